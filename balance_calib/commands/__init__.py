@@ -1,0 +1,1 @@
+"""Sub-commands of balance-calib, one module each (see cli.py)."""

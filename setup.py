@@ -1,0 +1,33 @@
+"""ament_python build of balance_calib (colcon build, or pip install -e .)."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'balance_calib'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.csv')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=False,
+    maintainer='balance_calib maintainers',
+    maintainer_email='maintainers@balance-calib.invalid',
+    description='Six-component wind-tunnel balance calibration after NAL TM-663, for ROS 2.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'balance-calib = balance_calib.cli:main',
+            'bridge_publisher = balance_calib.nodes.bridge_publisher:main',
+            'balance_calibrator = balance_calib.nodes.balance_calibrator:main',
+            'balance_recorder = balance_calib.nodes.balance_recorder:main',
+            'thrust_analyzer = balance_calib.nodes.thrust_analyzer:main',
+        ],
+    },
+)
