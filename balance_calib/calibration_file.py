@@ -1,0 +1,179 @@
+"""calibration.yaml: the fitted calibration that `balance_calibrator` loads and `refit` writes.
+
+A balance config (config/lmc6522.yaml) is accepted as a calibration too: its memo matrices
+(Tables 10-16) become the linear, quadratic and cubic models, the cubic adopted.
+Files are replaced atomically (write to a temporary file in the same directory, fsync, rename),
+so a reader never sees half a calibration and a failed write leaves the old one in place.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+import yaml
+
+from .config import ConfigError, balance_config_from_dict
+from .model.balance_model import BalanceModel
+from .units import BRIDGE_OUTPUTS, COMPONENTS
+
+FORMAT = 'balance_calib/calibration 1'
+
+# Extra model variables and the live input each needs.
+VARIABLE_INPUTS = {'dT': 'temperature', 'dT2': 'temperature', 'dir_FX': 'load_history', 'dir_FY': 'load_history',
+                   'dir_FZ': 'load_history', 'dir_MX': 'load_history', 'dir_MY': 'load_history',
+                   'dir_MZ': 'load_history'}
+
+
+@dataclass(frozen=True)
+class Calibration:
+    balance: str
+    models: Mapping[str, BalanceModel]     # every fitted model by name ('linear', ..., 'cubic+temperature')
+    adopted: str                           # name of the model to use when the node asks for 'adopted'
+    base_model: str                        # the TM-663 model the adopted one builds on
+    capacity: np.ndarray                   # full scale per component
+    rated_output_mv: np.ndarray
+    components: tuple[str, ...] = COMPONENTS
+    bridge_outputs: tuple[str, ...] = BRIDGE_OUTPUTS
+    sigma_pct_fs: Mapping[str, float] = field(default_factory=dict)
+    fitted_at: str = ''
+    reference_temperature_c: float | None = None
+    extra: Mapping[str, Any] = field(default_factory=dict)   # body, source bags, effects...
+
+    def model(self, name: str = 'adopted') -> BalanceModel:
+        key = self.adopted if name in ('adopted', '') else name
+        if key not in self.models:
+            raise ConfigError(f'calibration of {self.balance} has no {key!r} model '
+                              f'(it has {", ".join(self.models)})')
+        return self.models[key]
+
+    def requires(self, name: str = 'adopted') -> tuple[str, ...]:
+        """Live inputs the model needs besides the bridge outputs: 'temperature', 'load_history'."""
+        needed = []
+        for variable in self.model(name).extra_variables:
+            kind = VARIABLE_INPUTS.get(variable, variable)
+            if kind not in needed:
+                needed.append(kind)
+        return tuple(needed)
+
+    @property
+    def fitted_datetime(self) -> _dt.datetime | None:
+        try:
+            return _dt.datetime.fromisoformat(self.fitted_at)
+        except (TypeError, ValueError):
+            return None
+
+    def to_dict(self) -> dict:
+        return {
+            'format': FORMAT,
+            'balance': self.balance,
+            'fitted_at': self.fitted_at,
+            'adopted_model': self.adopted,
+            'base_model': self.base_model,
+            'components': list(self.components),
+            'bridge_outputs': list(self.bridge_outputs),
+            'capacity': {c: float(v) for c, v in zip(self.components, self.capacity)},
+            'rated_output_mv': {c: float(v) for c, v in zip(self.bridge_outputs, self.rated_output_mv)},
+            'reference_temperature_c': self.reference_temperature_c,
+            'sigma_pct_fs': {k: float(v) for k, v in self.sigma_pct_fs.items()},
+            **({'extra': _plain(self.extra)} if self.extra else {}),
+            'models': {name: {k: v for k, v in m.to_dict().items() if k not in ('components', 'inputs')}
+                       for name, m in self.models.items()},
+        }
+
+
+def _plain(value):
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    return value
+
+
+def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -> Calibration:
+    if not isinstance(data, Mapping):
+        raise ConfigError(f'{where}: not a calibration file (expected a mapping at the top level)')
+    if 'matrices' in data and 'models' not in data:           # a balance config with the memo's matrices
+        config = balance_config_from_dict(data, Path(where))
+        if not config.matrices:
+            raise ConfigError(f'{where}: balance config has no matrices')
+        adopted = 'cubic' if 'cubic' in config.matrices else list(config.matrices)[-1]
+        return Calibration(config.name, dict(config.matrices), adopted, adopted, config.capacity,
+                           config.rated_output_mv, config.components, config.bridge_outputs,
+                           {k: float(v) for k, v in (config.table17_sigma_pct_fs.get(adopted) or {}).items()},
+                           '', None, {'source': 'memo matrices (TM-663 Tables 10-16)'})
+    try:
+        components = tuple(data.get('components', COMPONENTS))
+        outputs = tuple(data.get('bridge_outputs', BRIDGE_OUTPUTS))
+        models = {name: BalanceModel.from_dict({'name': name, 'components': components, 'inputs': outputs, **m},
+                                               where=f'{where}: models.{name}')
+                  for name, m in (data['models'] or {}).items()}
+        if not models:
+            raise ConfigError(f'{where}: no models')
+        capacity = np.array([float(data['capacity'][c]) for c in components])
+        rated = np.array([float(data['rated_output_mv'][c]) for c in outputs])
+        adopted = str(data.get('adopted_model') or next(iter(models)))
+        if adopted not in models:
+            raise ConfigError(f'{where}: adopted_model {adopted!r} is not among the models ({", ".join(models)})')
+        ref = data.get('reference_temperature_c')
+        return Calibration(str(data.get('balance', 'balance')), models, adopted, str(data.get('base_model', adopted)),
+                           capacity, rated, components, outputs,
+                           {str(k): float(v) for k, v in (data.get('sigma_pct_fs') or {}).items()},
+                           str(data.get('fitted_at', '')), None if ref is None else float(ref),
+                           dict(data.get('extra') or {}))
+    except ConfigError:
+        raise
+    except KeyError as err:
+        raise ConfigError(f'{where}: missing key {err.args[0]!r}') from None
+    except (TypeError, ValueError, AttributeError) as err:
+        raise ConfigError(f'{where}: {err}') from None
+
+
+def load_calibration(path: str | Path) -> Calibration:
+    """Read calibration.yaml (or a balance config); ConfigError names the file and the problem."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as err:
+        raise ConfigError(f'{path}: cannot read calibration file: {err.strerror or err}') from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise ConfigError(f'{path}: not valid YAML: {str(err).splitlines()[0]}') from None
+    return calibration_from_dict(data, str(path))
+
+
+def write_text_atomically(path: str | Path, text: str) -> None:
+    """Write a file so that readers see the old or the new content, never a mix."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
+    try:
+        with os.fdopen(fd, 'w') as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def save_calibration(path: str | Path, calibration: Calibration) -> None:
+    header = f'# {calibration.balance} calibration written by balance_calib; loads in N, N·m from outputs in mV.\n'
+    write_text_atomically(path, header + yaml.safe_dump(calibration.to_dict(), sort_keys=False, width=160))
+
+
+def now_iso() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')
