@@ -66,6 +66,20 @@ def opposite_zero_pairs(points: LoadPoints, zeroed_reference=None):
     return pairs
 
 
+def retare_with_model(reduction: Reduction, model: BalanceModel) -> Reduction:
+    """Tare outputs from the inverse of a fitted model instead of the linear eqs. (32)-(37).
+
+    The memo's linear inverse misplaces the tare outputs by the balance's nonlinearity at the
+    body's weight (about 0.007 % FS on LMC6522 F_X); one fit -> Newton inverse -> refit removes it.
+    """
+    from .model.inverse import outputs_for_loads
+    body_outputs = outputs_for_loads(model.without_constant(), reduction.corrected.tare_loads)
+    corrected = corrected_data(reduction.points.applied_loads, reduction.zero.zeroed_outputs_mv,
+                               reduction.corrected.tare_loads, body_outputs)
+    return Reduction(reduction.points, reduction.zero, reduction.body, reduction.body_source,
+                     reduction.body_estimate, reduction.inverse_linear, corrected)
+
+
 def reduce_points(points: LoadPoints, config: BalanceConfig, *, estimate_body_weight: bool = True,
                   linear_model: BalanceModel | None = None) -> Reduction:
     """Zero-point subtraction, tare loads and tare outputs: the corrected data of §7.1.

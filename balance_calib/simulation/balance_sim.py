@@ -78,8 +78,12 @@ class SimulationSettings:
 
 def noise_mv_for_load_sigma(truth: BalanceModel, capacity, sigma_pct_fs) -> np.ndarray:
     """Per-bridge output noise (mV) that gives a load noise of sigma_pct_fs (% FS) per component."""
-    sigma_load = np.asarray(sigma_pct_fs, float) * np.asarray(capacity, float) / 100.0
-    return np.abs(np.linalg.solve(linear_part(truth), sigma_load))
+    from scipy.optimize import nnls
+    sigma_load = np.broadcast_to(np.asarray(sigma_pct_fs, float), (len(truth.components),)) \
+        * np.asarray(capacity, float) / 100.0
+    # independent bridge noise n adds up in load k as sum_i C_ki² n_i² (C the linear part)
+    variance, _ = nnls(linear_part(truth) ** 2, sigma_load ** 2)
+    return np.sqrt(variance)
 
 
 def _direction_history(loads: np.ndarray) -> np.ndarray:
@@ -166,7 +170,19 @@ def simulate_campaign(config: BalanceConfig, truth: BalanceModel | None = None, 
                     tuple(e.name for e in effects))
 
 
-def table17_noise(config: BalanceConfig) -> np.ndarray:
-    """The cubic row of Table 17 (% FS): the memo's noise floor, used as the simulated point noise."""
+def table17_noise(config: BalanceConfig, settings: SimulationSettings = SimulationSettings()) -> np.ndarray:
+    """Point noise (% FS) that makes a cubic fit after zero points scatter as Table 17's cubic row.
+
+    The memo's cubic σ is its noise floor. The zero points of §5(4) add the noise of the brackets
+    to every loaded point (factor ~1.11, zero_point_noise_factor), so the point noise is a little
+    smaller than the table's σ.
+    """
+    from ..zero_points import zero_point_noise_factor
     row = config.table17_sigma_pct_fs.get('cubic', {})
-    return np.array([float(row.get(c, 0.0)) for c in config.components])
+    target = np.array([float(row.get(c, 0.0)) for c in config.components])
+    schedule = config.schedule
+    if schedule is None:
+        return target
+    period = settings.transition_s + settings.point_duration_s
+    factor = zero_point_noise_factor(np.arange(len(schedule)) * period, schedule.is_zero_point, schedule.orientation)
+    return target / factor

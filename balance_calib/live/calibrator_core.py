@@ -1,0 +1,369 @@
+"""What `balance_calibrator` computes, without rclpy: raw bridge outputs (mV) -> wrench in tunnel axes.
+
+Per sample (or a batch of samples as one array):
+
+1. reject samples with a NaN or infinite output (nothing is published for them);
+2. loads in balance calibration axes from the active model with its constant terms dropped
+   (TM-663 §10.1: a wind-on load is measured from the wind-off zero, not from the calibration's);
+3. flag loads beyond `envelope_margin` x capacity: the model is extrapolating there;
+4. subtract the tare offset (the mean load of a wind-off window, `TareWindow`);
+5. turn the loads into the tunnel axes of the installation, TM-663 §10.2 (eqs. (50)-(85)).
+
+Step 2 then 5 is the memo's substitution: eqs. (50)-(55) evaluate the calibration-axis model on
+outputs written in tunnel axes and map the result back, `to_tunnel(model(from_tunnel(V_tunnel)))`;
+the bridges deliver calibration-axis outputs, so here it is `to_tunnel(model(V))` (see
+`tunnel_axes.py`).
+
+Models with variables besides the bridge outputs (Calibration.requires(): 'temperature',
+'load_history') get them from the live inputs; when one is missing or stale the calibration's base
+model runs instead, and the result says why (`WrenchBatch.fallback_reason`).
+"""
+from __future__ import annotations
+
+import datetime as _dt
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..calibration_file import Calibration, ConfigError
+from ..model.balance_model import BalanceModel
+from ..tunnel_axes import Installation, parse_installation
+from ..units import COMPONENTS
+
+MODEL_CHOICES = ('linear', 'quadratic', 'cubic', 'adopted')
+DEFAULT_ENVELOPE_MARGIN = 1.1
+UNITS = ('N', 'N', 'N', 'N·m', 'N·m', 'N·m')
+
+# diagnostic_msgs/DiagnosticStatus levels, repeated here so the core needs no ROS messages
+OK, WARN, ERROR = 0, 1, 2
+
+
+# --- the active calibration -------------------------------------------------------------------
+@dataclass(frozen=True)
+class ActiveCalibration:
+    """A calibration made ready for wind-on use: constant-free models, axes and envelope."""
+
+    calibration: Calibration
+    source: str                     # file it was read from (for messages)
+    requested_model: str            # the `model` parameter: 'adopted', 'cubic', ...
+    model_name: str                 # the key of the model in calibration.models
+    model: BalanceModel             # without constant terms (§10.1)
+    requires: tuple[str, ...]       # live inputs it needs: 'temperature', 'load_history'
+    base_name: str                  # the model that runs when an input is missing
+    base_model: BalanceModel        # without constant terms
+    installation: Installation
+    envelope: np.ndarray            # (6,) |load| above this (N, N·m) is outside the calibrated range
+
+    @property
+    def capacity(self) -> np.ndarray:
+        return self.calibration.capacity
+
+    def age_days(self, now: _dt.datetime | None = None) -> float | None:
+        fitted = self.calibration.fitted_datetime
+        if fitted is None:
+            return None
+        now = now or _dt.datetime.now(_dt.timezone.utc)
+        if fitted.tzinfo is None:
+            fitted = fitted.replace(tzinfo=_dt.timezone.utc)
+        return (now - fitted).total_seconds() / 86400.0
+
+
+def activate(calibration: Calibration, model: str = 'adopted', installation: str | Installation = 'upright',
+             envelope_margin: float = DEFAULT_ENVELOPE_MARGIN, source: str = '') -> ActiveCalibration:
+    """Check that `model` and `installation` make sense for `calibration` and prepare it.
+
+    Raises ConfigError (model missing from the calibration) or ValueError (installation, margin).
+    """
+    if not isinstance(installation, Installation):
+        installation = parse_installation(installation)
+    if not np.isfinite(envelope_margin) or envelope_margin <= 0:
+        raise ValueError(f'envelope_margin must be a positive number, not {envelope_margin}')
+    chosen = calibration.model(model)            # ConfigError names the models it has
+    model_name = calibration.adopted if model in ('adopted', '') else model
+    requires = calibration.requires(model_name)
+    base_name = calibration.base_model if calibration.base_model in calibration.models else model_name
+    base = calibration.models[base_name]
+    if base.extra_variables:                      # a base that needs inputs itself is no fallback
+        base_name, base = model_name, chosen
+    return ActiveCalibration(calibration, source, model, model_name, chosen.without_constant(), requires,
+                             base_name, base.without_constant(), installation,
+                             float(envelope_margin) * np.asarray(calibration.capacity, dtype=float))
+
+
+# --- live extra inputs ------------------------------------------------------------------------
+@dataclass
+class LoadHistory:
+    """Whether the load on each component last rose (+1) or fell (-1), for hysteresis models.
+
+    A change counts once it exceeds `deadband_fraction` of capacity, so noise does not flip it.
+    Starts at +1 (rising), as the simulated balance does.
+    """
+
+    capacity: np.ndarray
+    deadband_fraction: float = 0.005
+    reference: np.ndarray | None = None
+    direction: np.ndarray = field(default_factory=lambda: np.ones(6))
+
+    def update(self, loads: np.ndarray) -> np.ndarray:
+        """loads (N, 6) in time order -> direction (N, 6) after each sample."""
+        loads = np.atleast_2d(loads)
+        deadband = self.deadband_fraction * np.asarray(self.capacity, dtype=float)
+        out = np.empty_like(loads)
+        for k, row in enumerate(loads):   # a sequential state machine: inherently per sample
+            if self.reference is None:
+                self.reference = row.copy()
+            change = row - self.reference
+            moved = np.abs(change) > deadband
+            self.direction = np.where(moved, np.sign(change), self.direction)
+            self.reference = np.where(moved, row, self.reference)
+            out[k] = self.direction
+        return out
+
+
+def _extra_variables(model: BalanceModel, n: int, temperature_c: np.ndarray | None,
+                     reference_temperature_c: float | None, direction: np.ndarray | None) -> dict | str:
+    """The model's non-output variables, or a string saying which one is unavailable."""
+    extra = {}
+    for variable in model.extra_variables:
+        if variable in ('dT', 'dT2'):
+            if temperature_c is None or not np.all(np.isfinite(temperature_c)):
+                return 'temperature input missing or stale'
+            if reference_temperature_c is None:
+                return 'calibration has no reference_temperature_c'
+            d_t = np.broadcast_to(np.asarray(temperature_c, float) - reference_temperature_c, (n,))
+            extra[variable] = d_t if variable == 'dT' else d_t ** 2
+        elif variable.startswith('dir_') and variable[4:] in COMPONENTS:
+            if direction is None:
+                return 'load history not available'
+            extra[variable] = np.broadcast_to(direction, (n, 6))[:, COMPONENTS.index(variable[4:])]
+        else:
+            return f'no live input provides model variable {variable!r}'
+    return extra
+
+
+# --- samples -> wrench ------------------------------------------------------------------------
+@dataclass(frozen=True)
+class WrenchBatch:
+    accepted: np.ndarray            # (N,) False for samples with a NaN/inf output (not published)
+    loads_balance: np.ndarray       # (N, 6) untared loads, balance axes, N / N·m (NaN if rejected)
+    wrench_tunnel: np.ndarray       # (N, 6) tared loads in tunnel axes (what /balance/wrench carries)
+    out_of_envelope: np.ndarray     # (N,) a load beyond the envelope (published, but flagged)
+    model_used: str
+    fallback_reason: str = ''       # why the base model ran instead of the requested one ('' = it did not)
+
+
+def model_loads(active: ActiveCalibration, outputs_mv, *, temperature_c=None,
+                load_direction=None) -> tuple[np.ndarray, str, str]:
+    """Untared balance-axis loads (N, 6) of finite outputs (N, 6); also model used and fallback reason."""
+    outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
+    n = outputs.shape[0]
+    model, name, reason = active.model, active.model_name, ''
+    extra = _extra_variables(model, n, None if temperature_c is None else np.asarray(temperature_c, float),
+                             active.calibration.reference_temperature_c, load_direction)
+    if isinstance(extra, str):
+        model, name, reason = active.base_model, active.base_name, extra
+        extra = _extra_variables(model, n, None, None, load_direction)
+        if isinstance(extra, str):      # the base model needs inputs too: nothing sensible to run
+            raise ConfigError(f'{active.source}: neither {active.model_name} nor {active.base_name} '
+                              f'can run: {reason}')
+    return model.loads(outputs, extra or None), name, reason
+
+
+def compute_wrench(active: ActiveCalibration, outputs_mv, *, tare_offset=None, temperature_c=None,
+                   load_direction=None) -> WrenchBatch:
+    """Raw outputs (N, 6) mV -> tared wrench in tunnel axes (N, 6); see the module docstring."""
+    outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
+    accepted = np.all(np.isfinite(outputs), axis=1)
+    loads = np.full(outputs.shape, np.nan)
+    name, reason = active.model_name, ''
+    if accepted.any():
+        temps = None if temperature_c is None else np.broadcast_to(np.asarray(temperature_c, float),
+                                                                    (len(outputs),))[accepted]
+        direction = None if load_direction is None else np.broadcast_to(load_direction, outputs.shape)[accepted]
+        loads[accepted], name, reason = model_loads(active, outputs[accepted], temperature_c=temps,
+                                                    load_direction=direction)
+    offset = np.zeros(6) if tare_offset is None else np.asarray(tare_offset, dtype=float)
+    wrench = active.installation.to_tunnel(loads - offset)          # TM-663 §10.2
+    with np.errstate(invalid='ignore'):
+        outside = accepted & np.any(np.abs(loads) > active.envelope, axis=1)
+    return WrenchBatch(accepted, loads, wrench, outside, name, reason)
+
+
+# --- tare -------------------------------------------------------------------------------------
+def tare_offset(loads_balance) -> np.ndarray:
+    """The offset a tare subtracts: the mean load (6,) over a wind-off window (N, 6)."""
+    return np.mean(np.atleast_2d(np.asarray(loads_balance, dtype=float)), axis=0)
+
+
+@dataclass
+class TareWindow:
+    """Collects the next `samples` accepted samples after ~/tare; keeps their outputs so that the
+    offset can be recomputed for another calibration (after a refit or a `model` change)."""
+
+    samples: int
+    outputs_mv: list = field(default_factory=list)
+    temperature_c: list = field(default_factory=list)
+    direction: list = field(default_factory=list)
+
+    def __post_init__(self):
+        if int(self.samples) < 1:
+            raise ValueError(f'tare needs at least one sample, not {self.samples}')
+
+    def add(self, outputs_mv, temperature_c=None, direction=None) -> bool:
+        """Add accepted samples (N, 6) with their temperature (N,) and load direction (N, 6), if
+        known; True once the window is full (samples beyond it are ignored)."""
+        outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
+        n = max(0, min(len(outputs), self.samples - len(self.outputs_mv)))
+        temps = np.full(len(outputs), np.nan) if temperature_c is None else \
+            np.broadcast_to(np.asarray(temperature_c, float), (len(outputs),))
+        dirs = np.ones(outputs.shape) if direction is None else np.broadcast_to(direction, outputs.shape)
+        self.outputs_mv.extend(outputs[:n])
+        self.temperature_c.extend(temps[:n])
+        self.direction.extend(dirs[:n])
+        return self.complete
+
+    @property
+    def complete(self) -> bool:
+        return len(self.outputs_mv) >= self.samples
+
+    def offset(self, active: ActiveCalibration) -> np.ndarray:
+        """Balance-axis offset (6,) N / N·m: the mean load of the window under `active`."""
+        temps = np.array(self.temperature_c)
+        loads, _, _ = model_loads(active, np.array(self.outputs_mv),
+                                  temperature_c=None if np.isnan(temps).any() else temps,
+                                  load_direction=np.array(self.direction))
+        return tare_offset(loads)
+
+
+def describe_offset(offset_balance, installation: Installation) -> str:
+    """'FX=-1.234 N, ..., MZ=0.001 N·m' in the tunnel axes the wrench is published in."""
+    tunnel = installation.to_tunnel(np.asarray(offset_balance, dtype=float))
+    return ', '.join(f'{c}={v:+.4f} {u}' for c, v, u in zip(COMPONENTS, tunnel, UNITS))
+
+
+# --- diagnostics ------------------------------------------------------------------------------
+@dataclass
+class InputCounters:
+    """Counts since start and since the last diagnostics report."""
+
+    received: int = 0
+    published: int = 0
+    rejected_nonfinite: int = 0
+    out_of_envelope: int = 0
+    period_received: int = 0
+    period_rejected: int = 0
+    period_out_of_envelope: int = 0
+
+    def count(self, batch: WrenchBatch) -> None:
+        n, ok, out = len(batch.accepted), int(batch.accepted.sum()), int(batch.out_of_envelope.sum())
+        self.received += n
+        self.period_received += n
+        self.published += ok
+        self.rejected_nonfinite += n - ok
+        self.period_rejected += n - ok
+        self.out_of_envelope += out
+        self.period_out_of_envelope += out
+
+    def start_period(self) -> None:
+        self.period_received = self.period_rejected = self.period_out_of_envelope = 0
+
+
+@dataclass(frozen=True)
+class StatusReport:
+    """One diagnostic_msgs/DiagnosticStatus, as plain data."""
+
+    level: int
+    name: str
+    message: str
+    hardware_id: str
+    values: tuple[tuple[str, str], ...]
+
+
+@dataclass(frozen=True)
+class LiveState:
+    """What the node knows at a diagnostics tick."""
+
+    period_s: float
+    counters: InputCounters
+    last_sample_age_s: float | None            # None: no sample yet
+    stale_after_s: float
+    temperature_age_s: float | None
+    fallback_reason: str
+    tare_offset_balance: np.ndarray | None     # None: never tared
+    refit_running: bool = False
+
+
+def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'balance_calibrator',
+                now: _dt.datetime | None = None) -> list[StatusReport]:
+    """Input health and calibration status; levels OK / WARN / ERROR as DiagnosticStatus has them."""
+    c = state.counters
+    hardware = active.calibration.balance
+    rate = c.period_received / state.period_s if state.period_s > 0 else 0.0
+    level, problems = OK, []
+    if state.last_sample_age_s is None:
+        level, problems = WARN, ['no sample received yet']
+    elif state.last_sample_age_s > state.stale_after_s:
+        level, problems = WARN, [f'stale input: no sample for {state.last_sample_age_s:.1f} s']
+    if c.period_rejected:
+        level = max(level, WARN)
+        problems.append(f'{c.period_rejected} NaN/inf samples rejected')
+    if c.period_out_of_envelope:
+        level = max(level, WARN)
+        problems.append(f'{c.period_out_of_envelope} samples outside the calibrated envelope')
+    input_values = (
+        ('input_rate_hz', f'{rate:.1f}'),
+        ('last_sample_age_s', 'never' if state.last_sample_age_s is None else f'{state.last_sample_age_s:.3f}'),
+        ('stale', str(state.last_sample_age_s is None or state.last_sample_age_s > state.stale_after_s)),
+        ('samples_received', str(c.received)),
+        ('wrenches_published', str(c.published)),
+        ('rejected_nonfinite', str(c.rejected_nonfinite)),
+        ('out_of_envelope', str(c.out_of_envelope)),
+        ('envelope', ', '.join(f'{k}={v:.4g}' for k, v in zip(COMPONENTS, active.envelope))),
+    )
+    reports = [StatusReport(level, f'{node_name}: input', '; '.join(problems) or f'{rate:.1f} Hz',
+                            hardware, input_values)]
+
+    cal = active.calibration
+    age = active.age_days(now)
+    sigma = ', '.join(f'{k}={float(v):.3f}' for k, v in cal.sigma_pct_fs.items()) or 'unknown'
+    inputs = []
+    for needed in active.requires:
+        if needed == 'temperature':
+            fresh = state.temperature_age_s is not None and state.temperature_age_s <= state.stale_after_s
+            inputs.append((needed, 'fresh' if fresh else 'missing' if state.temperature_age_s is None else
+                           f'stale ({state.temperature_age_s:.1f} s)'))
+        else:
+            inputs.append((needed, 'fresh' if state.last_sample_age_s is not None else 'missing'))
+    cal_level = WARN if state.fallback_reason else OK
+    message = (f'{active.model_name} model, {active.installation.name} installation'
+               + (f'; FALLBACK to {active.base_name}: {state.fallback_reason}' if state.fallback_reason else ''))
+    tare = state.tare_offset_balance
+    cal_values = (
+        ('calibration_file', active.source),
+        ('model', active.model_name),
+        ('model_requested', active.requested_model),
+        ('model_in_use', active.base_name if state.fallback_reason else active.model_name),
+        ('fallback_reason', state.fallback_reason or 'none'),
+        ('installation', f'{active.installation.name} ({active.installation.spec})'),
+        ('fitted_at', cal.fitted_at or 'unknown (memo matrices)'),
+        ('age_days', 'unknown' if age is None else f'{age:.2f}'),
+        ('sigma_pct_fs', sigma),
+        ('requires', ', '.join(active.requires) or 'none'),
+        ('inputs', ', '.join(f'{k}: {v}' for k, v in inputs) or 'bridge outputs only'),
+        ('tare_offset', 'none' if tare is None else describe_offset(tare, active.installation)),
+        ('refit_running', str(state.refit_running)),
+    )
+    reports.append(StatusReport(cal_level, f'{node_name}: calibration', message, hardware, cal_values))
+    return reports
+
+
+def parse_reliability(value: str) -> str:
+    key = str(value).strip().lower().replace('-', '_')
+    if key not in ('reliable', 'best_effort'):
+        raise ValueError(f'input_reliability must be reliable or best_effort, not {value!r}')
+    return key
+
+
+def components_dict(values: Sequence[float]) -> Mapping[str, float]:
+    return {c: float(v) for c, v in zip(COMPONENTS, values)}

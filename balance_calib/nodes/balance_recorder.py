@@ -1,0 +1,155 @@
+"""balance_recorder: record named topics into a rosbag2 MCAP bag (there is no `ros2 bag` here).
+
+Parameters:
+  output (string, required)   bag directory to create; it must not exist yet.
+  topics (string[])           topics to record (default: the topics of docs/interfaces.md).
+
+Each topic's type and its publishers' QoS come from the graph; topics without publishers yet are
+looked up again every half second. Messages are recorded as serialized bytes (raw subscriptions)
+through the pure BagWriter. SIGINT and SIGTERM both end the recording cleanly: the bag's MCAP
+summary and metadata.yaml are complete afterwards.
+"""
+import importlib
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+from balance_calib.bags.errors import BagError
+from balance_calib.bags.writer import BagWriter, qos_profiles_yaml
+
+DEFAULT_TOPICS = ['/balance/raw', '/balance/temperature', '/calibration/applied_load',
+                  '/calibration/gravity', '/balance/wrench', '/diagnostics']
+DISCOVERY_PERIOD_S = 0.5
+QUEUE_DEPTH = 1000  # a recorder would rather buffer than drop
+
+
+def offered_qos_as_dict(qos: QoSProfile) -> dict:
+    """An offered QoS profile in rosbag2's v9 YAML vocabulary ('reliable', 'keep_last', ...)."""
+    def duration(value):
+        return {'sec': value.nanoseconds // 1_000_000_000,
+                'nsec': value.nanoseconds % 1_000_000_000}
+    return {'history': qos.history.name.lower(), 'depth': qos.depth,
+            'reliability': qos.reliability.name.lower(),
+            'durability': qos.durability.name.lower(),
+            'deadline': duration(qos.deadline), 'lifespan': duration(qos.lifespan),
+            'liveliness': qos.liveliness.name.lower(),
+            'liveliness_lease_duration': duration(qos.liveliness_lease_duration),
+            'avoid_ros_namespace_conventions': qos.avoid_ros_namespace_conventions}
+
+
+def subscription_qos(offered: list[QoSProfile]) -> QoSProfile:
+    """Reliable / transient-local only if every publisher offers it, as rosbag2 adapts."""
+    reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
+    transient_local = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=(DurabilityPolicy.TRANSIENT_LOCAL if transient_local
+                    else DurabilityPolicy.VOLATILE))
+
+
+def message_class(msgtype: str):
+    """'pkg/msg/Type' -> the generated Python class."""
+    package, _, name = msgtype.rpartition('/')
+    return getattr(importlib.import_module(package.replace('/', '.')), name)
+
+
+class BalanceRecorder(Node):
+
+    def __init__(self):
+        super().__init__('balance_recorder')
+        self._topics = list(self.declare_parameter('topics', DEFAULT_TOPICS).value)
+        output = self.declare_parameter('output', '').value
+        if not output:
+            raise BagError('parameter output (the bag directory to create) is required')
+        self._writer = BagWriter(output)
+        self._writer.open()
+        self._pending = [self.resolve_topic_name(topic) for topic in self._topics]
+        self._recording = {}
+        self.get_logger().info(f'recording {", ".join(self._pending)} into {output}')
+        self._discovery_timer = self.create_timer(DISCOVERY_PERIOD_S, self._discover)
+        self._discover()
+
+    def _discover(self):
+        types = dict(self.get_topic_names_and_types())
+        for topic in list(self._pending):
+            publishers = self.get_publishers_info_by_topic(topic)
+            if topic not in types or not publishers:
+                continue
+            self._pending.remove(topic)
+            msgtype = types[topic][0]
+            if len(types[topic]) > 1:
+                self.get_logger().warn(f'{topic} has several types {types[topic]}; '
+                                       f'recording {msgtype}')
+            offered = [p.qos_profile for p in publishers if p.topic_type == msgtype]
+            try:
+                self._writer.add_topic(
+                    topic, msgtype, qos_profiles_yaml([offered_qos_as_dict(q) for q in offered]),
+                    type_description_hash=str(publishers[0].topic_type_hash))
+                msg_class = message_class(msgtype)
+            except (BagError, ImportError, AttributeError) as error:
+                self.get_logger().error(f'cannot record {topic}: {error}')
+                continue
+            self._recording[topic] = self.create_subscription(
+                msg_class, topic, self._writer_for(topic), subscription_qos(offered), raw=True)
+            self.get_logger().info(f'recording {topic} ({msgtype})')
+        if not self._pending:
+            self._discovery_timer.cancel()
+
+    def _writer_for(self, topic):
+        def write(serialized: bytes, message_info: dict):
+            self._writer.write(topic, self.get_clock().now().nanoseconds, serialized,
+                               message_info.get('source_timestamp'))
+        return write
+
+    def destroy_node(self):
+        """Write what DDS has already delivered, finish the bag, then leave the graph."""
+        counts = {}
+        if self._writer.is_open:
+            for topic, subscription in self._recording.items():
+                # After a signal the context is shut down and no executor can run; messages
+                # already received are still in the reader's queue, so take them directly.
+                write = self._writer_for(topic)
+                while (taken := subscription.handle.take_message(subscription.msg_type,
+                                                                 True)) is not None:
+                    write(*taken)
+            counts = self._writer.close()
+        super().destroy_node()
+        # Logged once the node is gone, as the shut-down context can no longer reach /rosout.
+        summary = ', '.join(f'{topic}: {count}' for topic, count in counts.items())
+        self.get_logger().info(f'bag {self._writer.path} closed; messages written: '
+                               f'{summary or "none"}')
+        if self._pending:
+            self.get_logger().warn(f'never saw publishers on {", ".join(self._pending)}')
+
+
+def main(args=None):
+    # rclpy's own handlers for SIGINT and SIGTERM (ALL) shut the context down, so spin() returns
+    # or raises ExternalShutdownException and the bag is closed in destroy_node() either way.
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
+    recorder = None
+    try:
+        recorder = BalanceRecorder()
+        rclpy.spin(recorder)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except BagError as error:
+        rclpy.logging.get_logger('balance_recorder').error(str(error))
+        return 1
+    except RuntimeError:
+        # A signal landing while spin() builds its wait set surfaces as RCLError
+        # "context is not valid" (ros2/ros2cli#854): that is a shutdown, not a failure.
+        if rclpy.ok():
+            raise
+    finally:
+        if recorder is not None:
+            recorder.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    main()
