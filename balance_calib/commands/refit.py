@@ -1,0 +1,40 @@
+"""balance-calib refit BAG [BAG ...] --balance CONFIG --out DIR (interfaces.md, Command line)."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser('refit', help='refit the calibration from recorded campaign bags',
+                                   description='Run the refit pipeline behind ~/refit on bags and write '
+                                               'calibration.yaml, report.json, report.md and residual plots.')
+    parser.add_argument('bags', nargs='+', help='rosbag2 directories or bare .mcap files of one campaign')
+    parser.add_argument('--balance', required=True, help='balance config: lmc6522, b660h or a path')
+    parser.add_argument('--out', required=True, help='output directory')
+    parser.add_argument('--model', default='cubic', choices=['linear', 'quadratic', 'cubic'],
+                        help='base model of TM-663 §2 (default cubic)')
+    parser.add_argument('--no-diagnosis', action='store_true', help='do not look for effects the model lacks')
+    parser.add_argument('--declared-body', action='store_true',
+                        help='use the declared calibration body instead of estimating it from zero points')
+    parser.add_argument('--quiet', action='store_true', help='no progress on stderr')
+    parser.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..cli import CommandError
+    from ..refit.pipeline import RefitError, run_refit
+
+    def progress(message: str) -> None:
+        if not args.quiet:
+            print(f'[refit] {message}', file=sys.stderr, flush=True)
+
+    try:
+        result = run_refit(args.bags, args.balance, Path(args.out), model=args.model,
+                           diagnose=not args.no_diagnosis, estimate_body=not args.declared_body,
+                           progress=progress)
+    except RefitError as err:
+        raise CommandError(str(err)) from None
+    print(result.summary)
+    print(f'report: {result.out_dir / "report.md"}')
+    return 0

@@ -1,0 +1,67 @@
+"""balance-calib simulate: a full campaign of a simulated balance, the three models fitted,
+Table 17 (the memo's numbers beside ours) and the cubic matrix in the memo's layout."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser('simulate', help='simulate a calibration campaign and fit it',
+                                   description=__doc__)
+    parser.add_argument('--balance', action='append', help='lmc6522, b660h or a config path (repeatable; default both)')
+    parser.add_argument('--seed', type=int, default=1)
+    parser.add_argument('--effects', default='', help='effects the base model lacks, e.g. "temperature:sensitivity_per_k=2e-4"')
+    parser.add_argument('--bag', help='also write the campaign as a calibration bag (directory, must not exist)')
+    parser.add_argument('--samples-per-point', type=int, default=1)
+    parser.add_argument('--no-diagnosis', action='store_true')
+    parser.add_argument('--matrix', action='store_true', help='print the fitted cubic matrix (memo layout)')
+    parser.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..accuracy.sigma import format_sigma_table
+    from ..accuracy.tables import format_coefficient_tables
+    from ..cli import CommandError
+    from ..config import ConfigError, load_balance_config
+    from ..refit.pipeline import RefitError, calibrate_points, campaign_points, summary_line
+    from ..simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
+    from ..simulation.effects import parse_effects
+
+    try:
+        effects = parse_effects(args.effects)
+    except ValueError as err:
+        raise CommandError(str(err)) from None
+    for name in args.balance or ['lmc6522', 'b660h']:
+        try:
+            config = load_balance_config(name)
+        except ConfigError as err:
+            raise CommandError(str(err)) from None
+        settings = SimulationSettings(samples_per_point=args.samples_per_point, seed=args.seed,
+                                      noise_sigma_pct_fs=table17_noise(config),
+                                      transition_samples=2 if args.bag else 0)
+        campaign = simulate_campaign(config, settings=settings, effects=effects)
+        print(f'\n=== {config.name}: simulated campaign of {len(campaign.point)} points '
+              f'(truth: memo cubic matrix; noise: Table 17 cubic row; effects: {", ".join(campaign.effects) or "none"})')
+        try:
+            result = calibrate_points(campaign_points(campaign), config, diagnose=not args.no_diagnosis)
+        except RefitError as err:
+            raise CommandError(str(err)) from None
+        rows = {}
+        for order in ('linear', 'quadratic', 'cubic'):
+            rows[f'TM-663 Table 17 {order}'] = config.table17_sigma_pct_fs.get(order, {})
+            rows[f'balance_calib    {order}'] = result.fits[order].sigma_pct_fs
+        print('σ in % FS, eqs. (44)-(49):')
+        print(format_sigma_table(rows, config.components))
+        print(summary_line(result.report))
+        if args.matrix:
+            print(f'\nFitted cubic matrix (cf. TM-663 Table {12 if config.name == "LMC6522" else 16}):')
+            print(format_coefficient_tables(result.fits['cubic'].fit.model))
+        if args.bag:
+            from ..simulation.campaign_bag import write_campaign_bag
+            path = Path(args.bag) if len(args.balance or ['', '']) == 1 else Path(args.bag) / config.name.lower()
+            write_campaign_bag(campaign, path)
+            print(f'campaign bag: {path}', file=sys.stderr)
+    return 0

@@ -1,0 +1,122 @@
+"""report.json, report.md and calibration.yaml contents of a refit (keys per interfaces.md)."""
+from __future__ import annotations
+
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..accuracy.sigma import format_sigma_table
+from ..accuracy.tables import format_coefficient_tables
+from ..calibration_file import Calibration, now_iso
+
+
+def _round(values: Mapping[str, float], digits: int = 5) -> dict[str, float]:
+    return {k: round(float(v), digits) for k, v in values.items()}
+
+
+def _diagnosis_fields(diagnosis, fits, base_model):
+    """(sigma before/after, crossval before/after, effects list, adopted model or None, ref T)."""
+    base = fits[base_model]
+    before, cv_before = base.sigma_pct_fs, base.sigma_crossval_pct_fs
+    if diagnosis is None:
+        return before, before, cv_before, cv_before, [], None, None
+    sigma = diagnosis.sigma_pct_fs
+    cv = diagnosis.sigma_crossval_pct_fs
+    effects = [effect.as_report() if hasattr(effect, 'as_report') else dict(effect) for effect in diagnosis.effects]
+    live = diagnosis.live_model if diagnosis.effects else None
+    return (sigma['before'], sigma['after'], cv['before'], cv['after'], effects, live,
+            getattr(diagnosis, 'reference_temperature_c', None))
+
+
+def build_calibration(config, reduction, fits, base_model, diagnosis, sources: Sequence[str]) -> Calibration:
+    models = {order: fit.fit.model for order, fit in fits.items()}
+    before, after, _, _, effects, live, reference = _diagnosis_fields(diagnosis, fits, base_model)
+    adopted = base_model
+    if live is not None:
+        adopted = live.name
+        models[adopted] = live
+    body = reduction.body
+    return Calibration(
+        config.name, models, adopted, base_model, config.capacity, config.rated_output_mv, config.components,
+        config.bridge_outputs, _round(after), now_iso(), reference,
+        {'calibration_body': {'weight_n': round(body.weight_n, 4), 'cg_m': [round(x, 6) for x in body.cg_m],
+                              'source': reduction.body_source},
+         'points': int(len(reduction.points.label)), 'sources': list(sources),
+         'effects': [e['name'] for e in effects],
+         'sigma_pct_fs_base': _round(before)})
+
+
+def build_report(config, points, reduction, fits, base_model, diagnosis, cut, sources) -> dict:
+    before, after, cv_before, cv_after, effects, live, reference = _diagnosis_fields(diagnosis, fits, base_model)
+    body = reduction.body
+    report = {
+        'balance': config.name,
+        'points': int(len(points.label)),
+        'base_model': base_model,
+        'calibration_body': {'weight_N': round(body.weight_n, 3), 'cg_x_m': round(body.cg_m[0], 5),
+                             'source': reduction.body_source},
+        'sigma_pct_fs': {'before': _round(before), 'after': _round(after)},
+        'sigma_pct_fs_crossval': {'before': _round(cv_before), 'after': _round(cv_after)},
+        'effects': effects,
+        'adopted': live is not None,
+        # beyond the promised keys
+        'adopted_model': live.name if live is not None else base_model,
+        'models': {order: {'sigma_pct_fs': _round(f.sigma_pct_fs), 'sigma_pct_fs_crossval': _round(f.sigma_crossval_pct_fs),
+                           'terms_per_component': len(f.fit.model.terms), 'rank': f.fit.rank,
+                           'condition_number': float(f'{f.fit.condition_number:.4g}'),
+                           'unexcited_terms': list(f.fit.unexcited_terms)}
+                   for order, f in fits.items()},
+        'table17_memo': {k: dict(v) for k, v in config.table17_sigma_pct_fs.items()},
+        'calibration_body_detail': {
+            'weight_N': round(body.weight_n, 4), 'cg_m': [round(x, 6) for x in body.cg_m],
+            'declared_weight_N': config.calibration_body.weight_n,
+            'declared_cg_m': list(config.calibration_body.cg_m),
+            'opposite_pairs': reduction.body_estimate.pairs if reduction.body_estimate else 0},
+        'reference_temperature_c': reference,
+        'sources': list(sources),
+        'fitted_at': now_iso(),
+    }
+    if cut is not None:
+        report['samples'] = {'used': cut.samples_used, 'rejected_outliers': cut.samples_rejected_outliers,
+                             'rejected_nan': cut.samples_rejected_nan, 'empty_points': cut.empty_points}
+    return report
+
+
+def report_markdown(report: Mapping, result=None) -> str:
+    components = list(report['sigma_pct_fs']['before'])
+    lines = [f'# Calibration report: {report["balance"]}', '',
+             f'{report["points"]} load points; base model **{report["base_model"]}** (TM-663 §2); '
+             f'adopted model **{report.get("adopted_model", report["base_model"])}**.', '',
+             f'Calibration body: {report["calibration_body"]["weight_N"]:.2f} N, CG {report["calibration_body"]["cg_x_m"]:.4f} m '
+             f'forward ({report["calibration_body"]["source"]}; declared '
+             f'{report["calibration_body_detail"]["declared_weight_N"]:.2f} N).', '',
+             '## σ in % of full scale (Table 17 style, eqs. (44)-(49))', '', '```']
+    rows = {}
+    memo = report.get('table17_memo', {})
+    for order, values in report.get('models', {}).items():
+        if order in memo:
+            rows[f'TM-663 Table 17 / {order}'] = memo[order]
+        rows[f'this fit / {order}'] = values['sigma_pct_fs']
+        rows[f'this fit / {order} (cross-val.)'] = values['sigma_pct_fs_crossval']
+    rows['before (base model)'] = report['sigma_pct_fs']['before']
+    rows['after (adopted)'] = report['sigma_pct_fs']['after']
+    rows['before, cross-validated'] = report['sigma_pct_fs_crossval']['before']
+    rows['after, cross-validated'] = report['sigma_pct_fs_crossval']['after']
+    lines += [format_sigma_table(rows, components), '```', '', '## Effects found in the residuals', '']
+    if not report['effects']:
+        lines.append('None: the residuals of the base model show nothing it lacks (nothing adopted).')
+    for i, effect in enumerate(report['effects'], 1):
+        sig = ', '.join(f'{k} {v:.3f}' for k, v in effect.get('sigma_after_pct_fs', {}).items())
+        lines += [f'{i}. **{effect["name"]}** on {", ".join(effect["components"])}: {effect["evidence"]}',
+                  f'   terms: `{", ".join(effect.get("terms", []))}`; σ after: {sig}']
+    if report.get('plots'):
+        lines += ['', '## Residual plots', ''] + [f'![{p}]({p})' for p in report['plots']]
+    if result is not None:
+        lines += ['', '## Coefficients (layout of Tables 10-16; N or N·m per mV^k)', '']
+        for order, fit in result.fits.items():
+            lines += [f'### {order}', '', '```', format_coefficient_tables(fit.fit.model), '```', '']
+        adopted = result.calibration.model()
+        if adopted.name not in result.fits:
+            lines += [f'### {adopted.name} (adopted)', '', '```', format_coefficient_tables(adopted), '```', '']
+    lines += ['', f'Fitted {report.get("fitted_at", "")} from: {", ".join(report.get("sources", [])) or "simulation"}.']
+    return '\n'.join(lines) + '\n'
