@@ -1,6 +1,7 @@
 """balance-calib refit BAG [BAG ...] --balance CONFIG --out DIR (interfaces.md, Command line)."""
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -17,7 +18,8 @@ def register(subparsers) -> None:
     parser.add_argument('--no-diagnosis', action='store_true', help='do not look for effects the model lacks')
     parser.add_argument('--declared-body', action='store_true',
                         help='use the declared calibration body instead of estimating it from zero points')
-    parser.add_argument('--quiet', action='store_true', help='no progress on stderr')
+    parser.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
+                        help='progress lines on stderr (default: when stderr is a terminal)')
     parser.set_defaults(func=run)
 
 
@@ -26,7 +28,7 @@ def run(args) -> int:
     from ..refit.pipeline import RefitError, run_refit
 
     def progress(message: str) -> None:
-        if not args.quiet:
+        if args.progress or (args.progress is None and sys.stderr.isatty()):
             print(f'[refit] {message}', file=sys.stderr, flush=True)
 
     try:
