@@ -1,0 +1,1 @@
+"""Benchmark scripts: they print figures (ratios against a baseline run in the same process)."""
