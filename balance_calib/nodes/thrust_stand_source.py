@@ -5,19 +5,21 @@ and publishes them; `applied_load_events()` gives what goes on /calibration/appl
 
 One cycle, as the manual runs the experiment (calibration *after* the firings, footnote 12):
 
-    idle | firing, idle (venting) x firings | pressurise | loaded 0, unloaded 0, ..., loaded n, unloaded n | depressurise
+    idle | (firing, idle while venting) x firings | pressurise |
+    loaded 0, unloaded 0, ..., loaded n, unloaded n | depressurise
 
 - firing: the solenoid valve opens, the chamber gauge pressure rises to `firing_gauge_pa` with
   time constant `pressure_rise_s`; thrust = `efficiency` x the ideal thrust of eq. (5) at the
   instantaneous p_c (the manual warns measured and theory differ a lot). After the valve closes
   the chamber vents through the nozzle with time constant `pressure_decay_s`, still thrusting.
-  Below the chamber pressure at which a normal shock would enter the nozzle there is no ideal
-  solution; the thrust there is interpolated linearly to zero at p_c = p_a.
+  Below the chamber pressure at which a normal shock enters the nozzle eq. (5) does not hold;
+  the thrust there is interpolated linearly to zero at p_c = p_a.
 - calibration: nozzle plugged and chamber held at `firing_gauge_pa` (§4.2: the pressurised
   piping stiffens the stand); step k hangs the pan and the first k weights, then takes the pan
   down again. The leaf spring takes a set under each load: the zero moves by
   `hysteresis_fraction` of that load's reading and stays there after unloading, so the manual's
   correction (loaded minus the residual zero read after it) recovers the true sensitivity.
+- each cycle starts with the strain meter rebalanced: the accumulated set is gone.
 - every abrupt force change rings the stand (second order, `ring_frequency_hz`,
   `ring_damping_ratio`): "wait until the chamber's vibration has decayed" (§4.1).
 
@@ -155,21 +157,19 @@ class ThrustStandSimulator:
             load_n = (self.pan_mass_kg + self.weight_masses_kg[:k].sum()) * STANDARD_GRAVITY_M_S2
             add('loaded', step_s, False, self.firing_gauge_pa, float(load_n), k)
             add('unloaded', step_s, False, self.firing_gauge_pa, 0.0, k)
-        add('depressurise', idle_s, False, 0.0)
+        # long enough to bleed the chamber nearly to zero before the next cycle
+        add('depressurise', max(idle_s, 8.0 * self.pressure_decay_s), False, 0.0)
         return tuple(segments)
 
     def _segment_start_pressures(self) -> np.ndarray:
         start = 0.0
-        # repeating: the cycle starts where the previous one's venting ended (a fixed point that
-        # two passes reach to rounding, the decay over a cycle being tiny)
+        # repeating: each cycle starts where the previous one's venting ended; a few passes reach
+        # that fixed point to rounding (every firing and the final bleed forget the start value)
         for _ in range(3 if self.repeat else 1):
             pressures = []
             for segment in self.segments:
                 pressures.append(start)
-                start = self._pressure_in(segment, start, segment.end_s - segment.start_s)
-            if not self.repeat:
-                break
-            start = float(start)
+                start = float(self._pressure_in(segment, start, segment.end_s - segment.start_s))
         return np.array(pressures, dtype=float)
 
     def _pressure_in(self, segment: Segment, start_pa, elapsed_s):

@@ -208,7 +208,7 @@ class NozzlePerformance:
     c_star_m_s: float              # eq. (14)
     isp_s: float                   # eq. (15)
     expansion: str                 # optimum / under-expanded / over-expanded
-    flow_regime: str               # 'shock-free', 'shock in nozzle' or 'not choked'
+    flow_regime: str               # 'shock-free', 'shock in nozzle', 'subsonic exit' or 'not choked'
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -232,6 +232,17 @@ class Nozzle:
         _check_gamma(self.gamma)
         if not self.gas_constant_j_kg_k > 0:
             raise ValueError('gas constant must be positive')
+
+    @classmethod
+    def from_mapping(cls, data, where: str = 'thrust_stand') -> 'Nozzle':
+        """From the `thrust_stand:` section of a balance config (config/thrust_stand.yaml)."""
+        try:
+            return cls(float(data.get('throat_diameter_m', DEFAULT_THROAT_DIAMETER_M)),
+                       float(data.get('exit_diameter_m', DEFAULT_EXIT_DIAMETER_M)),
+                       float(data.get('gamma', DEFAULT_GAMMA)),
+                       float(data.get('gas_constant_j_kg_k', DEFAULT_GAS_CONSTANT_J_KG_K)))
+        except (AttributeError, TypeError, ValueError) as error:
+            raise ValueError(f'{where}: {error}') from None
 
     @property
     def throat_area_m2(self) -> float:
@@ -265,7 +276,9 @@ class Nozzle:
         c_star = float(characteristic_velocity_m_s(chamber_k, self.gamma, self.gas_constant_j_kg_k))
         if pa_over_pc > choking_ambient_ratio(area_ratio, self.gamma):
             regime = 'not choked'
-        elif branch == 'supersonic' and pa_over_pc > shock_free_ambient_ratio(area_ratio, self.gamma):
+        elif branch == 'subsonic':
+            regime = 'subsonic exit'     # physical only where p_a = p_e of this root
+        elif pa_over_pc > shock_free_ambient_ratio(area_ratio, self.gamma):
             regime = 'shock in nozzle'
         else:
             regime = 'shock-free'

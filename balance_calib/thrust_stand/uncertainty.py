@@ -87,13 +87,15 @@ def thrust_coefficient_uncertainty(calibration_slope: float, thrust_reading: flo
     calibration_slope=1 with its relative uncertainty, and thrust_reading=F_t in N.
     """
     chamber_pa = chamber_gauge_pa + ambient_pa
-    cf = float(measured_thrust_coefficient(calibration_slope * thrust_reading, chamber_gauge_pa, ambient_pa,
-                                           throat_diameter_m))
-    # a product/quotient, the manual's eq. (24): ∂C_F/∂x_i = ±(power) C_F / x_i
+    if not (chamber_pa > 0 and throat_diameter_m > 0):
+        raise ValueError(f'need p_c = p_G + p_a > 0 and D_t > 0; got p_c = {chamber_pa} Pa, '
+                         f'D_t = {throat_diameter_m} m')
+    per_newton = 1.0 / (chamber_pa * float(circle_area_m2(throat_diameter_m)))     # C_F per N of thrust
+    cf = float(calibration_slope * thrust_reading * per_newton)
+    # a product/quotient, the manual's eq. (24): ∂C_F/∂x_i = (power of x_i) C_F / x_i
     partials = {
-        'calibration_slope': cf / calibration_slope,
-        'thrust_reading': cf / thrust_reading if thrust_reading else
-        calibration_slope / (chamber_pa * float(circle_area_m2(throat_diameter_m))),
+        'calibration_slope': thrust_reading * per_newton,
+        'thrust_reading': calibration_slope * per_newton,
         'chamber_gauge_pa': -cf / chamber_pa,
         'ambient_pa': -cf / chamber_pa,
         'throat_diameter_m': -2.0 * cf / throat_diameter_m,
