@@ -46,9 +46,8 @@ class TopicNames:
     temperature: str = '/balance/temperature'
 
 
-# field of TopicNames -> (message type, float64 fields after the header that we keep)
+# TopicNames field -> (message type, float64 fields after its header, how many of them we keep)
 _LAYOUTS: dict[str, tuple[str, int, int]] = {
-    # name: (msgtype, doubles in the message after its header, doubles kept)
     'raw': ('geometry_msgs/msg/WrenchStamped', 6, 6),
     'applied_load': ('geometry_msgs/msg/WrenchStamped', 6, 6),
     'gravity': ('geometry_msgs/msg/Vector3Stamped', 3, 3),
@@ -153,7 +152,12 @@ def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicN
             readers.append(_open(source))
             _check_types(source, readers[-1], topics)
         recorded_topics = sorted({c.topic for r in readers for c in r.connections})
-        total = sum(c.msgcount for r in readers for c in r.connections if c.topic in wanted)
+        counts = {t: sum(c.msgcount for r in readers for c in r.connections if c.topic == t)
+                  for t in wanted}
+        for name in required:  # fail before reading a long campaign for nothing
+            if counts[getattr(topics, name)] == 0:
+                raise BagError(_no_messages(sources, getattr(topics, name), recorded_topics))
+        total = sum(counts.values())
         # topic -> one (receive times, CDR payloads, source) per bag
         collected: dict[str, list[tuple[list[int], list[bytes], Path]]] = {t: [] for t in wanted}
         msgtypes: dict[str, str] = {}
@@ -187,14 +191,14 @@ def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicN
 
     series = {}
     for topic, name in by_topic.items():
-        msgtype, doubles, kept = _LAYOUTS[name]
+        _, doubles, kept = _LAYOUTS[name]
+        kind = GravitySeries if name == 'gravity' else StampedSeries
         if not any(len(times) for times, _, _ in collected[topic]):
             if name in required:
                 raise BagError(_no_messages(sources, topic, recorded_topics))
-            series[name] = (GravitySeries if name == 'gravity' else StampedSeries).empty(kept)
+            series[name] = kind.empty(kept)
             continue
-        series[name] = _stamped_series(topic, collected[topic], doubles, kept,
-                                       GravitySeries if name == 'gravity' else StampedSeries)
+        series[name] = _stamped_series(topic, collected[topic], doubles, kept, kind)
     extra = {}
     for topic in extra_topics:
         if topic in by_topic:

@@ -79,6 +79,7 @@ class BagWriter:
     Also a context manager (closes on exit, even after an exception, so that what was written
     stays readable). Timestamps are int nanoseconds since the epoch (the receive time, as
     rosbag2's log_time); payloads are CDR bytes with their 4-byte encapsulation header.
+    Not thread-safe: write from one thread (a node's single-threaded executor does).
     """
 
     def __init__(self, path: str | os.PathLike, *, compression: str = 'zstd',
@@ -192,7 +193,7 @@ class BagWriter:
         information = self._bag_information()
         mcap, self._mcap = self._mcap, None
         try:
-            # rosbag2 repeats its metadata inside the MCAP file, so a bare .mcap is self-describing.
+            # rosbag2 repeats its metadata inside the MCAP file: a bare .mcap is self-describing.
             mcap.add_metadata('rosbag2', {'serialized_metadata': _dump_yaml(information)})
             mcap.finish()
             self._stream.flush()

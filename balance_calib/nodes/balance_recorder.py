@@ -10,6 +10,7 @@ through the pure BagWriter. SIGINT and SIGTERM both end the recording cleanly: t
 summary and metadata.yaml are complete afterwards.
 """
 import importlib
+import signal
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -61,19 +62,24 @@ class BalanceRecorder(Node):
 
     def __init__(self):
         super().__init__('balance_recorder')
-        self._topics = list(self.declare_parameter('topics', DEFAULT_TOPICS).value)
+        topics = self.declare_parameter('topics', DEFAULT_TOPICS).value
         output = self.declare_parameter('output', '').value
         if not output:
             raise BagError('parameter output (the bag directory to create) is required')
         self._writer = BagWriter(output)
         self._writer.open()
-        self._pending = [self.resolve_topic_name(topic) for topic in self._topics]
+        self._pending = [self.resolve_topic_name(topic) for topic in topics]
         self._recording = {}
         self.get_logger().info(f'recording {", ".join(self._pending)} into {output}')
-        self._discovery_timer = self.create_timer(DISCOVERY_PERIOD_S, self._discover)
+        # The timer runs for the whole recording, even with every topic found: rclpy (Jazzy) wakes
+        # spin() for a signal *before* it shuts the context down, so without a periodic wakeup
+        # spin() could sleep through the shutdown until the next message.
+        self.create_timer(DISCOVERY_PERIOD_S, self._discover)
         self._discover()
 
     def _discover(self):
+        if not self._pending:
+            return
         types = dict(self.get_topic_names_and_types())
         for topic in list(self._pending):
             publishers = self.get_publishers_info_by_topic(topic)
@@ -86,18 +92,16 @@ class BalanceRecorder(Node):
                                        f'recording {msgtype}')
             offered = [p.qos_profile for p in publishers if p.topic_type == msgtype]
             try:
+                msg_class = message_class(msgtype)
                 self._writer.add_topic(
                     topic, msgtype, qos_profiles_yaml([offered_qos_as_dict(q) for q in offered]),
                     type_description_hash=str(publishers[0].topic_type_hash))
-                msg_class = message_class(msgtype)
             except (BagError, ImportError, AttributeError) as error:
                 self.get_logger().error(f'cannot record {topic}: {error}')
                 continue
             self._recording[topic] = self.create_subscription(
                 msg_class, topic, self._writer_for(topic), subscription_qos(offered), raw=True)
             self.get_logger().info(f'recording {topic} ({msgtype})')
-        if not self._pending:
-            self._discovery_timer.cancel()
 
     def _writer_for(self, topic):
         def write(serialized: bytes, message_info: dict):
@@ -129,6 +133,9 @@ class BalanceRecorder(Node):
 def main(args=None):
     # rclpy's own handlers for SIGINT and SIGTERM (ALL) shut the context down, so spin() returns
     # or raises ExternalShutdownException and the bag is closed in destroy_node() either way.
+    # With SIGINT's default action in place, rclpy's handler does not chain to Python's, so
+    # Ctrl-C cannot raise KeyboardInterrupt in the middle of writing a message.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
     recorder = None
     try:

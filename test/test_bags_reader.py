@@ -1,0 +1,229 @@
+"""read_bags: campaign bags to arrays, and errors a person can act on."""
+import shutil
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from rosbags.rosbag2 import StoragePlugin, Writer as RosbagsWriter
+from rosbags.typesys import get_typestore, Stores
+
+from balance_calib.bags.errors import BagError
+from balance_calib.bags.reader import _decode_header_and_doubles, read_bags, TopicNames
+from balance_calib.bags.writer import BagWriter
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+T = TYPESTORE.types
+WRENCH = 'geometry_msgs/msg/WrenchStamped'
+GRAVITY = 'geometry_msgs/msg/Vector3Stamped'
+TEMPERATURE = 'sensor_msgs/msg/Temperature'
+NAN6 = [float('nan')] * 6
+
+
+def header(stamp_ns, frame_id='LMC6522'):
+    return T['std_msgs/msg/Header'](
+        T['builtin_interfaces/msg/Time'](stamp_ns // 10**9, stamp_ns % 10**9), frame_id)
+
+
+def cdr(message, little_endian=True):
+    return TYPESTORE.serialize_cdr(message, message.__msgtype__, little_endian=little_endian)
+
+
+def wrench(stamp_ns, six, frame_id='LMC6522'):
+    vector = T['geometry_msgs/msg/Vector3']
+    return T[WRENCH](header(stamp_ns, frame_id),
+                     T['geometry_msgs/msg/Wrench'](vector(*six[:3]), vector(*six[3:])))
+
+
+def gravity(stamp_ns, three):
+    return T[GRAVITY](header(stamp_ns), T['geometry_msgs/msg/Vector3'](*three))
+
+
+def temperature(stamp_ns, celsius):
+    return T[TEMPERATURE](header(stamp_ns), celsius, 0.01)
+
+
+def write_bag(path, records, types=None):
+    """records: (topic, receive time ns, message); a rosbag2 directory via BagWriter."""
+    with BagWriter(path) as writer:
+        for topic, _, message in records:
+            writer.add_topic(topic, (types or {}).get(topic, message.__msgtype__))
+        for topic, time_ns, message in records:
+            writer.write(topic, time_ns, cdr(message))
+    return path
+
+
+def campaign(t0, points, rng):
+    """A small calibration sequence: gravity, then per point a load and ten raw samples."""
+    records = [('/calibration/gravity', t0, gravity(t0 - 1, (0.0, 1.0, 0.0))),
+               ('/balance/temperature', t0 + 1, temperature(t0, 21.5))]
+    for point in range(points):
+        start = t0 + 1_000_000 * (point + 1)
+        load = NAN6 if point == 1 else list(rng.normal(size=6) * 100)
+        records.append(('/calibration/applied_load', start, wrench(start - 10, load, '')))
+        records += [('/balance/raw', start + 1000 * k + 7,
+                     wrench(start + 1000 * k, list(rng.normal(size=6))))
+                    for k in range(1, 11)]
+    return records
+
+
+def expected_raw(records):
+    raw = sorted((r for r in records if r[0] == '/balance/raw'), key=lambda r: r[1])
+    values = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
+                        m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z]
+                       for _, _, m in raw])
+    return np.array([r[1] for r in raw]), values
+
+
+def test_arrays_hold_every_topic_in_interface_order_and_units(tmp_path):
+    records = campaign(1_700_000_000_000_000_000, 4, np.random.default_rng(1))
+    data = read_bags(write_bag(tmp_path / 'bag', records),
+                     required=('raw', 'applied_load', 'gravity', 'temperature'))
+    times, values = expected_raw(records)
+    np.testing.assert_array_equal(data.raw.times_ns, times)
+    np.testing.assert_array_equal(data.raw.stamps_ns, times - 7)
+    np.testing.assert_array_equal(data.raw.values, values)
+    assert data.raw.values.shape == (40, 6) and set(data.raw.frame_ids) == {'LMC6522'}
+    assert data.applied_load.values.shape == (4, 6)
+    assert np.isnan(data.applied_load.values[1]).all()  # "between points" row kept
+    assert not np.isnan(data.applied_load.values[[0, 2, 3]]).any()
+    np.testing.assert_array_equal(data.gravity.vectors, [[0.0, 1.0, 0.0]])
+    np.testing.assert_array_equal(data.temperature.values, [21.5])
+    assert data.temperature.stamps_ns.tolist() == [1_700_000_000_000_000_000]
+    with pytest.raises(ValueError):
+        data.raw.values[0, 0] = 1.0  # the result is immutable
+
+
+def test_several_bags_of_both_kinds_merge_in_time_order(tmp_path):
+    rng = np.random.default_rng(2)
+    first = campaign(1_700_000_000_000_000_000, 3, rng)
+    second = campaign(1_700_000_000_000_000_000 + 500_000, 3, rng)  # interleaves with first
+    write_bag(tmp_path / 'first', first)
+    write_bag(tmp_path / 'second', second)
+    bare = tmp_path / 'second.mcap'
+    shutil.move(tmp_path / 'second' / 'second_0.mcap', bare)
+    data = read_bags([bare, tmp_path / 'first'])
+    times, values = expected_raw(first + second)
+    np.testing.assert_array_equal(data.raw.times_ns, times)
+    np.testing.assert_array_equal(data.raw.values, values)
+    assert np.all(np.diff(data.applied_load.times_ns) > 0)
+    assert len(data.gravity) == 2
+    assert data.sources == (bare, tmp_path / 'first')
+
+
+def test_remapped_topics_and_extra_topics(tmp_path):
+    records = [('/rig/raw', 10, wrench(5, [1, 2, 3, 4, 5, 6])),
+               ('/rig/raw', 20, wrench(15, [6, 5, 4, 3, 2, 1])),
+               ('/rig/note', 15, T['std_msgs/msg/String']('zero point'))]
+    data = read_bags(write_bag(tmp_path / 'bag', records),
+                     topics=TopicNames(raw='/rig/raw'), extra_topics=['/rig/note'])
+    np.testing.assert_array_equal(data.raw.values[:, 0], [1, 6])
+    assert data.extra['/rig/note'].messages[0].data == 'zero point'
+    assert data.extra['/rig/note'].times_ns.tolist() == [15]
+    assert len(data.applied_load) == 0 and data.applied_load.values.shape == (0, 6)
+
+
+def test_bags_written_by_other_tools_are_read(tmp_path):
+    """rosbags' own writer stands in for `ros2 bag record` (different file names, no chunk CRC)."""
+    with RosbagsWriter(tmp_path / 'other', version=9,
+                       storage_plugin=StoragePlugin.MCAP) as writer:
+        connection = writer.add_connection('/balance/raw', WRENCH, typestore=TYPESTORE)
+        for i in range(5):
+            writer.write(connection, 100 + i, cdr(wrench(i, [i] * 6)))
+    data = read_bags(tmp_path / 'other')
+    np.testing.assert_array_equal(data.raw.values[:, 5], np.arange(5.0))
+
+
+def test_progress_is_reported_up_to_the_total(tmp_path):
+    records = [('/balance/raw', i, wrench(i, [i] * 6)) for i in range(25_000)]
+    calls = []
+    read_bags(write_bag(tmp_path / 'bag', records), progress=lambda done, total:
+              calls.append((done, total)))
+    assert calls[-1] == (25_000, 25_000)
+    assert [done for done, _ in calls] == sorted(done for done, _ in calls) and len(calls) > 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(frame_ids=st.lists(st.text(max_size=12), min_size=1, max_size=8),
+       values=st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=6,
+                       max_size=6),
+       stamp_ns=st.integers(min_value=0, max_value=2**31 * 10**9 - 1),
+       little_endian=st.booleans())
+def test_vectorised_cdr_decoding_equals_rosbags_deserialisation(frame_ids, values, stamp_ns,
+                                                               little_endian):
+    payloads = [cdr(wrench(stamp_ns + i, values, frame_id), little_endian)
+                for i, frame_id in enumerate(frame_ids)]
+    payloads.append(cdr(wrench(stamp_ns, values[::-1], 'x'), not little_endian))
+    stamps_ns, decoded, decoded_frame_ids = _decode_header_and_doubles(payloads, 6)
+    for i, payload in enumerate(payloads):
+        message = TYPESTORE.deserialize_cdr(payload, WRENCH)
+        force, torque = message.wrench.force, message.wrench.torque
+        np.testing.assert_array_equal(
+            decoded[i], [force.x, force.y, force.z, torque.x, torque.y, torque.z])
+        assert decoded_frame_ids[i] == message.header.frame_id
+        assert stamps_ns[i] == message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+
+
+# -- errors ---------------------------------------------------------------------------------------
+
+def test_missing_path_names_it(tmp_path):
+    with pytest.raises(BagError, match=f'{tmp_path / "nowhere"}: no such file'):
+        read_bags([tmp_path / 'nowhere'])
+
+
+def test_a_directory_without_metadata_or_a_foreign_file_is_not_a_bag(tmp_path):
+    (tmp_path / 'empty').mkdir()
+    with pytest.raises(BagError, match=f'{tmp_path / "empty"}: not a rosbag2 bag'):
+        read_bags(tmp_path / 'empty')
+    (tmp_path / 'notes.txt').write_text('hello')
+    with pytest.raises(BagError, match='notes.txt: not a bag'):
+        read_bags(tmp_path / 'notes.txt')
+
+
+@pytest.mark.parametrize('bare', [True, False])
+def test_truncated_mcap_names_the_file(tmp_path, bare):
+    records = [('/balance/raw', i, wrench(i, [i] * 6)) for i in range(2000)]
+    bag = write_bag(tmp_path / 'bag', records)
+    mcap_path = bag / 'bag_0.mcap'
+    content = mcap_path.read_bytes()
+    mcap_path.write_bytes(content[:len(content) // 2])
+    target = mcap_path if bare else bag
+    with pytest.raises(BagError, match=f'{target}: cannot open bag, the file is truncated'):
+        read_bags(target)
+
+
+def test_wrong_message_type_names_file_topic_and_types(tmp_path):
+    array = T['std_msgs/msg/Float64MultiArray'](
+        T['std_msgs/msg/MultiArrayLayout']([], 0), np.zeros(6))
+    bag = write_bag(tmp_path / 'bag', [('/balance/raw', 1, array)])
+    with pytest.raises(BagError) as error:
+        read_bags(bag)
+    assert str(error.value) == (f'{bag}: topic /balance/raw has type '
+                                f'std_msgs/msg/Float64MultiArray, expected {WRENCH}')
+
+
+def test_required_topic_without_messages_names_bag_and_topic(tmp_path):
+    bag = write_bag(tmp_path / 'bag', [('/balance/raw', 1, wrench(1, [0] * 6))])
+    read_bags(bag)  # applied_load is optional by default
+    with pytest.raises(BagError, match=f'{bag}: no messages on /calibration/applied_load, '
+                                       'which is required .topics in the bag: /balance/raw'):
+        read_bags(bag, required=('raw', 'applied_load'))
+
+
+def test_corrupt_payload_names_file_and_topic(tmp_path):
+    bag = tmp_path / 'bag'
+    with BagWriter(bag) as writer:
+        writer.add_topic('/balance/raw', WRENCH)
+        writer.write('/balance/raw', 1, cdr(wrench(1, [0] * 6))[:30])
+    with pytest.raises(BagError, match=f'{bag}: topic /balance/raw: message 0 is shorter'):
+        read_bags(bag)
+
+
+def test_damaged_chunk_names_the_file(tmp_path):
+    bag = write_bag(tmp_path / 'bag', [('/balance/raw', i, wrench(i, [i] * 6))
+                                       for i in range(20_000)])
+    mcap_path = bag / 'bag_0.mcap'
+    content = bytearray(mcap_path.read_bytes())
+    content[1000:1100] = bytes(b ^ 0x55 for b in content[1000:1100])
+    mcap_path.write_bytes(bytes(content))
+    with pytest.raises(BagError, match=f'{bag}: cannot read messages, the file is corrupt'):
+        read_bags(bag)

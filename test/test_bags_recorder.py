@@ -1,0 +1,170 @@
+"""balance_recorder end to end: a real node over DDS records what a test node publishes.
+
+The recorder runs as its console script in a subprocess on its own ROS_DOMAIN_ID; the test node
+publishes from this process on the same domain. Waits are bounded polls: the publishers' matched
+subscription counts (the recorder has subscribed), then wait_for_all_acked (it has every
+message), then the process exit.
+"""
+import itertools
+import os
+import signal
+import socket
+import subprocess
+import time
+
+import numpy as np
+import pytest
+import rclpy
+import yaml
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from rclpy.duration import Duration
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+from balance_calib.bags.reader import read_bags
+from balance_calib.nodes.balance_recorder import offered_qos_as_dict, subscription_qos
+
+_next_domain = itertools.count()
+SAMPLES = 200
+GRAVITY_VECTORS = [(0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (0.0, -0.7071067811865476,
+                                                     0.7071067811865476)]
+
+
+@pytest.fixture
+def domain_id():
+    """A free domain for this test alone, searched from this pytest process's pid.
+
+    Other test runs on this machine use the same topic names, so a shared domain would mix
+    their messages into the bag. Fast DDS's first participant on domain d binds UDP port
+    7410 + 250 d; if that port can be bound, nobody is on d.
+    """
+    start = os.getpid() + 41 * next(_next_domain)
+    for offset in range(100):
+        candidate = 1 + (start + offset) % 100
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.bind(('0.0.0.0', 7410 + 250 * candidate))
+            except OSError:
+                continue
+        return candidate
+    pytest.skip('no free ROS domain in 1..100')
+
+
+@pytest.fixture
+def test_node(domain_id):
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node('bag_recorder_test_publisher', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    yield node, executor
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.try_shutdown(context=context)
+
+
+def start_recorder(bag, domain_id):
+    return subprocess.Popen(
+        ['balance_recorder', '--ros-args', '-p', f'output:={bag}',
+         '-p', 'topics:=[/balance/raw, /calibration/gravity]'],
+        env={**os.environ, 'ROS_DOMAIN_ID': str(domain_id)},
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def wait_until(condition, executor, recorder, timeout_s=30.0):
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if recorder.poll() is not None:
+            pytest.fail(f'recorder exited early:\n{recorder.communicate()[0]}')
+        if time.monotonic() > deadline:
+            recorder.kill()
+            pytest.fail(f'timed out; recorder said:\n{recorder.communicate()[0]}')
+        executor.spin_once(timeout_sec=0.05)
+
+
+def record_and_stop(tmp_path, domain_id, test_node, stop_signal):
+    node, executor = test_node
+    reliable = QoSProfile(depth=SAMPLES, reliability=ReliabilityPolicy.RELIABLE)
+    raw_publisher = node.create_publisher(WrenchStamped, '/balance/raw', reliable)
+    gravity_publisher = node.create_publisher(Vector3Stamped, '/calibration/gravity', reliable)
+    bag = tmp_path / 'campaign'
+    recorder = start_recorder(bag, domain_id)
+    try:
+        wait_until(lambda: raw_publisher.get_subscription_count() > 0
+                   and gravity_publisher.get_subscription_count() > 0, executor, recorder)
+        sent = []
+        for index in range(SAMPLES):
+            message = WrenchStamped()
+            message.header.stamp.sec, message.header.stamp.nanosec = 1_700_000_000, index
+            message.header.frame_id = 'LMC6522'
+            six = [index + 0.125 * k for k in range(6)]
+            (message.wrench.force.x, message.wrench.force.y, message.wrench.force.z,
+             message.wrench.torque.x, message.wrench.torque.y, message.wrench.torque.z) = six
+            sent.append(six)
+            raw_publisher.publish(message)
+            if index % 80 == 0:
+                vector = Vector3Stamped()
+                vector.vector.x, vector.vector.y, vector.vector.z = GRAVITY_VECTORS[index // 80]
+                gravity_publisher.publish(vector)
+        for publisher in (raw_publisher, gravity_publisher):
+            assert publisher.wait_for_all_acked(Duration(seconds=20))
+        recorder.send_signal(stop_signal)
+        output, _ = recorder.communicate(timeout=30)
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+            recorder.communicate()
+    assert recorder.returncode == 0, output
+    return bag, np.array(sent), output
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('stop_signal', [signal.SIGINT, signal.SIGTERM],
+                         ids=['SIGINT', 'SIGTERM'])
+def test_recorder_keeps_every_message_in_order_and_closes_the_bag_on(tmp_path, domain_id,
+                                                                     test_node, stop_signal):
+    bag, sent, output = record_and_stop(tmp_path, domain_id, test_node, stop_signal)
+    data = read_bags(bag, required=('raw', 'gravity'))
+    np.testing.assert_array_equal(data.raw.values, sent)
+    assert data.raw.stamps_ns.tolist() == [1_700_000_000 * 10**9 + i for i in range(SAMPLES)]
+    assert set(data.raw.frame_ids) == {'LMC6522'}
+    np.testing.assert_array_equal(data.gravity.vectors, GRAVITY_VECTORS)
+    assert f'/balance/raw: {SAMPLES}' in output and '/calibration/gravity: 3' in output
+    info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    assert info['version'] == 9 and info['message_count'] == SAMPLES + 3
+    raw = next(t['topic_metadata'] for t in info['topics_with_message_count']
+               if t['topic_metadata']['name'] == '/balance/raw')
+    assert [q['reliability'] for q in raw['offered_qos_profiles']] == ['reliable']
+    assert raw['type_description_hash'].startswith('RIHS01_')
+
+
+@pytest.mark.ros
+def test_recorder_refuses_an_existing_output(tmp_path, domain_id):
+    (tmp_path / 'campaign').mkdir()
+    result = subprocess.run(
+        ['balance_recorder', '--ros-args', '-p', f'output:={tmp_path / "campaign"}'],
+        env={**os.environ, 'ROS_DOMAIN_ID': str(domain_id)}, capture_output=True, text=True,
+        timeout=30)
+    assert result.returncode == 1
+    assert 'exists already' in result.stderr + result.stdout
+
+
+def test_subscription_is_reliable_only_if_every_publisher_offers_it():
+    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+    assert subscription_qos([reliable]).reliability == ReliabilityPolicy.RELIABLE
+    assert subscription_qos([reliable]).durability == DurabilityPolicy.TRANSIENT_LOCAL
+    mixed = subscription_qos([reliable, best_effort])
+    assert mixed.reliability == ReliabilityPolicy.BEST_EFFORT
+    assert mixed.durability == DurabilityPolicy.VOLATILE
+
+
+def test_offered_qos_is_written_in_rosbag2_v9_words():
+    profile = offered_qos_as_dict(QoSProfile(depth=7, reliability=ReliabilityPolicy.BEST_EFFORT,
+                                             durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    assert profile['history'] == 'keep_last' and profile['depth'] == 7
+    assert profile['reliability'] == 'best_effort'
+    assert profile['durability'] == 'transient_local'
+    assert profile['liveliness'] == 'system_default'
+    assert profile['deadline'] == {'sec': 0, 'nsec': 0}
