@@ -3,13 +3,16 @@
 Per sample (or a batch of samples as one array):
 
 1. reject samples with a NaN or infinite output (nothing is published for them);
-2. loads in balance calibration axes from the active model with its constant terms dropped
-   (TM-663 §10.1: a wind-on load is measured from the wind-off zero, not from the calibration's);
-3. flag loads beyond `envelope_margin` x capacity: the model is extrapolating there;
-4. subtract the tare offset (the mean load of a wind-off window, `TareWindow`);
+2. subtract the tare: the mean bridge outputs of a wind-off window (`TareWindow`), mV. Outputs are
+   measured from that zero, which is why the wind-on model drops its constant terms (TM-663
+   §10.1: zero outputs must mean zero load). The tare is in the output domain, not in loads: the
+   electrical zero is several % of full scale, and model(V + z) - model(z) != model(V) for the
+   quadratic and cubic models, whereas model(V + z - z) = model(V);
+3. loads in balance calibration axes from the active model without its constants;
+4. flag loads beyond `envelope_margin` x capacity: the model is extrapolating there;
 5. turn the loads into the tunnel axes of the installation, TM-663 §10.2 (eqs. (50)-(85)).
 
-Step 2 then 5 is the memo's substitution: eqs. (50)-(55) evaluate the calibration-axis model on
+Step 3 then 5 is the memo's substitution: eqs. (50)-(55) evaluate the calibration-axis model on
 outputs written in tunnel axes and map the result back, `to_tunnel(model(from_tunnel(V_tunnel)))`;
 the bridges deliver calibration-axis outputs, so here it is `to_tunnel(model(V))` (see
 `tunnel_axes.py`).
@@ -22,7 +25,6 @@ from __future__ import annotations
 
 import datetime as _dt
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -146,8 +148,8 @@ def _extra_variables(model: BalanceModel, n: int, temperature_c: np.ndarray | No
 @dataclass(frozen=True)
 class WrenchBatch:
     accepted: np.ndarray            # (N,) False for samples with a NaN/inf output (not published)
-    loads_balance: np.ndarray       # (N, 6) untared loads, balance axes, N / N·m (NaN if rejected)
-    wrench_tunnel: np.ndarray       # (N, 6) tared loads in tunnel axes (what /balance/wrench carries)
+    loads_balance: np.ndarray       # (N, 6) tared loads, balance axes, N / N·m (NaN if rejected)
+    wrench_tunnel: np.ndarray       # (N, 6) the same in tunnel axes (what /balance/wrench carries)
     out_of_envelope: np.ndarray     # (N,) a load beyond the envelope (published, but flagged)
     model_used: str
     fallback_reason: str = ''       # why the base model ran instead of the requested one ('' = it did not)
@@ -155,7 +157,7 @@ class WrenchBatch:
 
 def model_loads(active: ActiveCalibration, outputs_mv, *, temperature_c=None,
                 load_direction=None) -> tuple[np.ndarray, str, str]:
-    """Untared balance-axis loads (N, 6) of finite outputs (N, 6); also model used and fallback reason."""
+    """Balance-axis loads (N, 6) of finite, tared outputs (N, 6); also the model used and why a fallback."""
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
     n = outputs.shape[0]
     model, name, reason = active.model, active.model_name, ''
@@ -170,76 +172,67 @@ def model_loads(active: ActiveCalibration, outputs_mv, *, temperature_c=None,
     return model.loads(outputs, extra or None), name, reason
 
 
-def compute_wrench(active: ActiveCalibration, outputs_mv, *, tare_offset=None, temperature_c=None,
+def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, temperature_c=None,
                    load_direction=None) -> WrenchBatch:
-    """Raw outputs (N, 6) mV -> tared wrench in tunnel axes (N, 6); see the module docstring."""
+    """Raw outputs (N, 6) mV, tare zero_mv (6,) -> wrench in tunnel axes (N, 6); see the module docstring."""
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
     accepted = np.all(np.isfinite(outputs), axis=1)
+    tared = outputs - (np.zeros(6) if zero_mv is None else np.asarray(zero_mv, dtype=float))
     loads = np.full(outputs.shape, np.nan)
     name, reason = active.model_name, ''
     if accepted.any():
         temps = None if temperature_c is None else np.broadcast_to(np.asarray(temperature_c, float),
                                                                     (len(outputs),))[accepted]
         direction = None if load_direction is None else np.broadcast_to(load_direction, outputs.shape)[accepted]
-        loads[accepted], name, reason = model_loads(active, outputs[accepted], temperature_c=temps,
+        loads[accepted], name, reason = model_loads(active, tared[accepted], temperature_c=temps,
                                                     load_direction=direction)
-    offset = np.zeros(6) if tare_offset is None else np.asarray(tare_offset, dtype=float)
-    wrench = active.installation.to_tunnel(loads - offset)          # TM-663 §10.2
+    wrench = active.installation.to_tunnel(loads)          # TM-663 §10.2
     with np.errstate(invalid='ignore'):
         outside = accepted & np.any(np.abs(loads) > active.envelope, axis=1)
     return WrenchBatch(accepted, loads, wrench, outside, name, reason)
 
 
 # --- tare -------------------------------------------------------------------------------------
-def tare_offset(loads_balance) -> np.ndarray:
-    """The offset a tare subtracts: the mean load (6,) over a wind-off window (N, 6)."""
-    return np.mean(np.atleast_2d(np.asarray(loads_balance, dtype=float)), axis=0)
+def tare_zero(outputs_mv) -> np.ndarray:
+    """The zero a tare subtracts: mean bridge outputs (6,) mV over a wind-off window (N, 6)."""
+    return np.mean(np.atleast_2d(np.asarray(outputs_mv, dtype=float)), axis=0)
 
 
 @dataclass
 class TareWindow:
-    """Collects the next `samples` accepted samples after ~/tare; keeps their outputs so that the
-    offset can be recomputed for another calibration (after a refit or a `model` change)."""
+    """Collects the next `samples` accepted samples after ~/tare."""
 
     samples: int
     outputs_mv: list = field(default_factory=list)
-    temperature_c: list = field(default_factory=list)
-    direction: list = field(default_factory=list)
 
     def __post_init__(self):
         if int(self.samples) < 1:
             raise ValueError(f'tare needs at least one sample, not {self.samples}')
 
-    def add(self, outputs_mv, temperature_c=None, direction=None) -> bool:
-        """Add accepted samples (N, 6) with their temperature (N,) and load direction (N, 6), if
-        known; True once the window is full (samples beyond it are ignored)."""
+    def add(self, outputs_mv) -> bool:
+        """Add accepted raw samples (N, 6) mV; True once the window is full (the rest is ignored)."""
         outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
-        n = max(0, min(len(outputs), self.samples - len(self.outputs_mv)))
-        temps = np.full(len(outputs), np.nan) if temperature_c is None else \
-            np.broadcast_to(np.asarray(temperature_c, float), (len(outputs),))
-        dirs = np.ones(outputs.shape) if direction is None else np.broadcast_to(direction, outputs.shape)
-        self.outputs_mv.extend(outputs[:n])
-        self.temperature_c.extend(temps[:n])
-        self.direction.extend(dirs[:n])
+        self.outputs_mv.extend(outputs[:max(0, self.samples - len(self.outputs_mv))])
         return self.complete
 
     @property
     def complete(self) -> bool:
         return len(self.outputs_mv) >= self.samples
 
-    def offset(self, active: ActiveCalibration) -> np.ndarray:
-        """Balance-axis offset (6,) N / N·m: the mean load of the window under `active`."""
-        temps = np.array(self.temperature_c)
-        loads, _, _ = model_loads(active, np.array(self.outputs_mv),
-                                  temperature_c=None if np.isnan(temps).any() else temps,
-                                  load_direction=np.array(self.direction))
-        return tare_offset(loads)
+    @property
+    def zero_mv(self) -> np.ndarray:
+        return tare_zero(np.array(self.outputs_mv))
 
 
-def describe_offset(offset_balance, installation: Installation) -> str:
-    """'FX=-1.234 N, ..., MZ=0.001 N·m' in the tunnel axes the wrench is published in."""
-    tunnel = installation.to_tunnel(np.asarray(offset_balance, dtype=float))
-    return ', '.join(f'{c}={v:+.4f} {u}' for c, v, u in zip(COMPONENTS, tunnel, UNITS))
+def describe_tare(zero_mv, active: ActiveCalibration) -> str:
+    """The zero subtracted, per bridge output in mV, and the load it stands for in tunnel axes."""
+    zero = np.asarray(zero_mv, dtype=float)
+    equivalent = active.installation.to_tunnel(active.base_model.loads(zero[None, :])[0]) \
+        if not active.base_model.extra_variables else np.full(6, np.nan)
+    outputs = ', '.join(f'{c}={v:+.5f} mV' for c, v in zip(active.calibration.bridge_outputs, zero))
+    loads = ', '.join(f'{c}={v:+.3f} {u}' for c, v, u in zip(COMPONENTS, equivalent, UNITS))
+    return (f'{outputs} (the load these outputs read as, {active.installation.name} tunnel axes, '
+            f'{active.base_name} model: {loads})')
 
 
 # --- diagnostics ------------------------------------------------------------------------------
@@ -290,7 +283,7 @@ class LiveState:
     stale_after_s: float
     temperature_age_s: float | None
     fallback_reason: str
-    tare_offset_balance: np.ndarray | None     # None: never tared
+    tare_zero_mv: np.ndarray | None            # None: never tared
     refit_running: bool = False
 
 
@@ -338,7 +331,7 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
     cal_level = WARN if state.fallback_reason else OK
     message = (f'{active.model_name} model, {active.installation.name} installation'
                + (f'; FALLBACK to {active.base_name}: {state.fallback_reason}' if state.fallback_reason else ''))
-    tare = state.tare_offset_balance
+    tare = state.tare_zero_mv
     cal_values = (
         ('calibration_file', active.source),
         ('model', active.model_name),
@@ -351,7 +344,8 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('sigma_pct_fs', sigma),
         ('requires', ', '.join(active.requires) or 'none'),
         ('inputs', ', '.join(f'{k}: {v}' for k, v in inputs) or 'bridge outputs only'),
-        ('tare_offset', 'none' if tare is None else describe_offset(tare, active.installation)),
+        ('tare_zero_mv', 'none' if tare is None else
+         ', '.join(f'{c}={v:+.5f}' for c, v in zip(cal.bridge_outputs, tare))),
         ('refit_running', str(state.refit_running)),
     )
     reports.append(StatusReport(cal_level, f'{node_name}: calibration', message, hardware, cal_values))
@@ -363,7 +357,3 @@ def parse_reliability(value: str) -> str:
     if key not in ('reliable', 'best_effort'):
         raise ValueError(f'input_reliability must be reliable or best_effort, not {value!r}')
     return key
-
-
-def components_dict(values: Sequence[float]) -> Mapping[str, float]:
-    return {c: float(v) for c, v in zip(COMPONENTS, values)}

@@ -1,0 +1,130 @@
+"""Wind-on load profiles for the simulated balance: an angle-of-attack sweep or a CSV of loads.
+
+The sweep imitates TM-663 §10.3 (α = -2° ... 22°, a longitudinal test): a simple wing-body
+(lift slope 0.7·2π per rad, limited smoothly at CL_max; parabolic drag polar CD = CD0 + k·CL²;
+linear pitching moment; small side loads from a slight asymmetry). Only the shape of each
+coefficient against α is physical: each tunnel-axis component is scaled so that its largest
+magnitude over the sweep is a set fraction of the balance capacity (50 % for the longitudinal
+components F_X, F_Z, M_Y, 5 % for the lateral ones), which keeps every point inside the
+calibrated envelope for any balance.
+
+Tunnel-axis components here: F_X axial force, F_Y side force, F_Z normal force, M_X rolling,
+M_Y pitching, M_Z yawing moment, N and N·m, turned into balance axes by the installation
+(TM-663 §10.2). The model weight is a constant load (-W on tunnel F_Z) present wind-off and
+wind-on alike, which the calibrator's tare removes; its change with α is deliberately not modelled.
+"""
+from __future__ import annotations
+
+import csv
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..model.balance_model import BalanceModel
+from ..model.inverse import outputs_for_loads
+from ..tunnel_axes import Installation
+from ..units import COMPONENTS
+
+LONGITUDINAL_FRACTION = 0.5
+LATERAL_FRACTION = 0.05
+
+
+@dataclass(frozen=True)
+class AeroModel:
+    lift_slope_per_rad: float = 0.7 * 2.0 * np.pi
+    cl_max: float = 1.3
+    cd0: float = 0.02
+    induced_drag_factor: float = 0.09
+    cm0: float = 0.02
+    cm_per_rad: float = -0.35
+    side_per_cl: tuple[float, float, float] = (0.02, 0.004, -0.006)   # CY, Cl, Cn per unit CL
+
+    def coefficients(self, alpha_deg) -> np.ndarray:
+        """(N, 6) body-axis coefficients [CA, CY, CN, Cl, Cm, Cn] at each α (degrees)."""
+        alpha = np.radians(np.atleast_1d(np.asarray(alpha_deg, dtype=float)))
+        lift = self.cl_max * np.tanh(self.lift_slope_per_rad * alpha / self.cl_max)
+        drag = self.cd0 + self.induced_drag_factor * lift ** 2
+        normal = lift * np.cos(alpha) + drag * np.sin(alpha)
+        axial = drag * np.cos(alpha) - lift * np.sin(alpha)
+        pitch = self.cm0 + self.cm_per_rad * alpha
+        side, roll, yaw = (k * lift for k in self.side_per_cl)
+        return np.column_stack([axial, side, normal, roll, pitch, yaw])
+
+
+def sweep_loads_tunnel(alpha_deg, capacity_tunnel, aero: AeroModel = AeroModel(),
+                       fractions=(LONGITUDINAL_FRACTION, LATERAL_FRACTION, LONGITUDINAL_FRACTION,
+                                  LATERAL_FRACTION, LONGITUDINAL_FRACTION, LATERAL_FRACTION)) -> np.ndarray:
+    """Tunnel-axis loads (N, 6), N / N·m, each component scaled to fraction x capacity at its peak."""
+    coefficients = aero.coefficients(alpha_deg)
+    peak = np.max(np.abs(coefficients), axis=0)
+    peak[peak == 0] = 1.0
+    return coefficients / peak * np.asarray(fractions) * np.abs(np.asarray(capacity_tunnel, dtype=float))
+
+
+@dataclass(frozen=True)
+class WindOnProfile:
+    """Per-sample loads of a wind-on run."""
+
+    times_s: np.ndarray            # (S,) sample times from the start of the run
+    condition: np.ndarray          # (S,) index into `label`; 0 is wind-off for a sweep
+    label: tuple[str, ...]         # per condition, e.g. 'wind off', 'alpha=+4.0 deg'
+    aero_tunnel: np.ndarray        # (S, 6) aerodynamic loads, tunnel axes (what a tared calibrator reads)
+    loads_balance: np.ndarray      # (S, 6) everything on the balance (aero + model weight), balance axes
+
+
+def aoa_sweep_profile(capacity, installation: Installation, rate_hz: float, *,
+                      alphas_deg=tuple(range(-2, 23, 2)), hold_s: float = 1.0, wind_off_s: float = 2.0,
+                      model_weight_n: float = 0.0, aero: AeroModel = AeroModel()) -> WindOnProfile:
+    """Wind-off for wind_off_s, then each α held for hold_s, sampled at rate_hz."""
+    if rate_hz <= 0 or hold_s <= 0 or wind_off_s < 0:
+        raise ValueError('rate_hz and hold_s must be positive, wind_off_s not negative')
+    alphas = np.asarray(alphas_deg, dtype=float)
+    capacity_tunnel = installation.to_tunnel(np.asarray(capacity, dtype=float))
+    conditions = np.vstack([np.zeros((1, 6)), sweep_loads_tunnel(alphas, capacity_tunnel, aero)])
+    counts = np.array([round(wind_off_s * rate_hz)] + [max(1, round(hold_s * rate_hz))] * len(alphas))
+    condition = np.repeat(np.arange(len(conditions)), counts)
+    times = (np.arange(len(condition)) + 0.5) / rate_hz
+    aero_tunnel = conditions[condition]
+    weight_tunnel = np.array([0.0, 0.0, -float(model_weight_n), 0.0, 0.0, 0.0])
+    labels = ('wind off',) + tuple(f'alpha={a:+.1f} deg' for a in alphas)
+    return WindOnProfile(times, condition, labels, aero_tunnel,
+                         installation.from_tunnel(aero_tunnel + weight_tunnel))
+
+
+def csv_profile(path: str | Path, installation: Installation, rate_hz: float) -> WindOnProfile:
+    """Loads from a CSV with columns time_s,FX,FY,FZ,MX,MY,MZ (balance axes, N / N·m), linearly
+    interpolated at rate_hz. Repeat a time to make a step. ValueError names file and line."""
+    path = Path(path)
+    try:
+        with open(path, newline='') as handle:
+            rows = list(csv.DictReader(handle))
+    except OSError as err:
+        raise ValueError(f'{path}: cannot read load profile: {err.strerror or err}') from None
+    columns = ('time_s',) + COMPONENTS
+    if not rows or any(c not in rows[0] for c in columns):
+        raise ValueError(f'{path}: load profile needs a header with columns {",".join(columns)}')
+    table = np.empty((len(rows), len(columns)))
+    for line, row in enumerate(rows, start=2):
+        try:
+            table[line - 2] = [float(row[c]) for c in columns]
+        except (TypeError, ValueError):
+            raise ValueError(f'{path}: line {line}: expected numbers in {",".join(columns)}') from None
+    if not np.all(np.isfinite(table)) or np.any(np.diff(table[:, 0]) < 0):
+        raise ValueError(f'{path}: load profile must be finite with non-decreasing time_s')
+    times = np.arange(table[0, 0], table[-1, 0], 1.0 / rate_hz) + 0.5 / rate_hz
+    loads = np.column_stack([np.interp(times, table[:, 0], table[:, 1 + k]) for k in range(6)])
+    _, condition = np.unique(loads, axis=0, return_inverse=True)
+    return WindOnProfile(times - table[0, 0], condition.ravel(), (), installation.to_tunnel(loads), loads)
+
+
+def wind_on_outputs(truth: BalanceModel, loads_balance, *, electrical_zero_mv=0.04, noise_mv=0.0,
+                    seed: int = 0) -> np.ndarray:
+    """Raw bridge outputs (S, 6) mV for loads (S, 6): inverse of the truth without constants
+    (§10.1), plus the electrical zero and Gaussian noise (σ noise_mv per bridge)."""
+    loads = np.atleast_2d(np.asarray(loads_balance, dtype=float))
+    unique, inverse = np.unique(loads, axis=0, return_inverse=True)
+    outputs = outputs_for_loads(truth.without_constant(), unique)[inverse.ravel()]
+    rng = np.random.default_rng(seed)
+    noise = rng.normal(size=outputs.shape) * np.asarray(noise_mv, float)
+    return outputs + np.asarray(electrical_zero_mv, float) + noise

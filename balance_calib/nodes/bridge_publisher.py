@@ -1,0 +1,330 @@
+"""bridge_publisher: a simulated balance (or a recorded bag) on /balance/raw, in real time.
+
+Modes (parameter `mode`):
+  calibration   plays the balance config's load schedule (Appendix A/B) like a real campaign:
+                /calibration/gravity when the body is rotated, /calibration/applied_load when a
+                point settles (all NaN while weights are changed), /balance/raw (mV) and
+                /balance/temperature (°C). Simulated by simulation.balance_sim.simulate_campaign.
+  wind_on       an angle-of-attack sweep (live/wind_on.py) or a CSV of balance-axis loads; also
+                /balance/truth: the true aerodynamic load in tunnel axes, N / N·m, stamped like
+                the raw sample it belongs to (a test and diagnostic topic, not a public interface).
+  replay        the messages of bag(s) as `ros2 bag play` sends them (header stamps as recorded).
+  thrust_stand  the lab manual's thrust stand (nodes/thrust_stand_source.py): strain channel on
+                /balance/raw force.x (mV), /thrust_stand/chamber_pressure (gauge) and
+                /thrust_stand/ambient_pressure (sensor_msgs/FluidPressure, Pa), and the
+                calibration weights on /calibration/applied_load (force.x, N).
+
+The node precomputes a timeline of events (live/timeline.py) and a timer publishes the events
+that are due; events of one sampling instant share the header stamp: the node clock when the
+first of them is published. Parameters are read at start-up.
+"""
+from __future__ import annotations
+
+import importlib
+import sys
+import time
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
+from rclpy.time import Time
+from sensor_msgs.msg import FluidPressure, Temperature
+
+from balance_calib.bags.errors import BagError
+from balance_calib.config import ConfigError, load_balance_config
+from balance_calib.live import timeline as tl
+from balance_calib.live.replay import read_recorded_messages
+from balance_calib.live.wind_on import aoa_sweep_profile, csv_profile, wind_on_outputs
+from balance_calib.simulation.balance_sim import (SimulationSettings, noise_mv_for_load_sigma, simulate_campaign,
+                                                  table17_noise)
+from balance_calib.simulation.effects import parse_effects
+from balance_calib.tunnel_axes import parse_installation
+
+MODES = ('calibration', 'wind_on', 'replay', 'thrust_stand')
+PARAMETERS = {                       # name: default (the type of the default is the parameter's type)
+    'mode': 'calibration',
+    'balance': 'lmc6522',
+    'truth_model': 'cubic',
+    'rate_hz': 100.0,
+    'effects': '',
+    'seed': 0,
+    'noise_sigma_pct_fs': -1.0,      # σ of a point mean, % FS, all components; < 0: Table 17 cubic row
+    'point_duration_s': 1.0,
+    'transition_s': 0.3,
+    'points': '',                    # e.g. '1-60,100' (point numbers as printed); '' = all
+    'speed': 1.0,                    # simulated (or recorded) seconds per real second
+    'bag': '',                       # replay: bag directory or .mcap; several separated by commas
+    'profile_csv': '',               # wind_on: time_s,FX,FY,FZ,MX,MY,MZ (balance axes); '' = α sweep
+    'installation': 'upright',
+    'hold_s': 1.0,                   # wind_on sweep: time at each α
+    'wind_off_s': 2.0,               # wind_on sweep: wind-off samples first (for ~/tare)
+    'alpha_start_deg': -2.0,
+    'alpha_end_deg': 22.0,
+    'alpha_step_deg': 2.0,
+    'model_weight_n': 0.0,
+    'temperature_c': 20.0,           # wind_on: balance temperature
+    'temperature_rate_hz': 10.0,
+    'loop': False,
+    'exit_when_done': False,
+    'wait_for_subscribers': 0,       # start only when /balance/raw has this many subscribers ...
+    'start_delay_s': 0.5,            # ... and this long after, so their other topics are matched too
+}
+RAW_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+EVENT_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+
+
+class StartupError(ValueError):
+    """A parameter or input that makes the requested mode impossible; the message says which."""
+
+
+class BridgePublisher(Node):
+    def __init__(self, **kwargs):
+        super().__init__('bridge_publisher', **kwargs)
+        self._settings = {name: self.declare_parameter(name, default).value for name, default in PARAMETERS.items()}
+        self.mode = str(self._settings['mode'])
+        if self.mode not in MODES:
+            raise StartupError(f'parameter mode = {self.mode!r}: choose one of {", ".join(MODES)}')
+        if self._settings['rate_hz'] <= 0 or self._settings['speed'] <= 0:
+            raise StartupError('parameters rate_hz and speed must be positive')
+        self.done = Future()                    # completes when the run is over and exit_when_done
+        self._outputs = {}
+        self._frame_id = ''
+        self._recorded = None
+        builder = {'calibration': self._calibration, 'wind_on': self._wind_on,
+                   'replay': self._replay, 'thrust_stand': self._thrust_stand}[self.mode]
+        try:
+            self._build = builder()
+            self._timeline = self._build(0)
+        except (ConfigError, BagError, ValueError, KeyError, ArithmeticError) as err:   # Newton: loads out of range
+            raise StartupError(f'{self.mode} mode: {err}') from None
+        self._cycle = 0
+        self._cursor = 0
+        self._start = None
+        self._last_time_s = None
+        self._stamp_ns = 0
+        self._waiting_logged = False
+        self._ready_at = None
+        tick_hz = min(max(float(self._settings['rate_hz']), 20.0), 250.0)
+        self._timer = self.create_timer(1.0 / tick_hz, self._on_tick)
+        self.get_logger().info(f'{self.mode}: {len(self._timeline)} events over '
+                               f'{self._timeline.duration_s / self._settings["speed"]:.1f} s')
+
+    # --- modes: each returns build(cycle) -> Timeline -----------------------------------------
+    def _publisher(self, kind, msg_type, topic, qos=EVENT_QOS):
+        self._outputs[kind] = self.create_publisher(msg_type, topic, qos)
+
+    def _balance(self):
+        config = load_balance_config(self._settings['balance'])
+        truth_name = str(self._settings['truth_model'])
+        if truth_name not in config.matrices:
+            raise ConfigError(f'truth_model {truth_name!r}: {config.name} has {", ".join(config.matrices)}')
+        noise = self._settings['noise_sigma_pct_fs']
+        noise = table17_noise(config) if noise < 0 else np.full(6, float(noise))
+        self._frame_id = config.name
+        self._publisher(tl.RAW, WrenchStamped, '/balance/raw', RAW_QOS)
+        self._publisher(tl.TEMPERATURE, Temperature, '/balance/temperature', RAW_QOS)
+        return config, config.matrices[truth_name], noise
+
+    def _temperature_every(self) -> int:
+        return max(1, round(self._settings['rate_hz'] / max(self._settings['temperature_rate_hz'], 1e-9)))
+
+    def _calibration(self):
+        config, truth, noise = self._balance()
+        schedule = tl.select_points(config.schedule, self._settings['points'])
+        effects = parse_effects(self._settings['effects'])
+        rate, duration, transition = float(self._settings['rate_hz']), float(self._settings['point_duration_s']), \
+            float(self._settings['transition_s'])
+        if duration <= 0 or transition < 0:
+            raise ValueError('point_duration_s must be positive and transition_s not negative')
+        self._publisher(tl.GRAVITY, Vector3Stamped, '/calibration/gravity')
+        self._publisher(tl.APPLIED_LOAD, WrenchStamped, '/calibration/applied_load')
+
+        def build(cycle):
+            settings = SimulationSettings(
+                samples_per_point=max(1, round(duration * rate)), sample_rate_hz=rate,
+                point_duration_s=duration, transition_s=transition,
+                transition_samples=round(transition * rate), noise_sigma_pct_fs=noise,
+                seed=int(self._settings['seed']) + cycle)
+            campaign = simulate_campaign(config, truth, schedule=schedule, settings=settings, effects=effects)
+            return tl.campaign_timeline(campaign, transition, self._temperature_every())
+        return build
+
+    def _wind_on(self):
+        config, truth, noise = self._balance()
+        installation = parse_installation(self._settings['installation'])
+        rate = float(self._settings['rate_hz'])
+        if self._settings['profile_csv']:
+            profile = csv_profile(self._settings['profile_csv'], installation, rate)
+            samples_per_condition = 1
+        else:
+            step = float(self._settings['alpha_step_deg'])
+            if step <= 0:
+                raise ValueError('alpha_step_deg must be positive')
+            alphas = np.arange(self._settings['alpha_start_deg'], self._settings['alpha_end_deg'] + step / 2, step)
+            profile = aoa_sweep_profile(config.capacity, installation, rate, alphas_deg=alphas,
+                                        hold_s=self._settings['hold_s'], wind_off_s=self._settings['wind_off_s'],
+                                        model_weight_n=self._settings['model_weight_n'])
+            samples_per_condition = max(1, round(self._settings['hold_s'] * rate))
+        # noise_sigma_pct_fs is the σ of a held point's mean, as in calibration mode
+        noise_mv = noise_mv_for_load_sigma(truth.without_constant(), config.capacity, noise) \
+            * np.sqrt(samples_per_condition)
+        zero_mv = SimulationSettings().electrical_zero_mv
+        self._publisher(tl.TRUTH, WrenchStamped, '/balance/truth', RAW_QOS)
+
+        def build(cycle):
+            raw = wind_on_outputs(truth, profile.loads_balance, electrical_zero_mv=zero_mv, noise_mv=noise_mv,
+                                  seed=int(self._settings['seed']) + cycle)
+            return tl.wind_on_timeline(profile.times_s, raw, profile.aero_tunnel,
+                                       float(self._settings['temperature_c']),
+                                       self._temperature_every())
+        return build
+
+    def _replay(self):
+        paths = [p.strip() for p in str(self._settings['bag']).split(',') if p.strip()]
+        if not paths:
+            raise ValueError('parameter bag is empty: give the bag directory or .mcap file to replay')
+        recorded = read_recorded_messages(paths)
+        for index, topic in enumerate(sorted(recorded.msgtypes)):
+            package, _, name = recorded.msgtypes[topic].partition('/msg/')
+            try:
+                msg_type = getattr(importlib.import_module(f'{package}.msg'), name)
+            except (ImportError, AttributeError):
+                self.get_logger().warn(f'replay: skipping {topic}: message type {recorded.msgtypes[topic]} '
+                                       f'is not available here')
+                continue
+            self._outputs[topic] = self.create_publisher(msg_type, topic, RAW_QOS)
+        self._recorded = recorded
+        replay_timeline = tl.Timeline(recorded.times_s, np.full(len(recorded), -1), np.zeros((len(recorded), 6)))
+        return lambda cycle: replay_timeline
+
+    def _thrust_stand(self):
+        try:
+            module = importlib.import_module('balance_calib.nodes.thrust_stand_source')
+            simulator = module.ThrustStandSimulator(seed=int(self._settings['seed']))
+        except (ImportError, AttributeError) as err:
+            raise StartupError(f'thrust_stand mode is not available: balance_calib.nodes.thrust_stand_source.'
+                               f'ThrustStandSimulator cannot be loaded ({err})') from None
+        self._frame_id = 'thrust_stand'
+        self._publisher(tl.RAW, WrenchStamped, '/balance/raw', RAW_QOS)
+        self._publisher(tl.CHAMBER_PRESSURE, FluidPressure, '/thrust_stand/chamber_pressure', RAW_QOS)
+        self._publisher(tl.AMBIENT_PRESSURE, FluidPressure, '/thrust_stand/ambient_pressure', RAW_QOS)
+        self._publisher(tl.APPLIED_LOAD, WrenchStamped, '/calibration/applied_load')
+        rate, duration = float(self._settings['rate_hz']), float(simulator.duration_s)
+        times = (np.arange(int(duration * rate)) + 0.5) / rate
+        applied = np.array(simulator.applied_load_events(), dtype=float).reshape(-1, 2)
+
+        def build(cycle):
+            sample = simulator.sample(times + cycle * duration)
+            loads = np.zeros((len(applied), 6))
+            loads[:, 0] = applied[:, 1]
+            loads[np.isnan(applied[:, 1])] = np.nan
+            return tl.merge(tl.thrust_stand_timeline(times, sample.strain_mv, sample.chamber_gauge_pa,
+                                                     sample.ambient_pa),
+                            tl.events(applied[:, 0], tl.APPLIED_LOAD, loads))
+        return build
+
+    # --- playing ------------------------------------------------------------------------------
+    def _on_tick(self):
+        now = self.get_clock().now()
+        if self._start is None:
+            wanted = int(self._settings['wait_for_subscribers'])
+            raw = self._outputs.get(tl.RAW) or self._outputs.get('/balance/raw')
+            if wanted > 0 and raw is not None and raw.get_subscription_count() < wanted:
+                if not self._waiting_logged:
+                    self.get_logger().info(f'waiting for {wanted} subscriber(s) on /balance/raw')
+                    self._waiting_logged = True
+                return
+            self._ready_at = self._ready_at or now
+            if (now - self._ready_at).nanoseconds * 1e-9 < float(self._settings['start_delay_s']):
+                return
+            self._start = now
+        sim_time_s = (now - self._start).nanoseconds * 1e-9 * float(self._settings['speed'])
+        end = self._timeline.due(self._cursor, sim_time_s)
+        for index in range(self._cursor, end):
+            self._publish(index, now)
+        self._cursor = end
+        if self._cursor >= len(self._timeline):
+            self._finish(now)
+
+    def _stamp(self, time_s: float, now: Time):
+        if time_s != self._last_time_s:      # a new sampling instant: a new, strictly later stamp
+            self._stamp_ns = max(now.nanoseconds, self._stamp_ns + 1)
+            self._last_time_s = time_s
+        return Time(nanoseconds=self._stamp_ns).to_msg()
+
+    def _publish(self, index: int, now: Time):
+        kind = int(self._timeline.kinds[index])
+        if self._recorded is not None:
+            publisher = self._outputs.get(self._recorded.topics[index])
+            if publisher is not None:
+                publisher.publish(self._recorded.payloads[index])
+            return
+        values = self._timeline.values[index]
+        stamp = self._stamp(float(self._timeline.times_s[index]), now)
+        if kind in (tl.RAW, tl.APPLIED_LOAD, tl.TRUTH):
+            msg = WrenchStamped()
+            msg.header.frame_id = self._frame_id if kind == tl.RAW else 'balance' if kind == tl.APPLIED_LOAD \
+                else 'tunnel'
+            (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
+             msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = (float(v) for v in values)
+        elif kind == tl.GRAVITY:
+            msg = Vector3Stamped()
+            msg.header.frame_id = 'balance'
+            msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in values[:3])
+        elif kind == tl.TEMPERATURE:
+            msg = Temperature(temperature=float(values[0]), variance=0.0)
+            msg.header.frame_id = self._frame_id
+        else:
+            msg = FluidPressure(fluid_pressure=float(values[0]), variance=0.0)
+            msg.header.frame_id = self._frame_id
+        msg.header.stamp = stamp
+        self._outputs[kind].publish(msg)
+
+    def _finish(self, now: Time):
+        self.get_logger().info(f'campaign complete ({self.mode}, cycle {self._cycle + 1}): '
+                               f'{len(self._timeline)} events in {(now - self._start).nanoseconds * 1e-9:.1f} s')
+        if self._settings['loop']:
+            self._cycle += 1
+            self._timeline = self._build(self._cycle)
+            self._cursor, self._start, self._last_time_s = 0, now, None
+            return
+        self._timer.cancel()
+        if self._settings['exit_when_done']:
+            # let reliable subscribers acknowledge the tail before the process goes away (acks come
+            # with the writer's next heartbeat, so this can take a couple of seconds)
+            deadline = time.monotonic() + 3.0
+            for publisher in self._outputs.values():
+                if publisher.get_subscription_count() > 0:
+                    publisher.wait_for_all_acked(Duration(seconds=max(deadline - time.monotonic(), 0.0)))
+            self.done.set_result(True)
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = None
+    status = 0
+    try:
+        node = BridgePublisher()
+        rclpy.spin_until_future_complete(node, node.done)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except StartupError as err:
+        rclpy.logging.get_logger('bridge_publisher').error(str(err))
+        status = 1
+    except RuntimeError:
+        if rclpy.ok():      # a signal during spin's wait-set setup (ros2/ros2cli#854) is a shutdown
+            raise
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return status
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,138 @@
+"""Helpers for the ROS tests (test_ros_*.py): real nodes over DDS on loopback.
+
+Each test gets its own ROS_DOMAIN_ID; node processes get it in their environment, the in-process
+probe node in its own rclpy context. Waits are bounded polls, never sleeps as synchronisation.
+"""
+from __future__ import annotations
+
+import itertools
+import os
+import signal
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+_counter = itertools.count()
+RELIABLE = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def new_domain_id() -> int:
+    """A domain in 1..99 unlikely to be shared with another test running at the same time."""
+    return 1 + (os.getpid() * 13 + next(_counter) * 37) % 99
+
+
+def wait_for(predicate, timeout_s: float, what: str, poll_s: float = 0.02):
+    """Poll predicate until it is truthy (returns its value) or fail after timeout_s."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f'timed out after {timeout_s:g} s waiting for {what}')
+        time.sleep(poll_s)
+
+
+def ros_args(parameters: dict) -> list[str]:
+    args = ['--ros-args']
+    for name, value in parameters.items():
+        if isinstance(value, bool):
+            value = 'true' if value else 'false'
+        elif isinstance(value, (list, tuple)):
+            value = '[' + ','.join(f"'{v}'" for v in value) + ']'
+        args += ['-p', f'{name}:={value}']
+    return args
+
+
+class NodeProcess:
+    """A node's console script as a subprocess with its own log files."""
+
+    def __init__(self, executable: str, domain_id: int, log_dir: Path, parameters: dict | None = None,
+                 extra_args: list[str] | None = None):
+        self.name = executable
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.stdout_path = log_dir / f'{executable}.{id(self)}.out'
+        self.stderr_path = log_dir / f'{executable}.{id(self)}.err'
+        self._stdout = open(self.stdout_path, 'w')
+        self._stderr = open(self.stderr_path, 'w')
+        self.process = subprocess.Popen([executable] + ros_args(parameters or {}) + (extra_args or []),
+                                        env=env, stdout=self._stdout, stderr=self._stderr,
+                                        start_new_session=True)
+
+    def output(self) -> str:
+        if not self._stdout.closed:
+            self._stdout.flush()
+            self._stderr.flush()
+        return self.stdout_path.read_text() + self.stderr_path.read_text()
+
+    def wait(self, timeout_s: float) -> int:
+        return self.process.wait(timeout=timeout_s)
+
+    def stop(self, timeout_s: float = 5.0) -> int | None:
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(timeout=timeout_s)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(timeout=timeout_s)
+        self._stdout.close()
+        self._stderr.close()
+        return self.process.returncode
+
+
+class Probe:
+    """An in-process rclpy node on the test's domain, spun by a background executor thread."""
+
+    def __init__(self, domain_id: int, name: str = 'test_probe'):
+        self.domain_id = domain_id
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id)
+        self.node = Node(name, context=self.context)
+        # single-threaded, as rclpy.spin() runs the nodes: rclpy's MultiThreadedExecutor busy-loops while
+        # a coroutine callback (the calibrator's ~/tare, ~/refit) awaits
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+        self.received: dict[str, list] = {}
+
+    def _spin(self):
+        try:
+            self.executor.spin()
+        except Exception:   # context shut down
+            pass
+
+    def add_node(self, node: Node):
+        self.executor.add_node(node)
+
+    def subscribe(self, msg_type, topic: str, qos=RELIABLE) -> list:
+        messages = self.received.setdefault(topic, [])
+        self.node.create_subscription(msg_type, topic, messages.append, qos)
+        return messages
+
+    def call(self, srv_type, service: str, timeout_s: float = 30.0, request=None):
+        client = self.node.create_client(srv_type, service)
+        wait_for(lambda: client.service_is_ready(), 20.0, f'service {service}')
+        future = client.call_async(request or srv_type.Request())
+        wait_for(future.done, timeout_s, f'reply of {service}')
+        return future.result()
+
+    def call_async(self, srv_type, service: str):
+        client = self.node.create_client(srv_type, service)
+        wait_for(lambda: client.service_is_ready(), 20.0, f'service {service}')
+        return client.call_async(srv_type.Request())
+
+    def close(self):
+        self.executor.shutdown(timeout_sec=2.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self._thread.join(timeout=5.0)

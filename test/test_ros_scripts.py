@@ -1,0 +1,113 @@
+"""launchless_scripts/trigger and launchless_scripts/graph, run as a user runs them."""
+import os
+import re
+import signal
+import subprocess
+import threading
+from pathlib import Path
+
+import pytest
+import yaml
+
+from ros_harness import NodeProcess, new_domain_id, wait_for
+
+pytestmark = pytest.mark.ros
+SCRIPTS = Path(__file__).resolve().parent.parent / 'launchless_scripts'
+
+
+def run_trigger(domain, *args, timeout=60):
+    return subprocess.run([str(SCRIPTS / 'trigger'), *args], capture_output=True, text=True, timeout=timeout,
+                          env=dict(os.environ, ROS_DOMAIN_ID=str(domain)))
+
+
+def test_trigger_prints_the_reply_and_exits_by_success(tmp_path):
+    domain = new_domain_id()
+    calibrator = NodeProcess('balance_calibrator', domain, tmp_path, {'tare_samples': 20, 'tare_timeout_s': 1.0})
+    try:
+        failed = run_trigger(domain, '/balance_calibrator/tare', '--timeout', '30')     # no samples: tare fails
+        assert failed.returncode == 1, failed.stderr
+        assert failed.stdout.startswith('success: false\nmessage: tare failed: only 0 of 20')
+        publisher = NodeProcess('bridge_publisher', domain, tmp_path, {'mode': 'wind_on', 'loop': True,
+                                                                        'rate_hz': 100.0})
+        try:
+            done = run_trigger(domain, '/balance_calibrator/tare', '--timeout', '30')
+        finally:
+            publisher.stop()
+        assert done.returncode == 0, done.stdout + done.stderr
+        assert done.stdout.startswith('success: true\nmessage: tare: averaged 20 samples')
+    finally:
+        calibrator.stop()
+    missing = run_trigger(domain, '/no_such_node/refit', '--timeout', '1')
+    assert missing.returncode == 1 and 'service /no_such_node/refit is not available' in missing.stderr
+
+
+def graph_params(tmp_path, **calibrator):
+    params = yaml.safe_load((SCRIPTS.parent / 'config' / 'graph_params.yaml').read_text())
+    params['bridge_publisher']['ros__parameters'].update(
+        mode='wind_on', rate_hz=100.0, wind_off_s=0.5, hold_s=0.2, alpha_step_deg=12.0)
+    params['balance_calibrator']['ros__parameters'].update(calibrator)
+    path = tmp_path / 'params.yaml'
+    path.write_text(yaml.safe_dump(params))
+    return path
+
+
+def start_graph(tmp_path, params, *args):
+    """The graph script; its output lines are collected in graph.lines as they come."""
+    graph = subprocess.Popen([str(SCRIPTS / 'graph'), str(params), '--bag', str(tmp_path / 'bag'), *args],
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
+                             env=dict(os.environ, ROS_DOMAIN_ID=str(new_domain_id())))
+    graph.lines = []
+    graph.reader = threading.Thread(target=lambda: graph.lines.extend(graph.stdout), daemon=True)
+    graph.reader.start()
+    return graph
+
+
+def stop_graph(graph):
+    if graph.poll() is None:
+        os.killpg(graph.pid, signal.SIGKILL)
+        graph.wait(30)
+    graph.reader.join(30)
+    return ''.join(graph.lines)
+
+
+def test_graph_runs_the_nodes_and_ends_with_the_publisher_closing_the_bag(tmp_path):
+    graph = start_graph(tmp_path, graph_params(tmp_path))
+    try:
+        assert graph.wait(90) == 0
+    finally:
+        output = stop_graph(graph)
+    assert 'campaign complete' in output and 'bridge_publisher exited with status 0' in output, output
+    metadata = yaml.safe_load((tmp_path / 'bag' / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+    counts = {t['topic_metadata']['name']: t['message_count'] for t in metadata['topics_with_message_count']}
+    assert counts['/balance/raw'] == 50 + 3 * 20 and counts['/balance/wrench'] > 0, counts
+
+
+def test_graph_forwards_sigterm_and_stops_every_node(tmp_path):
+    params = graph_params(tmp_path)
+    data = yaml.safe_load(params.read_text())
+    data['bridge_publisher']['ros__parameters'].update(loop=True, exit_when_done=False)
+    params.write_text(yaml.safe_dump(data))
+    graph = start_graph(tmp_path, params)
+    try:
+        wait_for(lambda: any('campaign complete' in line for line in graph.lines), 30.0, 'a first cycle')
+        graph.send_signal(signal.SIGTERM)
+        assert graph.wait(30) == 0
+    finally:
+        output = stop_graph(graph)
+    pids = [int(p) for p in re.findall(r'started \w+ \(pid (\d+)\)', output)]
+    assert len(pids) == 3, output
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+    assert (tmp_path / 'bag' / 'metadata.yaml').exists()           # the recorder closed its bag
+
+
+def test_graph_stops_everything_when_a_node_dies(tmp_path):
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('models: [\n')
+    graph = start_graph(tmp_path, graph_params(tmp_path, calibration_file=str(broken)), '--no-recorder')
+    try:
+        assert graph.wait(60) == 1
+    finally:
+        output = stop_graph(graph)
+    assert 'balance_calibrator exited with status 1' in output and 'broken.yaml' in output, output
