@@ -138,8 +138,17 @@ def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -
 
 
 def load_calibration(path: str | Path) -> Calibration:
-    """Read calibration.yaml (or a balance config); ConfigError names the file and the problem."""
+    """Read calibration.yaml (or a balance config, also by name: 'lmc6522', 'thrust_stand').
+
+    ConfigError names the file and the problem.
+    """
     path = Path(path)
+    if not path.exists() and path.suffix == '' and '/' not in str(path):
+        from .config import resolve_config_path
+        try:
+            path = resolve_config_path(str(path))
+        except ConfigError:
+            pass
     try:
         text = path.read_text()
     except OSError as err:

@@ -31,7 +31,7 @@ import numpy as np
 from ..calibration_file import Calibration, ConfigError
 from ..model.balance_model import BalanceModel
 from ..tunnel_axes import Installation, parse_installation
-from ..units import COMPONENTS
+from ..units import BRIDGE_OUTPUTS, COMPONENTS
 
 MODEL_CHOICES = ('linear', 'quadratic', 'cubic', 'adopted')
 DEFAULT_ENVELOPE_MARGIN = 1.1
@@ -39,6 +39,25 @@ UNITS = ('N', 'N', 'N', 'N·m', 'N·m', 'N·m')
 
 # diagnostic_msgs/DiagnosticStatus levels, repeated here so the core needs no ROS messages
 OK, WARN, ERROR = 0, 1, 2
+
+
+def six_axis_loads(model: BalanceModel, outputs_mv, extra=None) -> np.ndarray:
+    """Loads (N, 6) in FX..MZ order from the six raw channels (N, 6), whatever channels the model uses.
+
+    A one-channel thrust stand (inputs FXV, component FX) reads force.x and fills F_X only.
+    """
+    outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
+    columns = [BRIDGE_OUTPUTS.index(name) for name in model.inputs]
+    loads = np.zeros((outputs.shape[0], 6))
+    loads[:, [COMPONENTS.index(c) for c in model.components]] = model.loads(outputs[:, columns], extra)
+    return loads
+
+
+def six_axis(values, names, fill: float) -> np.ndarray:
+    """A per-component vector over `names` spread onto FX..MZ, `fill` where a component is absent."""
+    result = np.full(6, fill, dtype=float)
+    result[[COMPONENTS.index(n) for n in names]] = np.asarray(values, dtype=float)
+    return result
 
 
 # --- the active calibration -------------------------------------------------------------------
@@ -59,7 +78,8 @@ class ActiveCalibration:
 
     @property
     def capacity(self) -> np.ndarray:
-        return self.calibration.capacity
+        """(6,) full scale per component FX..MZ (inf for components the calibration lacks)."""
+        return six_axis(self.calibration.capacity, self.calibration.components, np.inf)
 
     def age_days(self, now: _dt.datetime | None = None) -> float | None:
         fitted = self.calibration.fitted_datetime
@@ -90,7 +110,7 @@ def activate(calibration: Calibration, model: str = 'adopted', installation: str
         base_name, base = model_name, chosen
     return ActiveCalibration(calibration, source, model, model_name, chosen.without_constant(), requires,
                              base_name, base.without_constant(), installation,
-                             float(envelope_margin) * np.asarray(calibration.capacity, dtype=float))
+                             float(envelope_margin) * six_axis(calibration.capacity, calibration.components, np.inf))
 
 
 # --- live extra inputs ------------------------------------------------------------------------
@@ -169,7 +189,7 @@ def model_loads(active: ActiveCalibration, outputs_mv, *, temperature_c=None,
         if isinstance(extra, str):      # the base model needs inputs too: nothing sensible to run
             raise ConfigError(f'{active.source}: neither {active.model_name} nor {active.base_name} '
                               f'can run: {reason}')
-    return model.loads(outputs, extra or None), name, reason
+    return six_axis_loads(model, outputs, extra or None), name, reason
 
 
 def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, temperature_c=None,
@@ -227,7 +247,7 @@ class TareWindow:
 def describe_tare(zero_mv, active: ActiveCalibration) -> str:
     """The zero subtracted, per bridge output in mV, and the load it stands for in tunnel axes."""
     zero = np.asarray(zero_mv, dtype=float)
-    equivalent = active.installation.to_tunnel(active.base_model.loads(zero[None, :])[0]) \
+    equivalent = active.installation.to_tunnel(six_axis_loads(active.base_model, zero[None, :])[0]) \
         if not active.base_model.extra_variables else np.full(6, np.nan)
     outputs = ', '.join(f'{c}={v:+.5f} mV' for c, v in zip(active.calibration.bridge_outputs, zero))
     loads = ', '.join(f'{c}={v:+.3f} {u}' for c, v, u in zip(COMPONENTS, equivalent, UNITS))
