@@ -1,0 +1,5 @@
+"""Residual diagnosis (issue 4): find the physical effects the base model lacks and add them."""
+from .candidates import EFFECT_NAMES
+from .diagnose import Diagnosis, DiagnosisSettings, EffectFound, diagnose
+
+__all__ = ['EFFECT_NAMES', 'Diagnosis', 'DiagnosisSettings', 'EffectFound', 'diagnose']

@@ -1,0 +1,522 @@
+"""Residual diagnosis: which physical effect does the base model of TM-663 lack? (issue 4)
+
+After the base fit (cubic, §2.3) of the corrected data (§5(4) zero points, §6-7 tare), the residuals
+of every component are examined against each candidate explanation (candidates.py, tare_refit.py).
+Per round, for every effect and component:
+
+1. forward selection of the effect's terms, each step a partial F-test at a Bonferroni level
+   α / (effects examined × candidate groups × components) -- the search is wide, the level strict.
+   The tests run on the loaded points whitened against the noise the zero points share with
+   their block (generalised least squares, statistics.ZeroPointWhitening); plain least squares
+   would see drift and temperature in the brackets' noise;
+2. the component counts only if the terms remove at least `min_effect_pct_fs` (RMS, % FS) and the
+   cross-validated σ (PRESS, e_i / (1 - h_ii), of the eq. (19) fit) improves;
+3. effects are ranked by the gain in BIC, Σ_k [n ln(RSS_before/RSS_after) - q_k ln n] (whitened,
+   n loaded points), so a large generic family that soaks up residual with many terms loses to
+   the specific effect that explains it with one or two.
+
+The best effect is added (its terms only for its components), everything refitted, and the search
+repeats until no effect passes. The adopted fit keeps every term; the live model drops the nuisance
+ones (the zero-drift time basis) and needs only outputs, dT and the load directions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..config import BalanceConfig, CalibrationBody
+from ..model.balance_model import BalanceModel
+from ..model.terms import as_variables, design_matrix, parse_terms
+from ..model.tm663 import tm663_terms
+from ..reduction import Reduction
+from ..tare.calibration_body import CorrectedData
+from .candidates import (EFFECT_NAMES, NUISANCE_EFFECTS, CandidateFamily, bidirectional_family,
+                         cross_terms_family, direction_variables, drift_family, drift_frequencies,
+                         drift_variables, without_base_terms, hysteresis_family, temperature_family)
+from .statistics import ComponentFit, ZeroPointWhitening, fit_columns, forward_select, partial_f, sigma_pct_fs
+from .tare_refit import refit_body
+
+
+@dataclass(frozen=True)
+class DiagnosisSettings:
+    alpha: float = 0.01                  # family-wise level of one search round (Bonferroni)
+    min_effect_pct_fs: float = 0.01      # an effect must remove at least this RMS in a component
+    max_rounds: int = 6
+    max_terms: Mapping[str, int] = field(default_factory=lambda: {'cross_terms': 4, 'zero_drift': 8})
+    drift_oversampling: float = 2.0      # Fourier grid spacing = 1 / (oversampling x campaign span)
+    tare_parameters: tuple[str, ...] = ('weight_n', 'cg_x_m')
+    effects: tuple[str, ...] = EFFECT_NAMES
+
+
+@dataclass(frozen=True)
+class EffectFound:
+    """One effect added to the model, with the numbers behind it (per component)."""
+
+    name: str                                  # one of EFFECT_NAMES
+    components: tuple[str, ...]
+    evidence: str                              # one line a person can check
+    terms: tuple[str, ...]                     # union over its components
+    terms_by_component: Mapping[str, tuple[str, ...]]
+    sigma_before_pct_fs: Mapping[str, float]   # in-sample, eq. (44), just before it was added
+    sigma_after_pct_fs: Mapping[str, float]    # ... and just after
+    press_sigma_before_pct_fs: Mapping[str, float]
+    press_sigma_after_pct_fs: Mapping[str, float]
+    removed_pct_fs: Mapping[str, float]        # sqrt(σ_before² - σ_after²): the size of the effect
+    f_value: Mapping[str, float]               # partial F of its terms
+    p_value: Mapping[str, float]               # of that F, Bonferroni-adjusted for the search
+    correlation: Mapping[str, float]           # multiple r between residual and its terms
+    evidence_by_component: Mapping[str, str]
+    score: float                               # BIC gain that ranked it
+    nuisance: bool                             # fitted at calibration, not applied live
+    parameters: Mapping[str, float] = field(default_factory=dict)  # tare: the refitted body
+    explaining_variable: Mapping[str, str] = field(default_factory=dict)       # per component
+    explaining_values: Mapping[str, np.ndarray] = field(default_factory=dict)  # (N,) per component
+    contribution: Mapping[str, np.ndarray] = field(default_factory=dict)       # (N,) load, N / N·m
+
+    def to_report(self) -> dict:
+        """The entry of report.json's "effects" list (interfaces.md)."""
+        return {'name': self.name, 'components': list(self.components), 'evidence': self.evidence,
+                'terms': list(self.terms),
+                'sigma_after_pct_fs': {c: round(float(v), 4) for c, v in self.sigma_after_pct_fs.items()}}
+
+    as_report = to_report           # the name refit/report.py calls
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """What the residuals say, and the model that answers it."""
+
+    balance: str
+    base_model: str
+    components: tuple[str, ...]
+    capacity: np.ndarray
+    effects: tuple[EffectFound, ...]                       # most important first
+    sigma_pct_fs: Mapping[str, Mapping[str, float]]        # 'before' / 'after' -> component -> σ
+    sigma_pct_fs_crossval: Mapping[str, Mapping[str, float]]
+    base_fit: BalanceModel
+    adopted: BalanceModel                                  # every term, nuisance included
+    live: BalanceModel                                     # nuisance terms removed
+    live_variables: tuple[str, ...]                        # extra live inputs: 'dT', 'dir_FX', ...
+    extra_variables: Mapping[str, np.ndarray]              # values per point the adopted fit used
+    reference_temperature_c: float | None
+    calibration_body: CalibrationBody
+    body_source: str                                       # 'declared', 'estimated' or 'fitted'
+    corrected: CorrectedData                               # the data the adopted fit saw
+    point_labels: np.ndarray
+    times_s: np.ndarray
+    orientation: np.ndarray
+    load_direction: np.ndarray                             # (N, 6) raw ±1 load history
+    residuals_before: np.ndarray                           # (N, 6) N / N·m, base model
+    residuals_after: np.ndarray                            # (N, 6) adopted model
+    press_residuals_before: np.ndarray
+    press_residuals_after: np.ndarray
+    skipped: Mapping[str, str]                             # effects not examined, and why
+
+    @property
+    def points(self) -> int:
+        return len(self.point_labels)
+
+    @property
+    def sigma_crossval_pct_fs(self) -> Mapping[str, Mapping[str, float]]:
+        """Alias of sigma_pct_fs_crossval (the name FitSummary uses in refit/)."""
+        return self.sigma_pct_fs_crossval
+
+    @property
+    def live_model(self) -> BalanceModel:
+        return self.live
+
+    @property
+    def effect_names(self) -> tuple[str, ...]:
+        return tuple(e.name for e in self.effects)
+
+    def residuals_pct_fs(self, which: str = 'after') -> np.ndarray:
+        residuals = self.residuals_after if which == 'after' else self.residuals_before
+        return residuals / self.capacity * 100.0
+
+    def to_report(self) -> dict:
+        """The σ and effect parts of report.json (interfaces.md)."""
+        def rounded(table):
+            return {k: {c: round(float(v), 4) for c, v in row.items()} for k, row in table.items()}
+        return {'sigma_pct_fs': rounded(self.sigma_pct_fs), 'sigma_pct_fs_crossval': rounded(self.sigma_pct_fs_crossval),
+                'effects': [e.to_report() for e in self.effects]}
+
+
+# --- the search -------------------------------------------------------------------------------
+class _Problem:
+    """Design columns by term name over the corrected data, plain and whitened.
+
+    Least squares over all points (eq. (19)) gives the coefficients, σ and PRESS; the tests use
+    the same fit whitened against the zero-point noise (statistics.ZeroPointWhitening).
+    """
+
+    def __init__(self, outputs_names, corrected: CorrectedData, variables, whitening: ZeroPointWhitening):
+        self.outputs_names = tuple(outputs_names)
+        self.variables = variables
+        self.whiten = whitening
+        self.n_white = int(whitening.loaded.sum())
+        self.set_corrected(corrected)
+
+    def set_corrected(self, corrected: CorrectedData):
+        self.corrected = corrected
+        self.outputs = np.asarray(corrected.bridge_outputs_mv, dtype=float)
+        self.loads = np.asarray(corrected.loads, dtype=float)
+        self.loads_white = self.whiten(self.loads)
+        self.cache: dict[str, np.ndarray] = {}
+        self.cache_white: dict[str, np.ndarray] = {}
+
+    def columns(self, names: Sequence[str]) -> np.ndarray:
+        missing = [n for n in dict.fromkeys(names) if n not in self.cache]
+        if missing:
+            variables = as_variables(self.outputs_names, self.outputs, self.variables)
+            matrix = design_matrix(parse_terms(missing), variables, len(self.outputs))
+            white = self.whiten(matrix)
+            for j, name in enumerate(missing):
+                self.cache[name], self.cache_white[name] = matrix[:, j], white[:, j]
+        if not names:
+            return np.zeros((len(self.outputs), 0))
+        return np.column_stack([self.cache[n] for n in names])
+
+    def white_columns(self, names: Sequence[str]) -> np.ndarray:
+        self.columns(names)
+        if not names:
+            return np.zeros((self.n_white, 0))
+        return np.column_stack([self.cache_white[n] for n in names])
+
+    def white_residuals(self, terms_per_component: Sequence[Sequence[str]]) -> list[np.ndarray]:
+        """Whitened residuals of every component; one QR per distinct term list."""
+        groups: dict[tuple, list[int]] = {}
+        for k, terms in enumerate(terms_per_component):
+            groups.setdefault(tuple(terms), []).append(k)
+        residuals: list = [None] * len(terms_per_component)
+        for terms, ks in groups.items():
+            matrix = self.white_columns(list(terms))
+            q, r = np.linalg.qr(matrix / np.maximum(np.linalg.norm(matrix, axis=0), 1e-300))
+            q = q[:, np.abs(np.diag(r)) > 1e-9 * np.abs(r[0, 0])]
+            targets = self.loads_white[:, ks]
+            fitted = targets - q @ (q.T @ targets)
+            for i, k in enumerate(ks):
+                residuals[k] = fitted[:, i]
+        return residuals
+
+    def fit(self, k: int, terms: Sequence[str]) -> '_Fit':
+        return _Fit(fit_columns(self.columns(terms), self.loads[:, k]),
+                    fit_columns(self.white_columns(terms), self.loads_white[:, k]))
+
+
+@dataclass(frozen=True)
+class _Fit:
+    ols: ComponentFit      # all points, eq. (19): coefficients, σ, PRESS
+    gls: ComponentFit      # loaded points, whitened: the tests
+
+
+@dataclass
+class _Candidate:
+    family: str
+    components: dict                 # component index -> dict of statistics
+    score: float
+    body_refit: object = None
+    components_fits: list | None = None      # tare: every component refitted with the new body
+
+
+def _fmt_p(p: float) -> str:
+    return f'{p:.1g}' if p >= 1e-99 else '< 1e-99'
+
+
+def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = 'cubic',
+             temperature_c=None, times_s=None, settings: DiagnosisSettings = DiagnosisSettings()) -> Diagnosis:
+    """Examine the residuals of the base fit and add the effects they show.
+
+    reduction: the corrected data (zero points and tare done); temperature_c, times_s: per point
+    (default: those of reduction.points; temperature all-NaN -> the temperature effect is skipped).
+    """
+    points = reduction.points
+    components, outputs_names = tuple(config.components), tuple(config.bridge_outputs)
+    capacity = np.asarray(config.capacity, dtype=float)
+    n_points = len(points.label)
+    times = np.asarray(points.times_s if times_s is None else times_s, dtype=float)
+    temps = np.asarray(points.temperature_c if temperature_c is None else temperature_c, dtype=float)
+    corrected = reduction.corrected
+    skipped: dict[str, str] = {}
+
+    base_terms = [t.name for t in tm663_terms(base_model, outputs_names)]
+    variables: dict[str, np.ndarray] = {}
+    families: list[CandidateFamily] = []
+    wanted = set(settings.effects)
+    reference_temperature = None
+    if 'temperature' in wanted:
+        if temps.shape == (n_points,) and np.all(np.isfinite(temps)) and np.ptp(temps) > 1e-6:
+            reference_temperature = float(np.mean(temps))
+            variables['dT'] = temps - reference_temperature
+            families.append(temperature_family(outputs_names))
+        else:
+            skipped['temperature'] = 'no balance temperature per point (or it never changed)'
+    if 'zero_drift' in wanted:
+        frequencies = drift_frequencies(times, settings.drift_oversampling)
+        if len(frequencies):
+            variables.update(drift_variables(times, frequencies, points.is_zero_point, points.orientation))
+            families.append(drift_family(frequencies, settings.max_terms.get('zero_drift', 8)))
+        else:
+            skipped['zero_drift'] = 'point times do not span a campaign'
+    directions, raw_direction = direction_variables(corrected.loads, times, capacity, components,
+                                                    points.is_zero_point, points.orientation)
+    if 'hysteresis' in wanted:
+        variables.update(directions)
+        families.append(hysteresis_family(components, outputs_names))
+    if 'bidirectional' in wanted:
+        families.append(bidirectional_family(outputs_names))
+    if 'cross_terms' in wanted:
+        families.append(cross_terms_family(outputs_names, base_terms, settings.max_terms.get('cross_terms', 4)))
+    families = [without_base_terms(f, base_terms) for f in families]
+    tare_available = 'tare' in wanted and len(np.unique(np.round(points.gravity, 6), axis=0)) >= 2
+    if 'tare' in wanted and not tare_available:
+        skipped['tare'] = 'a single orientation: the body weight cannot be told from the constant'
+    n_searches = len(families) + int(tare_available)
+
+    whitening = ZeroPointWhitening.for_points(points.times_s, points.is_zero_point, points.orientation)
+    problem = _Problem(outputs_names, corrected, variables, whitening)
+    comp_terms = [list(base_terms) for _ in components]
+    fits = [problem.fit(k, comp_terms[k]) for k in range(len(components))]
+    base_fits = list(fits)
+    base_coefficients = np.array([f.ols.coefficients for f in fits])
+    body, body_source = reduction.body, reduction.body_source
+
+    effects: list[dict] = []
+    adopted_families: set[str] = set()
+    for _round in range(settings.max_rounds):
+        candidates: list[_Candidate] = []
+        for family in families:
+            if family.name in adopted_families:
+                continue
+            candidate = _examine_family(family, fits, comp_terms, problem, capacity, settings, n_searches)
+            if candidate:
+                candidates.append(candidate)
+        if tare_available and 'tare' not in adopted_families:
+            candidate = _examine_tare(fits, comp_terms, problem, points.gravity, body, settings, n_searches,
+                                      capacity, components, outputs_names)
+            if candidate:
+                candidates.append(candidate)
+        if not candidates:
+            break
+        winner = max(candidates, key=lambda c: c.score)
+        adopted_families.add(winner.family)
+        before = {k: fits[k] for k in winner.components}
+        if winner.family == 'tare':
+            refit = winner.body_refit
+            problem.set_corrected(refit.corrected)
+            body, body_source = refit.body, 'fitted'
+            fits = list(winner.components_fits)
+        else:
+            for k, stats in winner.components.items():
+                comp_terms[k] = comp_terms[k] + list(stats['added'])
+                fits[k] = stats['fit']
+        effects.append({'candidate': winner, 'before': before})
+
+    # --- assemble -----------------------------------------------------------------------------
+    all_terms = list(base_terms)
+    for terms in comp_terms:
+        all_terms += [t for t in terms if t not in all_terms]
+    coefficients = np.zeros((len(components), len(all_terms)))
+    for k, terms in enumerate(comp_terms):
+        coefficients[k, [all_terms.index(t) for t in terms]] = fits[k].ols.coefficients
+    label = '+'.join([base_model] + [e['candidate'].family for e in effects])
+    adopted = BalanceModel(label, parse_terms(all_terms), coefficients, components, outputs_names)
+    base = BalanceModel(base_model, parse_terms(base_terms), base_coefficients, components, outputs_names)
+    live_ok = set(outputs_names) | {'dT'} | {f'dir_{c}' for c in components}
+    live_terms = [t.name for t in adopted.terms if set(t.variables) <= live_ok]
+    live = adopted.restricted_to(live_terms, name=label + ' (live)')
+    used = set(adopted.extra_variables)
+    extra_values = {name: values for name, values in variables.items() if name in used}
+
+    found = tuple(_effect_found(e, fits, comp_terms, components, problem, points, times) for e in effects)
+
+    def sigma_row(fit_list, press=False):
+        return {c: sigma_pct_fs(f.ols.press_residuals if press else f.ols.residuals, capacity[k])
+                for k, (c, f) in enumerate(zip(components, fit_list))}
+
+    return Diagnosis(
+        balance=config.name, base_model=base_model, components=components, capacity=capacity,
+        effects=found,
+        sigma_pct_fs={'before': sigma_row(base_fits), 'after': sigma_row(fits)},
+        sigma_pct_fs_crossval={'before': sigma_row(base_fits, True), 'after': sigma_row(fits, True)},
+        base_fit=base, adopted=adopted, live=live, live_variables=live.extra_variables,
+        extra_variables=extra_values, reference_temperature_c=reference_temperature,
+        calibration_body=body, body_source=body_source, corrected=problem.corrected,
+        point_labels=np.asarray(points.label), times_s=times, orientation=np.asarray(points.orientation),
+        load_direction=raw_direction,
+        residuals_before=np.column_stack([f.ols.residuals for f in base_fits]),
+        residuals_after=np.column_stack([f.ols.residuals for f in fits]),
+        press_residuals_before=np.column_stack([f.ols.press_residuals for f in base_fits]),
+        press_residuals_after=np.column_stack([f.ols.press_residuals for f in fits]),
+        skipped=skipped)
+
+
+def _component_statistics(before: _Fit, after: _Fit, capacity: float, n_tests: int) -> dict:
+    n, n_white = before.ols.points, before.gls.points
+    added = after.gls.rank - before.gls.rank
+    f_value, p_value = partial_f(before.gls.rss, after.gls.rss, added, after.gls.dof)
+    removed = np.sqrt(max(before.ols.rss - after.ols.rss, 0.0) / n) / capacity * 100.0
+    ratio = before.gls.rss / after.gls.rss if after.gls.rss > 0 else 1.0
+    return {
+        'fit': after, 'q': added, 'f': f_value, 'p': min(1.0, p_value * n_tests),
+        'r': float(np.sqrt(max(1.0 - 1.0 / ratio, 0.0))),
+        'removed': float(removed),
+        'sigma_before': sigma_pct_fs(before.ols.residuals, capacity),
+        'sigma_after': sigma_pct_fs(after.ols.residuals, capacity),
+        'press_before': sigma_pct_fs(before.ols.press_residuals, capacity),
+        'press_after': sigma_pct_fs(after.ols.press_residuals, capacity),
+        'bic_gain': float(n_white * np.log(ratio) - added * np.log(n_white)),
+    }
+
+
+def _passes(stats: dict, settings: DiagnosisSettings) -> bool:
+    return stats['removed'] >= settings.min_effect_pct_fs and stats['press_after'] < stats['press_before']
+
+
+def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_searches):
+    accepted = {}
+    n_components = len(fits)
+    for k, fit in enumerate(fits):
+        present = set(comp_terms[k])
+        groups = [g for g in family.groups if not set(g) & present]
+        if not groups:
+            continue
+        names = [t for g in groups for t in g]
+        index = {t: i for i, t in enumerate(names)}
+        n_tests = n_searches * len(groups) * n_components
+        selection = forward_select(fit.gls, problem.white_columns(names), [tuple(index[t] for t in g) for g in groups],
+                                   alpha_per_test=settings.alpha / n_tests, max_groups=family.max_groups)
+        if not selection.steps:
+            continue
+        chosen = [groups[i] for i in selection.groups]
+        added = [t for g in chosen for t in g]
+        stats = _component_statistics(fit, problem.fit(k, comp_terms[k] + added), capacity[k], n_tests)
+        label = family.label(chosen)
+        if family.name == 'zero_drift':
+            label = f'the time drift between zero points (periods {label.replace(" + ", ", ")})'
+        stats.update(added=tuple(added), groups=tuple(chosen), label=label)
+        if _passes(stats, settings):
+            accepted[k] = stats
+    if not accepted:
+        return None
+    return _Candidate(family.name, accepted, sum(s['bic_gain'] for s in accepted.values()))
+
+
+def _examine_tare(fits, comp_terms, problem, gravity, body, settings, n_searches, capacity,
+                  components, outputs_names):
+    sigmas = np.sqrt([f.gls.variance for f in fits])
+    output_terms = [t for t in comp_terms[0] if set(parse_terms([t])[0].variables) <= set(outputs_names)]
+    # the inverse for tare outputs: the current fit's output-only part, constants dropped
+    coefficients = np.array([[f.ols.coefficients[comp_terms[k].index(t)] if t in comp_terms[k] else 0.0
+                              for t in output_terms] for k, f in enumerate(fits)])
+    inverse_model = BalanceModel('current', parse_terms(output_terms), coefficients, tuple(components),
+                                 tuple(outputs_names)).without_constant()
+    corrected = problem.corrected
+
+    def refits(data):
+        problem.set_corrected(data)
+        return [problem.fit(k, comp_terms[k]) for k in range(len(fits))]
+
+    def weighted(data):
+        problem.set_corrected(data)
+        return np.concatenate([r / s for r, s in zip(problem.white_residuals(comp_terms), sigmas)])
+
+    # forward selection over the body parameters too: the weight alone first if that is what the
+    # residuals show; a CG that only follows the noise stays as declared
+    chi2_before = sum(f.gls.rss / s ** 2 for f, s in zip(fits, sigmas))
+    dof_total = sum(f.gls.dof for f in fits)
+    parameters = tuple(settings.tare_parameters)
+    selected: list[str] = []
+    chi2_current, refit = chi2_before, None
+    try:
+        while len(selected) < len(parameters):
+            trials = []
+            for name in parameters:
+                if name not in selected:
+                    trial = refit_body(corrected, gravity, body, inverse_model, weighted, selected + [name])
+                    trials.append((float(np.sum(weighted(trial.corrected) ** 2)), name, trial))
+            chi2, name, trial = min(trials, key=lambda t: t[0])
+            _, p_step = partial_f(chi2_current, chi2, 1, dof_total - len(selected) - 1)
+            if p_step * n_searches * len(parameters) > settings.alpha or trial.identifiable <= len(selected):
+                break
+            selected.append(name)
+            chi2_current, refit = chi2, trial
+        if refit is None:
+            return None
+        new_fits = refits(refit.corrected)
+    finally:
+        problem.set_corrected(corrected)
+    q = len(selected)
+    accepted = {}
+    for k, (before, after) in enumerate(zip(fits, new_fits)):
+        stats = _component_statistics(before, after, capacity[k], n_searches)
+        f_k, p_k = partial_f(before.gls.rss, after.gls.rss, q, after.gls.dof)
+        stats.update(q=q, f=f_k, p=min(1.0, p_k * n_searches), added=(), groups=(),
+                     label=_body_label(body, refit.body))
+        if _passes(stats, settings) and stats['p'] <= settings.alpha:
+            accepted[k] = stats
+    if not accepted:
+        return None
+    n_white = fits[0].gls.points
+    score = (sum(float(n_white * np.log(b.gls.rss / a.gls.rss)) for b, a in zip(fits, new_fits))
+             - q * np.log(n_white))
+    return _Candidate('tare', accepted, score, refit, new_fits)
+
+
+def _body_label(declared: CalibrationBody, fitted: CalibrationBody) -> str:
+    parts = [f'W {declared.weight_n:.1f} → {fitted.weight_n:.1f} N']
+    for axis, before, after in zip('xyz', declared.cg_m, fitted.cg_m):
+        if abs(after - before) > 1e-9:
+            parts.append(f'{axis}_cg {before * 1e3:.1f} → {after * 1e3:.1f} mm')
+    return 'the calibration body (' + ', '.join(parts) + ')'
+
+
+def _effect_found(entry, final_fits, comp_terms, components, problem, points, times) -> EffectFound:
+    candidate: _Candidate = entry['candidate']
+    name = candidate.family
+    per = {components[k]: s for k, s in candidate.components.items()}
+    lines = {}
+    for c, s in per.items():
+        lines[c] = (f'{c} residual follows {s["label"]}: r = {s["r"]:.2f}, F = {s["f"]:.3g} (p = {_fmt_p(s["p"])}), '
+                    f'removes {s["removed"]:.3f} % FS (σ {s["sigma_before"]:.3f} → {s["sigma_after"]:.3f}, '
+                    f'PRESS σ {s["press_before"]:.3f} → {s["press_after"]:.3f})')
+    order = sorted(per, key=lambda c: -per[c]['removed'])
+    evidence = lines[order[0]]
+    if len(order) > 1:
+        evidence += '; also ' + ', '.join(f'{c} (r = {per[c]["r"]:.2f}, removes {per[c]["removed"]:.3f} % FS)'
+                                          for c in order[1:])
+    terms = []
+    for c in order:
+        terms += [t for t in per[c]['added'] if t not in terms]
+    explaining_variable, explaining_values, contribution = {}, {}, {}
+    for k, s in candidate.components.items():
+        c = components[k]
+        if name == 'tare':
+            contribution[c] = entry['before'][k].ols.residuals - s['fit'].ols.residuals
+            explaining_variable[c] = 'orientation I_g'
+            explaining_values[c] = np.asarray(points.orientation, dtype=float)
+            continue
+        added = list(s['added'])
+        index = [comp_terms[k].index(t) for t in added]
+        contribution[c] = problem.columns(added) @ final_fits[k].ols.coefficients[index]
+        if name == 'zero_drift':
+            explaining_variable[c], explaining_values[c] = 'time (s)', times
+        else:
+            explaining_variable[c], explaining_values[c] = added[0], problem.columns(added[:1])[:, 0]
+    parameters = {}
+    if name == 'tare':
+        body = candidate.body_refit.body
+        parameters = {'weight_n': body.weight_n, 'cg_x_m': body.cg_m[0], 'cg_y_m': body.cg_m[1], 'cg_z_m': body.cg_m[2]}
+    return EffectFound(
+        name=name, components=tuple(c for c in components if c in per), evidence=evidence, terms=tuple(terms),
+        terms_by_component={c: tuple(per[c]['added']) for c in per},
+        sigma_before_pct_fs={c: per[c]['sigma_before'] for c in per},
+        sigma_after_pct_fs={c: per[c]['sigma_after'] for c in per},
+        press_sigma_before_pct_fs={c: per[c]['press_before'] for c in per},
+        press_sigma_after_pct_fs={c: per[c]['press_after'] for c in per},
+        removed_pct_fs={c: per[c]['removed'] for c in per},
+        f_value={c: per[c]['f'] for c in per}, p_value={c: per[c]['p'] for c in per},
+        correlation={c: per[c]['r'] for c in per}, evidence_by_component=lines,
+        score=float(candidate.score), nuisance=name in NUISANCE_EFFECTS, parameters=parameters,
+        explaining_variable=explaining_variable, explaining_values=explaining_values, contribution=contribution)

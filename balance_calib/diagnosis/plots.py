@@ -1,0 +1,102 @@
+"""Residual plots of a diagnosis, in the style of TM-663 Figs. 4-9 (PNG, matplotlib Agg).
+
+- `plot_residuals`: one figure per model, six panels (F_X ... M_Z), residual in % FS against point
+  number, the vertical axis fixed at ±0.5 % FS as in the memo; points beyond it are drawn on the
+  edge as open triangles so that nothing disappears silently.
+- `plot_effect`: per effect found, the residual with that effect put back (partial residual)
+  against the variable that explains it, with the fitted contribution.
+
+Figures are built on `matplotlib.figure.Figure` with the Agg canvas (no pyplot state), so plotting
+is safe inside a node's callback thread.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from .diagnose import Diagnosis, EffectFound
+
+CLIP_PCT_FS = 0.5      # the memo's vertical range of Figs. 4-9
+
+
+def _save(figure: Figure, path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    FigureCanvasAgg(figure)
+    figure.savefig(path, dpi=110)
+    return path
+
+
+def _clipped_scatter(axes, x, y, clip, **style):
+    inside = np.abs(y) <= clip
+    axes.plot(x[inside], y[inside], linestyle='none', **style)
+    for sign, marker in ((1, '^'), (-1, 'v')):
+        outside = sign * y > clip
+        if outside.any():
+            axes.plot(x[outside], np.full(outside.sum(), sign * clip * 0.97), linestyle='none', marker=marker,
+                      markersize=5, markerfacecolor='none', color=style.get('color', 'k'))
+
+
+def plot_residuals(diagnosis: Diagnosis, path, *, which: str = 'after', clip_pct_fs: float = CLIP_PCT_FS) -> Path:
+    """Six panels of residual (% FS) vs point number for the base ('before') or adopted ('after') model."""
+    if which not in ('before', 'after'):
+        raise ValueError("which must be 'before' or 'after'")
+    residuals = diagnosis.residuals_pct_fs(which)
+    sigma = diagnosis.sigma_pct_fs[which]
+    model = diagnosis.base_fit.name if which == 'before' else diagnosis.adopted.name
+    labels = np.asarray(diagnosis.point_labels, dtype=float)
+    figure = Figure(figsize=(12, 6.5))
+    figure.suptitle(f'{diagnosis.balance} — residuals of the {model} model '
+                    f'(exp − th, % F.S.; axis ±{clip_pct_fs:g} %)')
+    for k, component in enumerate(diagnosis.components):
+        axes = figure.add_subplot(2, 3, k + 1)
+        axes.axhline(0.0, color='0.6', linewidth=0.8)
+        _clipped_scatter(axes, labels, residuals[:, k], clip_pct_fs, marker='o', markersize=2.5, color='C0')
+        axes.set_ylim(-clip_pct_fs, clip_pct_fs)
+        axes.set_title(f'{component}: σ = {sigma[component]:.3f} % FS', fontsize=10)
+        axes.set_xlabel('point number')
+        axes.set_ylabel('residual (% FS)')
+        axes.grid(True, linewidth=0.3)
+    figure.tight_layout(rect=(0, 0, 1, 0.95))
+    return _save(figure, path)
+
+
+def plot_effect(diagnosis: Diagnosis, effect: EffectFound, path) -> Path:
+    """Partial residual (final residual + this effect's contribution, % FS) vs its explaining variable."""
+    components = list(effect.components)
+    figure = Figure(figsize=(max(6.0, 4.2 * len(components) + 0.5), 4.2))
+    figure.suptitle(f'{diagnosis.balance} — {effect.name}: residual with the effect put back')
+    for i, component in enumerate(components):
+        k = diagnosis.components.index(component)
+        scale = 100.0 / diagnosis.capacity[k]
+        x = np.asarray(effect.explaining_values[component], dtype=float)
+        contribution = np.asarray(effect.contribution[component]) * scale
+        partial = diagnosis.residuals_after[:, k] * scale + contribution
+        axes = figure.add_subplot(1, len(components), i + 1)
+        axes.plot(x, partial, linestyle='none', marker='o', markersize=2.5, color='C0', label='residual + effect')
+        order = np.argsort(x, kind='stable')
+        axes.plot(x[order], contribution[order], linestyle='none', marker='.', markersize=3, color='C3',
+                  label='fitted effect')
+        axes.set_xlabel(effect.explaining_variable[component])
+        axes.set_ylabel(f'{component} residual (% FS)')
+        axes.set_title(f'{component}: r = {effect.correlation[component]:.2f}, '
+                       f'removes {effect.removed_pct_fs[component]:.3f} % FS', fontsize=9)
+        axes.grid(True, linewidth=0.3)
+        if i == 0:
+            axes.legend(fontsize=8, loc='best')
+    figure.tight_layout(rect=(0, 0, 1, 0.92))
+    return _save(figure, path)
+
+
+def plot_diagnosis(diagnosis: Diagnosis, directory) -> list[Path]:
+    """Every figure of a diagnosis into `directory`: residuals before/after, one per effect."""
+    directory = Path(directory)
+    paths = [plot_residuals(diagnosis, directory / f'residuals_{diagnosis.base_model}.png', which='before')]
+    if diagnosis.effects:
+        paths.append(plot_residuals(diagnosis, directory / 'residuals_adopted.png', which='after'))
+    for effect in diagnosis.effects:
+        paths.append(plot_effect(diagnosis, effect, directory / f'effect_{effect.name}.png'))
+    return paths
