@@ -179,3 +179,13 @@ def test_diagnostics_report_rate_staleness_rejections_and_calibration():
     assert fallback[1].level == WARN and 'FALLBACK to linear' in fallback[1].message
     assert values['requires'] == 'temperature' and values['inputs'] == 'temperature: missing'
     assert values['model_in_use'] == 'linear'
+
+
+def test_temperature_terms_act_on_the_change_since_the_tare():
+    """A tare at 25 °C zeroes the output there; at 27 °C the dT term adds 10 N/K x 2 K."""
+    active = activate(temperature_calibration(), 'adopted', 'balance')
+    zero = np.full(6, 0.02)
+    at_tare = compute_wrench(active, zero[None, :], zero_mv=zero, temperature_c=25.0, tare_temperature_c=25.0)
+    np.testing.assert_allclose(at_tare.wrench_tunnel, np.zeros((1, 6)), atol=1e-9)
+    later = compute_wrench(active, zero[None, :], zero_mv=zero, temperature_c=27.0, tare_temperature_c=25.0)
+    np.testing.assert_allclose(later.wrench_tunnel, [[0, 0, 20.0, 0, 0, 0]], atol=1e-9)

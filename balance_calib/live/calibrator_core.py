@@ -193,7 +193,7 @@ def model_loads(active: ActiveCalibration, outputs_mv, *, temperature_c=None,
 
 
 def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, temperature_c=None,
-                   load_direction=None) -> WrenchBatch:
+                   load_direction=None, tare_temperature_c=None, tare_direction=None) -> WrenchBatch:
     """Raw outputs (N, 6) mV, tare zero_mv (6,) -> wrench in tunnel axes (N, 6); see the module docstring."""
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
     accepted = np.all(np.isfinite(outputs), axis=1)
@@ -206,6 +206,16 @@ def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tempe
         direction = None if load_direction is None else np.broadcast_to(load_direction, outputs.shape)[accepted]
         loads[accepted], name, reason = model_loads(active, tared[accepted], temperature_c=temps,
                                                     load_direction=direction)
+        if zero_mv is not None and active.model.extra_variables and name == active.model_name:
+            # The tare zeroed the outputs at the temperature and load direction of its moment; what
+            # the model's pure temperature / direction terms gave then belongs to that zero too, so
+            # the output reads 0 there and those terms act on the change since the tare.
+            offset, offset_name, _ = model_loads(
+                active, np.zeros((1, 6)),
+                temperature_c=None if tare_temperature_c is None else np.array([tare_temperature_c], float),
+                load_direction=None if tare_direction is None else np.atleast_2d(tare_direction))
+            if offset_name == name:
+                loads[accepted] -= offset[0]
     wrench = active.installation.to_tunnel(loads)          # TM-663 §10.2
     with np.errstate(invalid='ignore'):
         outside = accepted & np.any(np.abs(loads) > active.envelope, axis=1)

@@ -41,7 +41,7 @@ from balance_calib.calibration_file import Calibration, ConfigError, load_calibr
 from balance_calib.config import resolve_config_path
 from balance_calib.live.calibrator_core import (ActiveCalibration, InputCounters, LiveState, LoadHistory,
                                                 TareWindow, activate, compute_wrench, describe_tare, diagnostics,
-                                                parse_reliability)
+                                                parse_reliability, six_axis_loads)
 from balance_calib.tunnel_axes import Installation, parse_installation
 
 PARAMETERS = {   # name: (default, description)
@@ -126,6 +126,8 @@ class BalanceCalibrator(Node):
         self._history = LoadHistory(self._active.capacity)
         self._counters = InputCounters()
         self._tare_zero_mv: np.ndarray | None = None     # wind-off bridge outputs subtracted, mV
+        self._tare_temperature_c: float | None = None    # temperature and load direction at that tare
+        self._tare_direction: np.ndarray | None = None
         self._collecting: tuple[TareWindow, Future] | None = None
         self._last_sample_s: float | None = None         # time.monotonic() of the last raw sample
         self._temperature_c: float | None = None
@@ -186,10 +188,11 @@ class BalanceCalibrator(Node):
         direction = None
         if 'load_history' in active.requires and np.all(np.isfinite(outputs)):
             tared = outputs - (0.0 if self._tare_zero_mv is None else self._tare_zero_mv)
-            direction = self._history.update(active.base_model.loads(tared))
+            direction = self._history.update(six_axis_loads(active.base_model, tared))
         try:
             batch = compute_wrench(active, outputs, zero_mv=self._tare_zero_mv, temperature_c=temperature,
-                                   load_direction=direction)
+                                   load_direction=direction, tare_temperature_c=self._tare_temperature_c,
+                                   tare_direction=self._tare_direction)
         except ConfigError as err:       # neither the model nor its base can run: publish nothing
             self.get_logger().error(str(err), throttle_duration_sec=5.0)
             return
@@ -239,6 +242,9 @@ class BalanceCalibrator(Node):
                                 f'/balance/raw within {timeout_s:g} s; the previous tare stays')
             return response
         previous, self._tare_zero_mv = self._tare_zero_mv, window.zero_mv
+        # the conditions of the zero, for models with temperature or load-direction terms
+        self._tare_temperature_c = self._fresh_temperature(time.monotonic())
+        self._tare_direction = self._history.direction.copy()
         response.success = True
         response.message = f'tare: averaged {samples} samples; bridge zero now subtracted: ' \
                            f'{describe_tare(self._tare_zero_mv, self._active)}'

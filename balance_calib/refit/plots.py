@@ -49,9 +49,10 @@ def residual_figures(result, directory: Path) -> list[Path]:
         figures.append(residual_panels(pct, labels, config.components,
                                        f'{config.name}: {order} model residuals (cf. TM-663 Figs. 4-9)',
                                        directory / f'residuals_{order}.png'))
-    diagnosis = result.diagnosis
-    if diagnosis is not None and getattr(diagnosis, 'effects', None):
-        plot = getattr(diagnosis, 'plot', None)
-        if callable(plot):
-            figures.extend(plot(directory, labels=labels, components=config.components, capacity=capacity))
+    if result.diagnosis is not None and result.diagnosis.effects:
+        from ..diagnosis.plots import plot_effect, plot_residuals
+        diagnosis = result.diagnosis        # 'before' is the base model's figure above
+        figures.append(plot_residuals(diagnosis, directory / 'residuals_adopted.png', which='after'))
+        figures.extend(plot_effect(diagnosis, effect, directory / f'effect_{effect.name}.png')
+                       for effect in diagnosis.effects)
     return figures

@@ -22,10 +22,36 @@ def _diagnosis_fields(diagnosis, fits, base_model):
         return before, before, cv_before, cv_before, [], None, None
     sigma = diagnosis.sigma_pct_fs
     cv = diagnosis.sigma_crossval_pct_fs
-    effects = [effect.as_report() if hasattr(effect, 'as_report') else dict(effect) for effect in diagnosis.effects]
+    effects = [_effect_report(effect) for effect in diagnosis.effects]
     live = diagnosis.live_model if diagnosis.effects else None
     return (sigma['before'], sigma['after'], cv['before'], cv['after'], effects, live,
             getattr(diagnosis, 'reference_temperature_c', None))
+
+
+def _effect_report(effect) -> dict:
+    """interfaces.md's keys, then the numbers behind the evidence line."""
+    entry = effect.to_report()
+    entry.update({
+        'p_value': {c: float(f'{v:.3g}') for c, v in effect.p_value.items()},
+        'correlation': {c: round(float(v), 3) for c, v in effect.correlation.items()},
+        'removed_pct_fs': {c: round(float(v), 4) for c, v in effect.removed_pct_fs.items()},
+        'sigma_before_pct_fs': {c: round(float(v), 4) for c, v in effect.sigma_before_pct_fs.items()},
+        'sigma_crossval_before_pct_fs': {c: round(float(v), 4) for c, v in effect.press_sigma_before_pct_fs.items()},
+        'sigma_crossval_after_pct_fs': {c: round(float(v), 4) for c, v in effect.press_sigma_after_pct_fs.items()},
+        'explaining_variable': dict(effect.explaining_variable),
+        'applied_live': not effect.nuisance,
+    })
+    if effect.parameters:
+        entry['parameters'] = {k: float(v) for k, v in effect.parameters.items()}
+    return entry
+
+
+def _body(reduction, diagnosis):
+    """The body the adopted fit used and its source in interfaces.md's words."""
+    if diagnosis is None:
+        return reduction.body, reduction.body_source, reduction.body_source
+    detail = diagnosis.body_source
+    return diagnosis.calibration_body, ('declared' if detail == 'declared' else 'estimated'), detail
 
 
 def build_calibration(config, reduction, fits, base_model, diagnosis, sources: Sequence[str]) -> Calibration:
@@ -35,12 +61,12 @@ def build_calibration(config, reduction, fits, base_model, diagnosis, sources: S
     if live is not None:
         adopted = live.name
         models[adopted] = live
-    body = reduction.body
+    body, source, _ = _body(reduction, diagnosis)
     return Calibration(
         config.name, models, adopted, base_model, config.capacity, config.rated_output_mv, config.components,
         config.bridge_outputs, _round(after), now_iso(), reference,
         {'calibration_body': {'weight_n': round(body.weight_n, 4), 'cg_m': [round(x, 6) for x in body.cg_m],
-                              'source': reduction.body_source},
+                              'source': source},
          'points': int(len(reduction.points.label)), 'sources': list(sources),
          'effects': [e['name'] for e in effects],
          'sigma_pct_fs_base': _round(before)})
@@ -48,13 +74,13 @@ def build_calibration(config, reduction, fits, base_model, diagnosis, sources: S
 
 def build_report(config, points, reduction, fits, base_model, diagnosis, cut, sources) -> dict:
     before, after, cv_before, cv_after, effects, live, reference = _diagnosis_fields(diagnosis, fits, base_model)
-    body = reduction.body
+    body, source, detail = _body(reduction, diagnosis)
     report = {
         'balance': config.name,
         'points': int(len(points.label)),
         'base_model': base_model,
         'calibration_body': {'weight_N': round(body.weight_n, 3), 'cg_x_m': round(body.cg_m[0], 5),
-                             'source': reduction.body_source},
+                             'source': source},
         'sigma_pct_fs': {'before': _round(before), 'after': _round(after)},
         'sigma_pct_fs_crossval': {'before': _round(cv_before), 'after': _round(cv_after)},
         'effects': effects,
@@ -70,7 +96,7 @@ def build_report(config, points, reduction, fits, base_model, diagnosis, cut, so
         'calibration_body_detail': {
             'weight_N': round(body.weight_n, 4), 'cg_m': [round(x, 6) for x in body.cg_m],
             'declared_weight_N': config.calibration_body.weight_n,
-            'declared_cg_m': list(config.calibration_body.cg_m),
+            'declared_cg_m': list(config.calibration_body.cg_m), 'how': detail,
             'opposite_pairs': reduction.body_estimate.pairs if reduction.body_estimate else 0},
         'reference_temperature_c': reference,
         'sources': list(sources),

@@ -1,0 +1,1 @@
+"""Process-level orchestration of the nodes without ros2 launch (launchless_scripts/)."""

@@ -1,0 +1,242 @@
+"""The whole story without ros2 launch: a calibration campaign over DDS, recorded, refitted by the
+calibrator's ~/refit, then wind-on through the new calibration.
+
+    launchless_scripts/campaign [OUT_DIR] [--effects SPEC] [--installations upright,inverted]
+
+1. balance_calibrator (memo matrices at first, calibration_bags = OUT/bag), balance_recorder
+   (OUT/bag) and bridge_publisher in calibration mode (the Appendix schedule, fast timing) run as
+   processes on one ROS domain over loopback;
+2. when the publisher has played the schedule the recorder is stopped (the bag closes cleanly);
+3. ~/refit fits the bag (report in OUT/report) and the calibrator swaps to the new calibration;
+4. for each installation, bridge_publisher plays a wind-on α sweep, ~/tare zeroes on its wind-off
+   samples, and the mean /balance/wrench over every held point is compared with the true tunnel
+   load (/balance/truth).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+def _ros_args(parameters: dict) -> list[str]:
+    args = ['--ros-args']
+    for name, value in parameters.items():
+        if isinstance(value, bool):
+            value = 'true' if value else 'false'
+        elif isinstance(value, (list, tuple)):
+            value = '[' + ','.join(f"'{v}'" for v in value) + ']'
+        elif value == '':
+            value = "''"           # an empty string must be spelled as YAML
+        args += ['-p', f'{name}:={value}']
+    return args
+
+
+class _Process:
+    def __init__(self, name: str, parameters: dict, env: dict, logs: Path):
+        logs.mkdir(parents=True, exist_ok=True)
+        self.name = name
+        self.log = logs / f'{name}.{int(time.time() * 1000)}.log'
+        self._file = open(self.log, 'w')
+        self.process = subprocess.Popen([name] + _ros_args(parameters), env=env, stdout=self._file,
+                                        stderr=subprocess.STDOUT, start_new_session=True)
+
+    def wait(self, timeout: float) -> int:
+        return self.process.wait(timeout=timeout)
+
+    def stop(self, timeout: float = 10.0) -> int | None:
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(timeout=timeout)
+        self._file.close()
+        return self.process.returncode
+
+
+def _wait(predicate, timeout: float, what: str):
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f'timed out after {timeout:g} s waiting for {what}')
+        time.sleep(0.05)
+
+
+@dataclass
+class StoryResult:
+    refit_success: bool
+    refit_message: str
+    report: dict
+    wind_on_error_pct_fs: dict = field(default_factory=dict)   # installation -> (held points, 6) errors
+    bag: Path | None = None
+    report_dir: Path | None = None
+
+
+def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', installations=('upright', 'inverted'),
+              rate_hz: float = 200.0, point_duration_s: float = 0.1, transition_s: float = 0.03, seed: int = 1,
+              domain_id: int | None = None, say=print) -> StoryResult:
+    import rclpy
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from std_srvs.srv import Trigger
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+
+    out_dir = Path(out_dir).resolve()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    bag = out_dir / 'bag'
+    if bag.exists():
+        raise FileExistsError(f'{bag} exists already: choose a new output directory')
+    report_dir = out_dir / 'report'
+    logs = out_dir / 'logs'
+    domain = domain_id if domain_id is not None else random.randint(1, 99)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONUNBUFFERED='1')
+
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    node = Node('campaign_story', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    spinner = threading.Thread(target=lambda: _spin(executor), daemon=True)
+    spinner.start()
+    reliable = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
+    wrenches, truths = [], []
+    node.create_subscription(WrenchStamped, '/balance/wrench', wrenches.append, reliable)
+    node.create_subscription(WrenchStamped, '/balance/truth', truths.append, reliable)
+    # counted by bridge_publisher's wait_for_subscribers, so it starts only once we listen
+    node.create_subscription(WrenchStamped, '/balance/raw', lambda msg: None, reliable)
+    processes = []
+    try:
+        calibrator = _Process('balance_calibrator', {'balance': balance, 'calibration_bags': [str(bag)],
+                                                     'report_dir': str(report_dir), 'tare_samples': 100}, env, logs)
+        processes.append(calibrator)
+        recorder = _Process('balance_recorder', {'output': str(bag)}, env, logs)
+        processes.append(recorder)
+        say(f'[campaign] ROS_DOMAIN_ID={domain}: calibration campaign of {balance} over DDS '
+            f'({rate_hz:g} Hz, {point_duration_s:g} s per point), recording to {bag}'
+            + (f'; undeclared effects: {effects}' if effects else ''))
+        publisher = _Process('bridge_publisher', {
+            'mode': 'calibration', 'balance': balance, 'rate_hz': rate_hz, 'point_duration_s': point_duration_s,
+            'transition_s': transition_s, 'effects': effects, 'seed': seed, 'exit_when_done': True,
+            'wait_for_subscribers': 2}, env, logs)
+        processes.append(publisher)
+        code = publisher.wait(timeout=3600)
+        if code != 0:
+            raise RuntimeError(f'bridge_publisher failed ({code}); see {publisher.log}')
+        time.sleep(0.5)      # let the last samples reach the recorder before it closes the bag
+        if recorder.stop() != 0:
+            raise RuntimeError(f'balance_recorder did not close cleanly; see {recorder.log}')
+        say(f'[campaign] campaign recorded; calling /balance_calibrator/refit ...')
+        client = node.create_client(Trigger, '/balance_calibrator/refit')
+        _wait(client.service_is_ready, 30, 'the ~/refit service')
+        future = client.call_async(Trigger.Request())
+        _wait(future.done, 600, 'the ~/refit reply')
+        reply = future.result()
+        say(f'[campaign] refit: success={reply.success}: {reply.message}')
+        reports = sorted(report_dir.glob('*/report.json'), key=lambda p: p.stat().st_mtime)
+        report = json.loads(reports[-1].read_text()) if reports else {}
+        result = StoryResult(reply.success, reply.message, report, {}, bag,
+                             reports[-1].parent if reports else report_dir)
+        if not reply.success:
+            return result
+
+        setter = node.create_client(SetParameters, '/balance_calibrator/set_parameters')
+        _wait(setter.service_is_ready, 30, 'the calibrator parameter service')
+        from balance_calib.config import load_balance_config
+        capacity = load_balance_config(balance).capacity
+        for installation in installations:
+            request = SetParameters.Request()
+            request.parameters = [Parameter('installation', value=installation).to_parameter_msg()]
+            done = setter.call_async(request)
+            _wait(done.done, 10, 'set installation')
+            wrenches.clear()
+            truths.clear()
+            tare_client = node.create_client(Trigger, '/balance_calibrator/tare')
+            _wait(tare_client.service_is_ready, 10, 'the ~/tare service')
+            tare = tare_client.call_async(Trigger.Request())
+            wind = _Process('bridge_publisher', {
+                'mode': 'wind_on', 'balance': balance, 'installation': installation, 'rate_hz': rate_hz,
+                'wind_off_s': 1.0, 'hold_s': 0.5, 'alpha_step_deg': 4.0, 'noise_sigma_pct_fs': 0.005,
+                'exit_when_done': True, 'wait_for_subscribers': 2, 'seed': seed + 1}, env, logs)
+            processes.append(wind)
+            if wind.wait(timeout=300) != 0:
+                raise RuntimeError(f'wind-on publisher failed; see {wind.log}')
+            _wait(tare.done, 10, 'the ~/tare reply')
+            _wait(lambda: len(wrenches) >= len(truths) > 0, 10, 'the wind-on wrenches')
+            errors = _held_point_errors(truths, wrenches, capacity)
+            result.wind_on_error_pct_fs[installation] = errors
+            worst = np.max(np.abs(errors), axis=0)
+            say(f'[campaign] wind-on, {installation} installation: {len(errors)} held α points, worst |mean error| % FS: '
+                + ', '.join(f'{c} {w:.3f}' for c, w in zip(('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'), worst)))
+        return result
+    finally:
+        for process in reversed(processes):
+            process.stop()
+        executor.shutdown(timeout_sec=2)
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def _spin(executor):
+    try:
+        executor.spin()
+    except Exception:
+        pass
+
+
+def _held_point_errors(truths, wrenches, capacity) -> np.ndarray:
+    def by_stamp(messages):
+        return {(m.header.stamp.sec, m.header.stamp.nanosec): (m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
+                                                               m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z)
+                for m in messages}
+    true, measured = by_stamp(truths), by_stamp(wrenches)
+    stamps = sorted(set(true) & set(measured))
+    t = np.array([true[s] for s in stamps])
+    m = np.array([measured[s] for s in stamps])
+    held = np.any(t != 0, axis=1)
+    conditions, index = np.unique(t[held], axis=0, return_inverse=True)
+    index = index.ravel()
+    return np.array([(m[held][index == k].mean(axis=0) - load) / np.abs(capacity) * 100
+                     for k, load in enumerate(conditions)])
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog='campaign', description=__doc__.split('\n')[0])
+    parser.add_argument('out', nargs='?', default='demo_out')
+    parser.add_argument('--balance', default='lmc6522')
+    parser.add_argument('--effects', default='', help='effects the refit is not told about')
+    parser.add_argument('--installations', default='upright,inverted')
+    parser.add_argument('--rate', type=float, default=200.0)
+    parser.add_argument('--point-duration', type=float, default=0.1)
+    args = parser.parse_args(argv)
+    out = Path(args.out) / time.strftime('campaign_%Y%m%dT%H%M%S')
+    result = run_story(out, balance=args.balance, effects=args.effects, rate_hz=args.rate,
+                       point_duration_s=args.point_duration,
+                       installations=[i for i in args.installations.split(',') if i])
+    if result.report:
+        report = result.report
+        print(f'[campaign] report: {result.report_dir / "report.md"}')
+        print(f'[campaign] effects found: {", ".join(e["name"] for e in report["effects"]) or "none"}; '
+              f'σ before -> after (% FS): ' + ', '.join(
+                  f'{c} {report["sigma_pct_fs"]["before"][c]:.3f}->{report["sigma_pct_fs"]["after"][c]:.3f}'
+                  for c in report['sigma_pct_fs']['before']))
+    return 0 if result.refit_success else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())
