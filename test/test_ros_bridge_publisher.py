@@ -54,7 +54,8 @@ def test_calibration_mode_plays_the_schedule_as_interfaces_md_describes(probe, t
 
     # exactly the simulated campaign, sample for sample (same settings and seed)
     settings = SimulationSettings(samples_per_point=20, sample_rate_hz=200.0, point_duration_s=0.1, transition_s=0.03,
-                                  transition_samples=6, noise_sigma_pct_fs=table17_noise(CONFIG), seed=7)
+                                  transition_samples=6, noise_sigma_pct_fs=table17_noise(CONFIG), seed=7,
+                                  time_scale=90.0 / 0.13)       # physical_seconds_per_point 90 (default)
     campaign = simulate_campaign(CONFIG, CONFIG.matrices['cubic'], schedule=select_points(CONFIG.schedule, '1-16'),
                                  settings=settings)
     np.testing.assert_array_equal([six(m) for m in raw], campaign.raw_mv)

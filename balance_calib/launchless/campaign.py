@@ -86,7 +86,8 @@ class StoryResult:
 
 def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', installations=('upright', 'inverted'),
               rate_hz: float = 200.0, point_duration_s: float = 0.1, transition_s: float = 0.03, seed: int = 1,
-              domain_id: int | None = None, say=print) -> StoryResult:
+              domain_id: int | None = None, wind_on_temperature_c: float = 20.0, compare_base: bool = False,
+              say=print) -> StoryResult:
     import rclpy
     from geometry_msgs.msg import WrenchStamped
     from rclpy.context import Context
@@ -159,9 +160,13 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
         _wait(setter.service_is_ready, 30, 'the calibrator parameter service')
         from balance_calib.config import load_balance_config
         capacity = load_balance_config(balance).capacity
-        for installation in installations:
+        runs = [(installation, 'adopted') for installation in installations]
+        if compare_base and report.get('adopted'):
+            runs.append((installations[0], report['base_model']))      # the same wind-on without the effect's terms
+        for installation, model in runs:
             request = SetParameters.Request()
-            request.parameters = [Parameter('installation', value=installation).to_parameter_msg()]
+            request.parameters = [Parameter('installation', value=installation).to_parameter_msg(),
+                                  Parameter('model', value=model).to_parameter_msg()]
             done = setter.call_async(request)
             _wait(done.done, 10, 'set installation')
             wrenches.clear()
@@ -172,16 +177,18 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
             wind = _Process('bridge_publisher', {
                 'mode': 'wind_on', 'balance': balance, 'installation': installation, 'rate_hz': rate_hz,
                 'wind_off_s': 1.0, 'hold_s': 0.5, 'alpha_step_deg': 4.0, 'noise_sigma_pct_fs': 0.005,
-                'exit_when_done': True, 'wait_for_subscribers': 2, 'seed': seed + 1}, env, logs)
+                'exit_when_done': True, 'wait_for_subscribers': 2, 'seed': seed + 1, 'effects': effects,
+                'temperature_c': wind_on_temperature_c}, env, logs)
             processes.append(wind)
             if wind.wait(timeout=300) != 0:
                 raise RuntimeError(f'wind-on publisher failed; see {wind.log}')
             _wait(tare.done, 10, 'the ~/tare reply')
             _wait(lambda: len(wrenches) >= len(truths) > 0, 10, 'the wind-on wrenches')
             errors = _held_point_errors(truths, wrenches, capacity)
-            result.wind_on_error_pct_fs[installation] = errors
+            result.wind_on_error_pct_fs[f'{installation}/{model}'] = errors
             worst = np.max(np.abs(errors), axis=0)
-            say(f'[campaign] wind-on, {installation} installation: {len(errors)} held α points, worst |mean error| % FS: '
+            say(f'[campaign] wind-on at {wind_on_temperature_c:g} °C, {installation} installation, {model} model: '
+                f'{len(errors)} held α points, worst |mean error| % FS: '
                 + ', '.join(f'{c} {w:.3f}' for c, w in zip(('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'), worst)))
         return result
     finally:
@@ -190,6 +197,7 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
         executor.shutdown(timeout_sec=2)
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+        spinner.join(timeout=5)
 
 
 def _spin(executor):
@@ -223,10 +231,13 @@ def main(argv=None) -> int:
     parser.add_argument('--installations', default='upright,inverted')
     parser.add_argument('--rate', type=float, default=200.0)
     parser.add_argument('--point-duration', type=float, default=0.1)
+    parser.add_argument('--wind-on-temperature', type=float, default=20.0,
+                        help='balance temperature during the wind-on runs, °C')
     args = parser.parse_args(argv)
     out = Path(args.out) / time.strftime('campaign_%Y%m%dT%H%M%S')
     result = run_story(out, balance=args.balance, effects=args.effects, rate_hz=args.rate,
-                       point_duration_s=args.point_duration,
+                       point_duration_s=args.point_duration, wind_on_temperature_c=args.wind_on_temperature,
+                       compare_base=bool(args.effects),
                        installations=[i for i in args.installations.split(',') if i])
     if result.report:
         report = result.report

@@ -119,12 +119,28 @@ def csv_profile(path: str | Path, installation: Installation, rate_hz: float) ->
 
 
 def wind_on_outputs(truth: BalanceModel, loads_balance, *, electrical_zero_mv=0.04, noise_mv=0.0,
-                    seed: int = 0) -> np.ndarray:
+                    seed: int = 0, effects=(), times_s=None, temperature_c=20.0, rated_output_mv=None,
+                    reference_temperature_c: float = 20.0) -> np.ndarray:
     """Raw bridge outputs (S, 6) mV for loads (S, 6): inverse of the truth without constants
-    (§10.1), plus the electrical zero and Gaussian noise (σ noise_mv per bridge)."""
+    (§10.1), plus the effects the balance has (simulation/effects.py: temperature at
+    `temperature_c`, hysteresis from the load history, ...), the electrical zero and Gaussian noise
+    (σ noise_mv per bridge)."""
+    from ..simulation.balance_sim import _direction_history
+    from ..simulation.effects import SampleContext
     loads = np.atleast_2d(np.asarray(loads_balance, dtype=float))
+    model = truth.without_constant()
+    for effect in effects:
+        model = effect.truth(model)
     unique, inverse = np.unique(loads, axis=0, return_inverse=True)
-    outputs = outputs_for_loads(truth.without_constant(), unique)[inverse.ravel()]
+    outputs = outputs_for_loads(model, unique)[inverse.ravel()]
+    if effects:
+        n = len(loads)
+        ctx = SampleContext(np.arange(n, dtype=float) if times_s is None else np.asarray(times_s, float),
+                            np.broadcast_to(np.asarray(temperature_c, float), (n,)), loads, outputs,
+                            _direction_history(loads), np.ones(6) if rated_output_mv is None else
+                            np.asarray(rated_output_mv, float), reference_temperature_c)
+        for effect in effects:
+            outputs = effect.outputs(outputs, ctx)
     rng = np.random.default_rng(seed)
     noise = rng.normal(size=outputs.shape) * np.asarray(noise_mv, float)
     return outputs + np.asarray(electrical_zero_mv, float) + noise

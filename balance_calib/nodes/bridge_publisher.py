@@ -56,6 +56,8 @@ PARAMETERS = {                       # name: default (the type of the default is
     'noise_sigma_pct_fs': -1.0,      # σ of a point mean, % FS, all components; < 0: Table 17 cubic row
     'point_duration_s': 1.0,
     'transition_s': 0.3,
+    'physical_seconds_per_point': 90.0,   # calibration: the campaign's temperature and drift follow
+                                          # a real one of this many seconds a point, however fast it plays
     'points': '',                    # e.g. '1-60,100' (point numbers as printed); '' = all
     'speed': 1.0,                    # simulated (or recorded) seconds per real second
     'bag': '',                       # replay: bag directory or .mcap; several separated by commas
@@ -149,7 +151,8 @@ class BridgePublisher(Node):
                 samples_per_point=max(1, round(duration * rate)), sample_rate_hz=rate,
                 point_duration_s=duration, transition_s=transition,
                 transition_samples=round(transition * rate), noise_sigma_pct_fs=noise,
-                seed=int(self._settings['seed']) + cycle)
+                seed=int(self._settings['seed']) + cycle,
+                time_scale=float(self._settings['physical_seconds_per_point']) / max(duration + transition, 1e-9))
             campaign = simulate_campaign(config, truth, schedule=schedule, settings=settings, effects=effects)
             return tl.campaign_timeline(campaign, transition, self._temperature_every())
         return build
@@ -174,11 +177,14 @@ class BridgePublisher(Node):
         noise_mv = noise_mv_for_load_sigma(truth.without_constant(), config.capacity, noise) \
             * np.sqrt(samples_per_condition)
         zero_mv = SimulationSettings().electrical_zero_mv
+        effects = parse_effects(self._settings['effects'])     # the balance's own effects, wind-on too
         self._publisher(tl.TRUTH, WrenchStamped, '/balance/truth', RAW_QOS)
 
         def build(cycle):
             raw = wind_on_outputs(truth, profile.loads_balance, electrical_zero_mv=zero_mv, noise_mv=noise_mv,
-                                  seed=int(self._settings['seed']) + cycle)
+                                  seed=int(self._settings['seed']) + cycle, effects=effects, times_s=profile.times_s,
+                                  temperature_c=float(self._settings['temperature_c']),
+                                  rated_output_mv=config.rated_output_mv)
             return tl.wind_on_timeline(profile.times_s, raw, profile.aero_tunnel,
                                        float(self._settings['temperature_c']),
                                        self._temperature_every())

@@ -74,6 +74,9 @@ class SimulationSettings:
     reference_temperature_c: float = 20.0
     axial_jig: bool = False               # add the ±2.94 N F_X jig of Tables 9/13 to applied loads
     seed: int = 0
+    # Physical seconds per second of the simulated timeline: a campaign played fast over DDS (0.1 s a
+    # point) still drifts and warms as one that takes 90 s a point does (time_scale 90 / 0.13).
+    time_scale: float = 1.0
 
 
 def noise_mv_for_load_sigma(truth: BalanceModel, capacity, sigma_pct_fs) -> np.ndarray:
@@ -146,11 +149,12 @@ def simulate_campaign(config: BalanceConfig, truth: BalanceModel | None = None, 
         direction = np.vstack([direction, tr_direction])[order]
         loads_at_sample = np.vstack([loads_at_sample, tr_loads])[order]
 
-    hours = times / 3600.0
+    physical_s = times * settings.time_scale       # what temperature, drift and effects follow
+    hours = physical_s / 3600.0
     temperature = (settings.temperature_mean_c
                    + settings.temperature_swing_c * np.sin(2 * np.pi * hours / 24.0 - 1.0)
                    + 0.3 * np.sin(2 * np.pi * hours / 3.1))
-    ctx = SampleContext(times, temperature, loads_at_sample, outputs_clean, direction,
+    ctx = SampleContext(physical_s, temperature, loads_at_sample, outputs_clean, direction,
                         config.rated_output_mv, settings.reference_temperature_c)
     outputs = outputs_clean.copy()
     for effect in effects:
