@@ -136,6 +136,25 @@ def test_recorder_keeps_every_message_in_order_and_closes_the_bag_on(tmp_path, d
                if t['topic_metadata']['name'] == '/balance/raw')
     assert [q['reliability'] for q in raw['offered_qos_profiles']] == ['reliable']
     assert raw['type_description_hash'].startswith('RIHS01_')
+    assert_identical_through_rosbags_and_mcap(bag)
+
+
+def assert_identical_through_rosbags_and_mcap(bag):
+    """The recorder's bag reads back the same through rosbags and through mcap + mcap_ros2."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.highlevel import AnyReader
+
+    from test_bags_writer import fields_of
+    with AnyReader([bag]) as reader:
+        by_rosbags = [(c.topic, t, fields_of(reader.deserialize(raw, c.msgtype))) for c, t, raw in reader.messages()]
+    mcap_file = next(bag.glob('*.mcap'))
+    with open(mcap_file, 'rb') as stream:
+        by_mcap = [(channel.topic, message.log_time, fields_of(decoded)) for _, channel, message, decoded
+                   in make_reader(stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
+                       log_time_order=True)]
+    assert len(by_rosbags) == SAMPLES + 3
+    assert by_rosbags == by_mcap
 
 
 @pytest.mark.ros
