@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import datetime as _dt
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -75,6 +76,16 @@ class ActiveCalibration:
     base_model: BalanceModel        # without constant terms
     installation: Installation
     envelope: np.ndarray            # (6,) |load| above this (N, N·m) is outside the calibrated range
+
+    @cached_property
+    def plan(self):
+        """What one sample needs, precomputed: input columns, component slots, powers, coefficients."""
+        names, plain, absolute, has_absolute = self.model._exponents
+        columns = np.array([BRIDGE_OUTPUTS.index(v) for v in self.model.inputs])
+        order = [self.model.inputs.index(v) for v in names if v in self.model.inputs]
+        positions = np.array([COMPONENTS.index(c) for c in self.model.components])
+        return columns[order], positions, plain, absolute if has_absolute else None, \
+            np.array(self.model.coefficients)
 
     @property
     def capacity(self) -> np.ndarray:
@@ -196,6 +207,8 @@ def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tempe
                    load_direction=None, tare_temperature_c=None, tare_direction=None) -> WrenchBatch:
     """Raw outputs (N, 6) mV, tare zero_mv (6,) -> wrench in tunnel axes (N, 6); see the module docstring."""
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
+    if outputs.shape[0] == 1 and not active.model.extra_variables:
+        return _one_plain_sample(active, outputs, zero_mv)
     accepted = np.all(np.isfinite(outputs), axis=1)
     tared = outputs - (np.zeros(6) if zero_mv is None else np.asarray(zero_mv, dtype=float))
     loads = np.full(outputs.shape, np.nan)
@@ -220,6 +233,25 @@ def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tempe
     with np.errstate(invalid='ignore'):
         outside = accepted & np.any(np.abs(loads) > active.envelope, axis=1)
     return WrenchBatch(accepted, loads, wrench, outside, name, reason)
+
+
+def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv) -> WrenchBatch:
+    """compute_wrench for the live path: one sample, a model of the bridge outputs only (~10 µs)."""
+    columns, positions, plain, absolute, coefficients = active.plan
+    tared = outputs[0] if zero_mv is None else outputs[0] - zero_mv
+    values = tared[columns]
+    loads = np.zeros((1, 6))
+    accepted = bool(np.isfinite(values).all() and np.isfinite(outputs).all())
+    if not accepted:
+        loads[:] = np.nan
+        return WrenchBatch(np.array([False]), loads, loads.copy(), np.array([False]), active.model_name)
+    design = np.prod(values ** plain, axis=1)
+    if absolute is not None:
+        design = design * np.prod(np.abs(values) ** absolute, axis=1)
+    loads[0, positions] = coefficients @ design
+    outside = bool((np.abs(loads[0]) > active.envelope).any())
+    return WrenchBatch(np.array([True]), loads, active.installation.to_tunnel(loads), np.array([outside]),
+                       active.model_name)
 
 
 # --- tare -------------------------------------------------------------------------------------

@@ -6,6 +6,7 @@ TM-663 eqs. (1)-(18) are the instances with the term lists of `tm663.py`; any ot
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -51,17 +52,17 @@ class BalanceModel:
         return cls(name, tuple(terms), np.zeros((len(components), len(terms))), tuple(components), tuple(inputs))
 
     # --- properties ---------------------------------------------------------------------------
-    @property
+    @cached_property
     def term_names(self) -> tuple[str, ...]:
         return tuple(t.name for t in self.terms)
 
-    @property
+    @cached_property
     def variables(self) -> tuple[str, ...]:
         """Every variable the terms need (inputs first)."""
         needed = {v for t in self.terms for v in t.variables}
         return tuple(v for v in self.inputs if v in needed) + tuple(sorted(needed - set(self.inputs)))
 
-    @property
+    @cached_property
     def extra_variables(self) -> tuple[str, ...]:
         return tuple(v for v in self.variables if v not in self.inputs)
 
@@ -76,10 +77,34 @@ class BalanceModel:
         return coefficient_number(self.components.index(component), self.term_index(term), len(self.terms))
 
     # --- evaluation ---------------------------------------------------------------------------
+    @cached_property
+    def _exponents(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray, bool]:
+        """Variables, and the powers of each (plain, absolute) in each term: (n_terms, n_vars) ints."""
+        names = self.variables
+        plain = np.zeros((len(self.terms), len(names)), dtype=np.int64)
+        absolute = np.zeros_like(plain)
+        for j, term in enumerate(self.terms):
+            for factor in term.factors:
+                (absolute if factor.absolute else plain)[j, names.index(factor.variable)] += factor.power
+        return names, plain, absolute, bool(absolute.any())
+
     def design(self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+        """(N, n_terms): every term on every sample, as products of powers (one numpy expression)."""
         outputs = np.atleast_2d(np.asarray(bridge_outputs_mv, dtype=float))
-        variables = as_variables(self.inputs, outputs, extra)
-        return design_matrix(self.terms, variables, outputs.shape[0])
+        if outputs.shape[1] != len(self.inputs):
+            raise ValueError(f'expected {len(self.inputs)} columns ({", ".join(self.inputs)}), got {outputs.shape[1]}')
+        names, plain, absolute, has_absolute = self._exponents
+        extra_names = names[len([v for v in names if v in self.inputs]):]
+        missing = [v for v in extra_names if not extra or v not in extra]
+        if missing:
+            raise KeyError(f'the model needs variable(s) {", ".join(missing)} that the data does not have')
+        columns = [outputs[:, self.inputs.index(v)] for v in names[:len(names) - len(extra_names)]]
+        columns += [np.broadcast_to(np.asarray(extra[v], dtype=float), (outputs.shape[0],)) for v in extra_names]
+        values = np.column_stack(columns) if columns else np.zeros((outputs.shape[0], 0))
+        matrix = np.prod(values[:, None, :] ** plain[None, :, :], axis=2)
+        if has_absolute:
+            matrix = matrix * np.prod(np.abs(values)[:, None, :] ** absolute[None, :, :], axis=2)
+        return matrix
 
     def loads(self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
         """Loads (N, n_components) from outputs (N, n_inputs), TM-663 eqs. (1)-(18)."""

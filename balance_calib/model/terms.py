@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
@@ -78,7 +79,7 @@ class Term:
     def name(self) -> str:
         return '*'.join(f.name for f in self.factors) if self.factors else '1'
 
-    @property
+    @cached_property
     def variables(self) -> tuple[str, ...]:
         return tuple(dict.fromkeys(f.variable for f in self.factors))
 

@@ -150,11 +150,21 @@ class BalanceCalibrator(Node):
         self.create_service(Trigger, '~/tare', self._on_tare, callback_group=services)
         self.create_service(Trigger, '~/refit', self._on_refit, callback_group=services)
         self._diagnostics_timer = self.create_timer(self._param('diagnostics_period_s'), self._on_diagnostics)
+        self._frame_id = self._param('frame_id')
+        self._stale_after_s = self._param('stale_after_s')
+        self._last_warning_s: dict[str, float] = {}
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.get_logger().info(f'{self._active.model_name} model of {calibration.balance} from {path}, '
                                f'{self._active.installation.name} installation; requires '
                                f'{", ".join(self._active.requires) or "bridge outputs only"}')
+
+    def _due(self, what: str, now_s: float, every_s: float = 5.0) -> bool:
+        """A cheap log throttle for the per-sample path (rclpy's throttle inspects the call stack)."""
+        if now_s - self._last_warning_s.get(what, -1e9) < every_s:
+            return False
+        self._last_warning_s[what] = now_s
+        return True
 
     def _param(self, name):
         try:
@@ -174,7 +184,7 @@ class BalanceCalibrator(Node):
             self._temperature_c, self._temperature_s = float(msg.temperature), time.monotonic()
 
     def _fresh_temperature(self, now_s: float) -> float | None:
-        if self._temperature_s is None or now_s - self._temperature_s > self._param('stale_after_s'):
+        if self._temperature_s is None or now_s - self._temperature_s > self._stale_after_s:
             return None
         return self._temperature_c
 
@@ -198,8 +208,9 @@ class BalanceCalibrator(Node):
             return
         self._counters.count(batch)
         if not batch.accepted[0]:
-            self.get_logger().warning(f'rejected a /balance/raw sample with NaN/inf outputs '
-                                      f'({self._counters.rejected_nonfinite} so far)', throttle_duration_sec=5.0)
+            if self._due('nonfinite', now_s):
+                self.get_logger().warning(f'rejected a /balance/raw sample with NaN/inf outputs '
+                                          f'({self._counters.rejected_nonfinite} so far)')
             return
         if batch.fallback_reason != self._fallback_reason:
             if batch.fallback_reason:
@@ -208,16 +219,16 @@ class BalanceCalibrator(Node):
             else:
                 self.get_logger().info(f'{active.model_name} model back in use')
             self._fallback_reason = batch.fallback_reason
-        if batch.out_of_envelope[0]:
+        if batch.out_of_envelope[0] and self._due('envelope', now_s):
             self.get_logger().warning(f'load outside the calibrated envelope ({self._counters.out_of_envelope}'
-                                      f' samples so far)', throttle_duration_sec=5.0)
+                                      f' samples so far)')
         if self._collecting is not None:
             window, done = self._collecting
             if window.add(outputs) and not done.done():
                 done.set_result(True)
         out = WrenchStamped()
         out.header.stamp = msg.header.stamp
-        out.header.frame_id = self._param('frame_id')
+        out.header.frame_id = self._frame_id
         (out.wrench.force.x, out.wrench.force.y, out.wrench.force.z,
          out.wrench.torque.x, out.wrench.torque.y, out.wrench.torque.z) = (float(v) for v in batch.wrench_tunnel[0])
         self._wrench_pub.publish(out)
@@ -378,6 +389,8 @@ class BalanceCalibrator(Node):
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters) -> None:
+        self._frame_id = self._param('frame_id')      # read per sample: kept as attributes
+        self._stale_after_s = self._param('stale_after_s')
         if 'diagnostics_period_s' in {p.name for p in parameters}:
             self.destroy_timer(self._diagnostics_timer)
             self._diagnostics_timer = self.create_timer(self._param('diagnostics_period_s'), self._on_diagnostics)
