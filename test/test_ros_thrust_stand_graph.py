@@ -15,7 +15,8 @@ def _status(messages):
         for status in array.status:
             if status.name == 'thrust_analyzer: thrust coefficient':
                 values = {kv.key: kv.value for kv in status.values}
-                if values.get('firing') == 'true' and values.get('cf_measured', 'nan') != 'nan':
+                steady = float(values.get('chamber_gauge_pressure_pa', 'nan')) > 4.5e5   # regulator at 0.5 MPa
+                if values.get('firing') == 'true' and values.get('cf_measured', 'nan') != 'nan' and steady:
                     return values
     return None
 
