@@ -9,7 +9,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from ros_harness import NodeProcess, new_domain_id, wait_for
+from geometry_msgs.msg import WrenchStamped
+
+from ros_harness import NodeProcess, Probe, new_domain_id, wait_for
 
 pytestmark = pytest.mark.ros
 SCRIPTS = Path(__file__).resolve().parent.parent / 'launchless_scripts'
@@ -27,12 +29,17 @@ def test_trigger_prints_the_reply_and_exits_by_success(tmp_path):
         failed = run_trigger(domain, '/balance_calibrator/tare', '--timeout', '30')     # no samples: tare fails
         assert failed.returncode == 1, failed.stderr
         assert failed.stdout.startswith('success: false\nmessage: tare failed: only 0 of 20')
+        probe = Probe(domain)
+        wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
         publisher = NodeProcess('bridge_publisher', domain, tmp_path, {'mode': 'wind_on', 'loop': True,
                                                                         'rate_hz': 100.0})
         try:
+            # the tare waits only tare_timeout_s = 1 s: let the publisher start streaming first
+            wait_for(lambda: len(wrenches) > 0, 30.0, 'samples through the calibrator')
             done = run_trigger(domain, '/balance_calibrator/tare', '--timeout', '30')
         finally:
             publisher.stop()
+            probe.close()
         assert done.returncode == 0, done.stdout + done.stderr
         assert done.stdout.startswith('success: true\nmessage: tare: averaged 20 samples')
     finally:
