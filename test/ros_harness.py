@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import itertools
 import os
-import signal
-import subprocess
 import threading
 import time
 from pathlib import Path
@@ -18,6 +16,8 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from balance_calib.launchless.processes import NodeProcess, ros_args  # noqa: F401 (re-exported)
 
 _counter = itertools.count()
 RELIABLE = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
@@ -38,55 +38,6 @@ def wait_for(predicate, timeout_s: float, what: str, poll_s: float = 0.02):
         if time.monotonic() > deadline:
             raise AssertionError(f'timed out after {timeout_s:g} s waiting for {what}')
         time.sleep(poll_s)
-
-
-def ros_args(parameters: dict) -> list[str]:
-    args = ['--ros-args']
-    for name, value in parameters.items():
-        if isinstance(value, bool):
-            value = 'true' if value else 'false'
-        elif isinstance(value, (list, tuple)):
-            value = '[' + ','.join(f"'{v}'" for v in value) + ']'
-        args += ['-p', f'{name}:={value}']
-    return args
-
-
-class NodeProcess:
-    """A node's console script as a subprocess with its own log files."""
-
-    def __init__(self, executable: str, domain_id: int, log_dir: Path, parameters: dict | None = None,
-                 extra_args: list[str] | None = None):
-        self.name = executable
-        env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
-        log_dir.mkdir(parents=True, exist_ok=True)
-        self.stdout_path = log_dir / f'{executable}.{id(self)}.out'
-        self.stderr_path = log_dir / f'{executable}.{id(self)}.err'
-        self._stdout = open(self.stdout_path, 'w')
-        self._stderr = open(self.stderr_path, 'w')
-        self.process = subprocess.Popen([executable] + ros_args(parameters or {}) + (extra_args or []),
-                                        env=env, stdout=self._stdout, stderr=self._stderr,
-                                        start_new_session=True)
-
-    def output(self) -> str:
-        if not self._stdout.closed:
-            self._stdout.flush()
-            self._stderr.flush()
-        return self.stdout_path.read_text() + self.stderr_path.read_text()
-
-    def wait(self, timeout_s: float) -> int:
-        return self.process.wait(timeout=timeout_s)
-
-    def stop(self, timeout_s: float = 5.0) -> int | None:
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
-            try:
-                self.process.wait(timeout=timeout_s)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait(timeout=timeout_s)
-        self._stdout.close()
-        self._stderr.close()
-        return self.process.returncode
 
 
 class Probe:

@@ -18,8 +18,6 @@ import argparse
 import json
 import os
 import random
-import signal
-import subprocess
 import sys
 import threading
 import time
@@ -28,42 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-
-def _ros_args(parameters: dict) -> list[str]:
-    args = ['--ros-args']
-    for name, value in parameters.items():
-        if isinstance(value, bool):
-            value = 'true' if value else 'false'
-        elif isinstance(value, (list, tuple)):
-            value = '[' + ','.join(f"'{v}'" for v in value) + ']'
-        elif value == '':
-            value = "''"           # an empty string must be spelled as YAML
-        args += ['-p', f'{name}:={value}']
-    return args
-
-
-class _Process:
-    def __init__(self, name: str, parameters: dict, env: dict, logs: Path):
-        logs.mkdir(parents=True, exist_ok=True)
-        self.name = name
-        self.log = logs / f'{name}.{int(time.time() * 1000)}.log'
-        self._file = open(self.log, 'w')
-        self.process = subprocess.Popen([name] + _ros_args(parameters), env=env, stdout=self._file,
-                                        stderr=subprocess.STDOUT, start_new_session=True)
-
-    def wait(self, timeout: float) -> int:
-        return self.process.wait(timeout=timeout)
-
-    def stop(self, timeout: float = 10.0) -> int | None:
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
-            try:
-                self.process.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait(timeout=timeout)
-        self._file.close()
-        return self.process.returncode
+from .processes import NodeProcess
 
 
 def _wait(predicate, timeout: float, what: str):
@@ -106,7 +69,7 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
     report_dir = out_dir / 'report'
     logs = out_dir / 'logs'
     domain = domain_id if domain_id is not None else random.randint(1, 99)
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONUNBUFFERED='1')
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')    # real DDS, never off this machine
 
     context = Context()
     rclpy.init(context=context, domain_id=domain)
@@ -123,25 +86,25 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
     node.create_subscription(WrenchStamped, '/balance/raw', lambda msg: None, reliable)
     processes = []
     try:
-        calibrator = _Process('balance_calibrator', {'balance': balance, 'calibration_bags': [str(bag)],
-                                                     'report_dir': str(report_dir), 'tare_samples': 100}, env, logs)
+        calibrator = NodeProcess('balance_calibrator', domain, logs, {'balance': balance, 'calibration_bags': [str(bag)],
+                                                     'report_dir': str(report_dir), 'tare_samples': 100})
         processes.append(calibrator)
-        recorder = _Process('balance_recorder', {'output': str(bag)}, env, logs)
+        recorder = NodeProcess('balance_recorder', domain, logs, {'output': str(bag)})
         processes.append(recorder)
         say(f'[campaign] ROS_DOMAIN_ID={domain}: calibration campaign of {balance} over DDS '
             f'({rate_hz:g} Hz, {point_duration_s:g} s per point), recording to {bag}'
             + (f'; undeclared effects: {effects}' if effects else ''))
-        publisher = _Process('bridge_publisher', {
+        publisher = NodeProcess('bridge_publisher', domain, logs, {
             'mode': 'calibration', 'balance': balance, 'rate_hz': rate_hz, 'point_duration_s': point_duration_s,
             'transition_s': transition_s, 'effects': effects, 'seed': seed, 'exit_when_done': True,
-            'wait_for_subscribers': 2}, env, logs)
+            'wait_for_subscribers': 2})
         processes.append(publisher)
-        code = publisher.wait(timeout=3600)
+        code = publisher.wait(3600)
         if code != 0:
-            raise RuntimeError(f'bridge_publisher failed ({code}); see {publisher.log}')
+            raise RuntimeError(f'bridge_publisher failed ({code}); see {publisher.stderr_path}')
         time.sleep(0.5)      # let the last samples reach the recorder before it closes the bag
         if recorder.stop() != 0:
-            raise RuntimeError(f'balance_recorder did not close cleanly; see {recorder.log}')
+            raise RuntimeError(f'balance_recorder did not close cleanly; see {recorder.stderr_path}')
         say(f'[campaign] campaign recorded; calling /balance_calibrator/refit ...')
         client = node.create_client(Trigger, '/balance_calibrator/refit')
         _wait(client.service_is_ready, 30, 'the ~/refit service')
@@ -174,14 +137,14 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
             tare_client = node.create_client(Trigger, '/balance_calibrator/tare')
             _wait(tare_client.service_is_ready, 10, 'the ~/tare service')
             tare = tare_client.call_async(Trigger.Request())
-            wind = _Process('bridge_publisher', {
+            wind = NodeProcess('bridge_publisher', domain, logs, {
                 'mode': 'wind_on', 'balance': balance, 'installation': installation, 'rate_hz': rate_hz,
                 'wind_off_s': 1.0, 'hold_s': 0.5, 'alpha_step_deg': 4.0, 'noise_sigma_pct_fs': 0.005,
                 'exit_when_done': True, 'wait_for_subscribers': 2, 'seed': seed + 1, 'effects': effects,
-                'temperature_c': wind_on_temperature_c}, env, logs)
+                'temperature_c': wind_on_temperature_c})
             processes.append(wind)
-            if wind.wait(timeout=300) != 0:
-                raise RuntimeError(f'wind-on publisher failed; see {wind.log}')
+            if wind.wait(300) != 0:
+                raise RuntimeError(f'wind-on publisher failed; see {wind.stderr_path}')
             _wait(tare.done, 10, 'the ~/tare reply')
             _wait(lambda: len(wrenches) >= len(truths) > 0, 10, 'the wind-on wrenches')
             errors = _held_point_errors(truths, wrenches, capacity)

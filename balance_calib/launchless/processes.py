@@ -1,0 +1,59 @@
+"""Node processes for the launchless scripts and the ROS tests: a console script with parameters
+on a chosen ROS domain, its output in log files, stopped with SIGINT (then killed if it hangs)."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+from pathlib import Path
+
+
+def ros_args(parameters: dict) -> list[str]:
+    args = ['--ros-args']
+    for name, value in parameters.items():
+        if isinstance(value, bool):
+            value = 'true' if value else 'false'
+        elif isinstance(value, (list, tuple)):
+            value = '[' + ','.join(f"'{v}'" for v in value) + ']'
+        elif value == '':
+            value = "''"           # an empty string must be spelled as YAML
+        args += ['-p', f'{name}:={value}']
+    return args
+
+
+class NodeProcess:
+    """A node's console script as a subprocess with its own log files."""
+
+    def __init__(self, executable: str, domain_id: int, log_dir: Path, parameters: dict | None = None,
+                 extra_args: list[str] | None = None):
+        self.name = executable
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.stdout_path = log_dir / f'{executable}.{id(self)}.out'
+        self.stderr_path = log_dir / f'{executable}.{id(self)}.err'
+        self._stdout = open(self.stdout_path, 'w')
+        self._stderr = open(self.stderr_path, 'w')
+        self.process = subprocess.Popen([executable] + ros_args(parameters or {}) + (extra_args or []),
+                                        env=env, stdout=self._stdout, stderr=self._stderr,
+                                        start_new_session=True)
+
+    def output(self) -> str:
+        if not self._stdout.closed:
+            self._stdout.flush()
+            self._stderr.flush()
+        return self.stdout_path.read_text() + self.stderr_path.read_text()
+
+    def wait(self, timeout_s: float) -> int:
+        return self.process.wait(timeout=timeout_s)
+
+    def stop(self, timeout_s: float = 5.0) -> int | None:
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+            try:
+                self.process.wait(timeout=timeout_s)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(timeout=timeout_s)
+        self._stdout.close()
+        self._stderr.close()
+        return self.process.returncode
