@@ -9,7 +9,6 @@ import itertools
 import os
 import threading
 import time
-from pathlib import Path
 
 import rclpy
 from rclpy.context import Context
