@@ -311,7 +311,10 @@ class InputCounters:
     period_out_of_envelope: int = 0
 
     def count(self, batch: WrenchBatch) -> None:
-        n, ok, out = len(batch.accepted), int(batch.accepted.sum()), int(batch.out_of_envelope.sum())
+        if len(batch.accepted) == 1:      # the live path: one sample, no numpy reductions
+            n, ok, out = 1, int(bool(batch.accepted[0])), int(bool(batch.out_of_envelope[0]))
+        else:
+            n, ok, out = len(batch.accepted), int(batch.accepted.sum()), int(batch.out_of_envelope.sum())
         self.received += n
         self.period_received += n
         self.published += ok

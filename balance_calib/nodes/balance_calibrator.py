@@ -152,6 +152,7 @@ class BalanceCalibrator(Node):
         self._diagnostics_timer = self.create_timer(self._param('diagnostics_period_s'), self._on_diagnostics)
         self._frame_id = self._param('frame_id')
         self._stale_after_s = self._param('stale_after_s')
+        self._out = WrenchStamped()
         self._last_warning_s: dict[str, float] = {}
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -226,11 +227,11 @@ class BalanceCalibrator(Node):
             window, done = self._collecting
             if window.add(outputs) and not done.done():
                 done.set_result(True)
-        out = WrenchStamped()
+        out = self._out          # one message, reused: publish() serializes it before returning
         out.header.stamp = msg.header.stamp
         out.header.frame_id = self._frame_id
-        (out.wrench.force.x, out.wrench.force.y, out.wrench.force.z,
-         out.wrench.torque.x, out.wrench.torque.y, out.wrench.torque.z) = (float(v) for v in batch.wrench_tunnel[0])
+        force, torque = out.wrench.force, out.wrench.torque
+        force.x, force.y, force.z, torque.x, torque.y, torque.z = batch.wrench_tunnel[0].tolist()
         self._wrench_pub.publish(out)
 
     # --- ~/tare -------------------------------------------------------------------------------
