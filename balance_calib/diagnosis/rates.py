@@ -166,6 +166,16 @@ def _run(args):
 
 
 # --- tables -----------------------------------------------------------------------------------
+def _grid(outcomes, effect, balances, sizes, cell) -> list[str]:
+    """One table row: cell(runs, effect) for every balance and size ('' where nothing ran)."""
+    cells = []
+    for b in balances:
+        for s in sizes:
+            runs = [o for o in outcomes if o.balance == b and o.effect == effect and o.noise_floors == s]
+            cells.append(cell(runs, effect) if runs else '')
+    return cells
+
+
 def markdown_tables(outcomes: list[Outcome], sizes, balances) -> str:
     lines = []
     names = {b: load_balance_config(b).name for b in balances}
@@ -187,17 +197,12 @@ def markdown_tables(outcomes: list[Outcome], sizes, balances) -> str:
               + ' | also named |')
     lines.append(header)
     lines.append('|---' * (2 + len(balances) * len(sizes)) + '|')
+    def detection(runs, effect):
+        first = sum(1 for o in runs if o.found[:1] == (effect,))
+        return f'{first}/{len(runs)} ({sum(1 for o in runs if effect in o.found)})'
+
     for effect in EFFECT_NAMES:
-        cells = []
-        for b in balances:
-            for s in sizes:
-                runs = [o for o in outcomes if o.balance == b and o.effect == effect and o.noise_floors == s]
-                if not runs:
-                    cells.append('')
-                    continue
-                first = sum(1 for o in runs if o.found[:1] == (effect,))
-                anywhere = sum(1 for o in runs if effect in o.found)
-                cells.append(f'{first}/{len(runs)} ({anywhere})')
+        cells = _grid(outcomes, effect, balances, sizes, detection)
         runs = [o for o in outcomes if o.effect == effect]
         extra = [o for o in runs if set(o.found) - {effect}]
         others = ', '.join(sorted({n for o in extra for n in o.found} - {effect}))
@@ -207,17 +212,13 @@ def markdown_tables(outcomes: list[Outcome], sizes, balances) -> str:
     lines.append('σ_FX (% FS) before -> after, in-sample and cross-validated (PRESS), median over seeds:\n')
     lines.append('| effect | ' + ' | '.join(f'{names[b]} {s:g}x' for b in balances for s in sizes) + ' |')
     lines.append('|---' * (1 + len(balances) * len(sizes)) + '|')
+    def sigmas(runs, effect):
+        med = lambda attr: float(np.median([getattr(o, attr) for o in runs]))
+        return (f'{med("sigma_before"):.3f}→{med("sigma_after"):.3f} '
+                f'(CV {med("crossval_before"):.3f}→{med("crossval_after"):.3f})')
+
     for effect in EFFECT_NAMES:
-        cells = []
-        for b in balances:
-            for s in sizes:
-                runs = [o for o in outcomes if o.balance == b and o.effect == effect and o.noise_floors == s]
-                if not runs:
-                    cells.append('')
-                    continue
-                med = lambda attr: float(np.median([getattr(o, attr) for o in runs]))
-                cells.append(f'{med("sigma_before"):.3f}→{med("sigma_after"):.3f} '
-                             f'(CV {med("crossval_before"):.3f}→{med("crossval_after"):.3f})')
+        cells = _grid(outcomes, effect, balances, sizes, sigmas)
         lines.append(f'| {effect} | ' + ' | '.join(cells) + ' |')
     lines.append('')
     lines.append('Injected parameters (F_X bridge):\n')
