@@ -31,6 +31,7 @@ import numpy as np
 
 from ..calibration_file import Calibration, ConfigError
 from ..model.balance_model import BalanceModel
+from ..model.terms import power_products
 from ..tunnel_axes import Installation, parse_installation
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
 
@@ -245,9 +246,7 @@ def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv) -
     if not accepted:
         loads[:] = np.nan
         return WrenchBatch(np.array([False]), loads, loads.copy(), np.array([False]), active.model_name)
-    design = np.prod(values ** plain, axis=1)
-    if absolute is not None:
-        design = design * np.prod(np.abs(values) ** absolute, axis=1)
+    design = power_products(values[None, :], plain, absolute)[0]
     loads[0, positions] = coefficients @ design
     outside = bool((np.abs(loads[0]) > active.envelope).any())
     return WrenchBatch(np.array([True]), loads, active.installation.to_tunnel(loads), np.array([outside]),

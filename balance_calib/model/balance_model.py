@@ -12,7 +12,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
-from .terms import Term, as_variables, design_matrix, parse_terms
+from .terms import Term, as_variables, parse_terms, power_products, term_exponents
 from .tm663 import coefficient_number, tm663_terms
 
 
@@ -80,13 +80,8 @@ class BalanceModel:
     @cached_property
     def _exponents(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray, bool]:
         """Variables, and the powers of each (plain, absolute) in each term: (n_terms, n_vars) ints."""
-        names = self.variables
-        plain = np.zeros((len(self.terms), len(names)), dtype=np.int64)
-        absolute = np.zeros_like(plain)
-        for j, term in enumerate(self.terms):
-            for factor in term.factors:
-                (absolute if factor.absolute else plain)[j, names.index(factor.variable)] += factor.power
-        return names, plain, absolute, bool(absolute.any())
+        plain, absolute = term_exponents(self.terms, self.variables)
+        return self.variables, plain, absolute, bool(absolute.any())
 
     def design(self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
         """(N, n_terms): every term on every sample, as products of powers (one numpy expression)."""
@@ -101,10 +96,7 @@ class BalanceModel:
         columns = [outputs[:, self.inputs.index(v)] for v in names[:len(names) - len(extra_names)]]
         columns += [np.broadcast_to(np.asarray(extra[v], dtype=float), (outputs.shape[0],)) for v in extra_names]
         values = np.column_stack(columns) if columns else np.zeros((outputs.shape[0], 0))
-        matrix = np.prod(values[:, None, :] ** plain[None, :, :], axis=2)
-        if has_absolute:
-            matrix = matrix * np.prod(np.abs(values)[:, None, :] ** absolute[None, :, :], axis=2)
-        return matrix
+        return power_products(values, plain, absolute if has_absolute else None)
 
     def loads(self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
         """Loads (N, n_components) from outputs (N, n_inputs), TM-663 eqs. (1)-(18)."""

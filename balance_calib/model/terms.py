@@ -136,12 +136,30 @@ def as_variables(names: Sequence[str], values: np.ndarray,
     return variables
 
 
+def term_exponents(terms: Sequence[Term], names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Powers (n_terms, n_vars) of each variable in each term: of its value, and of its absolute value."""
+    plain = np.zeros((len(terms), len(names)), dtype=np.int64)
+    absolute = np.zeros_like(plain)
+    for j, term in enumerate(terms):
+        for factor in term.factors:
+            (absolute if factor.absolute else plain)[j, list(names).index(factor.variable)] += factor.power
+    return plain, absolute
+
+
+def power_products(values: np.ndarray, plain: np.ndarray, absolute: np.ndarray | None) -> np.ndarray:
+    """(N, n_terms) = prod_v values[:, v] ** plain[:, v] * |values[:, v]| ** absolute[:, v]."""
+    matrix = np.prod(values[:, None, :] ** plain[None, :, :], axis=2)
+    if absolute is not None and absolute.any():
+        matrix = matrix * np.prod(np.abs(values)[:, None, :] ** absolute[None, :, :], axis=2)
+    return matrix
+
+
 def design_matrix(terms: Sequence[Term], variables: Mapping[str, np.ndarray], length: int) -> np.ndarray:
     """(N, n_terms) matrix whose column j is term j evaluated on every sample."""
     missing = sorted({v for t in terms for v in t.variables} - set(variables))
     if missing:
         raise KeyError(f'the model needs variable(s) {", ".join(missing)} that the data does not have')
-    matrix = np.empty((length, len(terms)))
-    for j, term in enumerate(terms):
-        matrix[:, j] = term.evaluate(variables, length)
-    return matrix
+    names = tuple(dict.fromkeys(v for t in terms for v in t.variables))
+    values = np.column_stack([np.broadcast_to(np.asarray(variables[v], dtype=float), (length,)) for v in names]) \
+        if names else np.zeros((length, 0))
+    return power_products(values, *term_exponents(terms, names))
