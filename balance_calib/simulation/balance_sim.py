@@ -132,6 +132,8 @@ def simulate_campaign(config: BalanceConfig, truth: BalanceModel | None = None, 
     outputs_clean = point_outputs[sample_point]
     direction = _direction_history(true_loads)[sample_point]
     loads_at_sample = true_loads[sample_point]
+    gravity_at_sample = gravity[sample_point]
+    settled_at_sample = start[sample_point]
     if settings.transition_samples > 0:
         # weights being changed: outputs and loads ramp from the previous point to the next
         n_tr = int(settings.transition_samples)
@@ -148,6 +150,8 @@ def simulate_campaign(config: BalanceConfig, truth: BalanceModel | None = None, 
         outputs_clean = np.vstack([outputs_clean, tr_outputs])[order]
         direction = np.vstack([direction, tr_direction])[order]
         loads_at_sample = np.vstack([loads_at_sample, tr_loads])[order]
+        gravity_at_sample = np.vstack([gravity_at_sample, gravity[np.repeat(np.arange(n_points), n_tr)]])[order]
+        settled_at_sample = np.concatenate([settled_at_sample, tr_times])[order]
 
     physical_s = times * settings.time_scale       # what temperature, drift and effects follow
     hours = physical_s / 3600.0
@@ -155,7 +159,9 @@ def simulate_campaign(config: BalanceConfig, truth: BalanceModel | None = None, 
                    + settings.temperature_swing_c * np.sin(2 * np.pi * hours / 24.0 - 1.0)
                    + 0.3 * np.sin(2 * np.pi * hours / 3.1))
     ctx = SampleContext(physical_s, temperature, loads_at_sample, outputs_clean, direction,
-                        config.rated_output_mv, settings.reference_temperature_c)
+                        config.rated_output_mv, settings.reference_temperature_c,
+                        np.asarray(config.capacity, float), gravity_at_sample,
+                        settled_at_sample * settings.time_scale)
     outputs = outputs_clean.copy()
     for effect in effects:
         outputs = effect.outputs(outputs, ctx)

@@ -27,6 +27,9 @@ class SampleContext:
     direction: np.ndarray          # (S, 6) +1 if the load on that bridge last rose, -1 if it fell
     rated_output_mv: np.ndarray    # (6,)
     reference_temperature_c: float
+    capacity: np.ndarray | None = None        # (6,) rated loads, N / N·m
+    gravity: np.ndarray | None = None         # (S, 3) unit gravity vector, balance axes
+    settled_since_s: np.ndarray | None = None  # (S,) physical time the sample's load was reached
 
 
 class Effect:
@@ -137,7 +140,193 @@ class HeavierBody(Effect):
         return self.weight_factor
 
 
+
+
+# --- alternative shapes ------------------------------------------------------------------------
+# Written from the physics, not from the diagnosis's candidate terms (diagnosis/candidates.py): the
+# diagnosis has to find these with terms that fit them only approximately.
+
+def _play(values: np.ndarray, half_width: np.ndarray) -> np.ndarray:
+    """Play (backlash) operator on each column of values (S, n), starting at the first value."""
+    out = np.empty_like(values)
+    state = values[0].copy()
+    for i, v in enumerate(values):
+        state = np.minimum(np.maximum(state, v - half_width), v + half_width)
+        out[i] = state
+    return out
+
+
+@dataclass(frozen=True)
+class PlayHysteresis(Effect):
+    """A hysteresis loop of play-operator (Preisach, one hysteron) shape on each bridge.
+
+    The offset follows the output through a backlash of half-width width_fraction x rated output:
+    it moves linearly away from a turning point and saturates at ±fraction_of_rated x rated output
+    once the load has moved 2 x width past it. Small load reversals give small loops.
+    """
+
+    fraction_of_rated: Sequence[float] | float = 0.0
+    width_fraction: float = 0.25
+    name = 'hysteresis'
+
+    def outputs(self, outputs_mv, ctx):
+        half = self.width_fraction * ctx.rated_output_mv
+        lag = (ctx.outputs_mv - _play(ctx.outputs_mv, half)) / half        # in [-1, 1]
+        return outputs_mv + _vector(self.fraction_of_rated) * ctx.rated_output_mv * lag
+
+
+@dataclass(frozen=True)
+class TurningPointHysteresis(Effect):
+    """Loop offset growing with the distance the load travelled since its last turning point:
+    ±h x rated x (1 - exp(-|V - V_turn| / (scale x rated))), sign of the direction of travel."""
+
+    fraction_of_rated: Sequence[float] | float = 0.0
+    scale_fraction: float = 0.3
+    name = 'hysteresis'
+
+    def outputs(self, outputs_mv, ctx):
+        v, d = ctx.outputs_mv, ctx.direction
+        turn = np.empty_like(v)
+        turn[0] = v[0]
+        for i in range(1, len(v)):
+            changed = d[i] != d[i - 1]
+            turn[i] = np.where(changed, v[i - 1], turn[i - 1])
+        grow = 1.0 - np.exp(-np.abs(v - turn) / (self.scale_fraction * ctx.rated_output_mv))
+        return outputs_mv + _vector(self.fraction_of_rated) * ctx.rated_output_mv * d * grow
+
+
+def lagged_temperature(times_s, temperature_c, lag_s: float) -> np.ndarray:
+    """First-order lag of the temperature (the gauges follow the case with time constant lag_s)."""
+    if lag_s <= 0:
+        return np.asarray(temperature_c, float)
+    out = np.empty(len(times_s))
+    out[0] = temperature_c[0]
+    for i in range(1, len(times_s)):
+        w = np.exp(-max(times_s[i] - times_s[i - 1], 0.0) / lag_s)
+        out[i] = w * out[i - 1] + (1 - w) * temperature_c[i]
+    return out
+
+
+@dataclass(frozen=True)
+class TemperatureShapes(Effect):
+    """Temperature acting through dT² and/or a lagged gauge temperature:
+    V += z2·dT'² and V *= 1 + s·dT' + s2·dT'², dT' the gauge temperature lagging the measured one
+    by a first-order lag of lag_s (0: no lag). The refit only sees the measured temperature."""
+
+    sensitivity_per_k: Sequence[float] | float = 0.0
+    sensitivity_per_k2: Sequence[float] | float = 0.0
+    zero_mv_per_k2: Sequence[float] | float = 0.0
+    lag_s: float = 0.0
+    name = 'temperature'
+
+    def outputs(self, outputs_mv, ctx):
+        gauge = lagged_temperature(ctx.times_s, ctx.temperature_c, self.lag_s)
+        d_t = (gauge - ctx.reference_temperature_c)[:, None]
+        gain = _vector(self.sensitivity_per_k) * d_t + _vector(self.sensitivity_per_k2) * d_t ** 2
+        return outputs_mv + _vector(self.zero_mv_per_k2) * d_t ** 2 + gain * ctx.outputs_mv
+
+
+def _load_steps(ctx: SampleContext):
+    """(step times (M,), output changes (M, 6)) of the load history, in time order."""
+    v = ctx.outputs_mv
+    changed = np.any(np.abs(np.diff(v, axis=0)) > 1e-12, axis=1)
+    index = np.where(changed)[0] + 1
+    since = ctx.settled_since_s if ctx.settled_since_s is not None else ctx.times_s
+    times = np.concatenate([[since[0]], since[index]])
+    steps = np.vstack([v[:1], v[index] - v[index - 1]])
+    return times, steps
+
+
+@dataclass(frozen=True)
+class Creep(Effect):
+    """Output relaxing after each load change with two time constants:
+    V(t) = V - c Σ_i ΔV_i Σ_j w_j exp(-(t - t_i)/τ_j) over the load steps i before t."""
+
+    fraction: Sequence[float] | float = 0.0
+    time_constants_s: Sequence[float] = (40.0, 400.0)
+    weights: Sequence[float] = (0.6, 0.4)
+    name = 'creep'
+
+    def outputs(self, outputs_mv, ctx):
+        step_times, steps = _load_steps(ctx)
+        age = ctx.times_s[:, None] - step_times[None, :]                 # (S, M)
+        kernel = np.zeros_like(age)
+        for tau, w in zip(self.time_constants_s, self.weights):
+            kernel += w * np.exp(-np.clip(age, 0.0, None) / tau)
+        kernel[age < 0] = 0.0
+        return outputs_mv - _vector(self.fraction) * (kernel @ steps)
+
+
+@dataclass(frozen=True)
+class SupplyDrift(Effect):
+    """The bridge supply (excitation) drifting: every bridge output x (1 + g(t)),
+    g = gain_per_hour x hours + the steps (time s, relative step) that have happened by then."""
+
+    gain_per_hour: float = 0.0
+    steps: Sequence[Sequence[float]] = ()
+    name = 'excitation'
+
+    def outputs(self, outputs_mv, ctx):
+        t = ctx.times_s - ctx.times_s[0]
+        gain = self.gain_per_hour * t / 3600.0
+        for when, size in self.steps:
+            gain = gain + size * (t >= when)
+        return outputs_mv + gain[:, None] * ctx.outputs_mv
+
+
+@dataclass(frozen=True)
+class LoadSignBidirectional(Effect):
+    """Sensitivity different for positive and negative *load* on a component (not output):
+    V_k += b_k x rated output_k x |L_k| / capacity_k."""
+
+    asymmetry: Sequence[float] | float = 0.0
+    name = 'bidirectional'
+
+    def outputs(self, outputs_mv, ctx):
+        return outputs_mv + _vector(self.asymmetry) * ctx.rated_output_mv * np.abs(ctx.loads) / ctx.capacity
+
+
+# --- outside every family: what the diagnosis must call "unexplained" ------------------------
+@dataclass(frozen=True)
+class NeighbourDeadBand(Effect):
+    """A load on one component leaking into the next bridge only beyond a dead band:
+    V_target += a x rated_target x max(|L_source|/capacity - d, 0) / (1 - d)."""
+
+    fraction_of_rated: float = 0.0
+    source: int = 0
+    target: int = 1
+    dead_band: float = 0.4
+    name = 'neighbour_dead_band'
+
+    def outputs(self, outputs_mv, ctx):
+        x = np.abs(ctx.loads[:, self.source]) / ctx.capacity[self.source]
+        leak = np.clip(x - self.dead_band, 0.0, None) / (1.0 - self.dead_band)
+        out = outputs_mv.copy()
+        out[:, self.target] += self.fraction_of_rated * ctx.rated_output_mv[self.target] * leak
+        return out
+
+
+@dataclass(frozen=True)
+class GravityTimeNonlinearity(Effect):
+    """A bridge curvature that grows in time and flips with the gravity direction:
+    V_k += a x g_z x (t / campaign) x V_k |V_k| / rated_k (a mounting that settles under its own weight)."""
+
+    fraction_of_rated: Sequence[float] | float = 0.0
+    name = 'gravity_time'
+
+    def outputs(self, outputs_mv, ctx):
+        t = ctx.times_s - ctx.times_s[0]
+        span = max(float(t[-1]), 1e-9)
+        g = ctx.gravity[:, 2:3] + 0.5 * ctx.gravity[:, 1:2]
+        shape = ctx.outputs_mv * np.abs(ctx.outputs_mv) / ctx.rated_output_mv
+        return outputs_mv + _vector(self.fraction_of_rated) * g * (t / span)[:, None] * shape
+
+
 EFFECTS = {cls.name: cls for cls in (Temperature, ZeroDrift, Hysteresis, Bidirectional, CrossTerms, HeavierBody)}
+ALTERNATIVE_EFFECTS = {'play_hysteresis': PlayHysteresis, 'turning_hysteresis': TurningPointHysteresis,
+                       'temperature_shapes': TemperatureShapes, 'creep': Creep, 'supply_drift': SupplyDrift,
+                       'load_sign_bidirectional': LoadSignBidirectional,
+                       'neighbour_dead_band': NeighbourDeadBand, 'gravity_time': GravityTimeNonlinearity}
 
 
 def parse_effects(spec: str) -> list[Effect]:
@@ -146,7 +335,7 @@ def parse_effects(spec: str) -> list[Effect]:
      cross_terms:FX.FXV^2*FZV=40; bidirectional:asymmetry=1e-3|0|0|0|0|0; zero_drift:amplitude_mv=0.002,period_s=900"
     Values are numbers, or per-bridge lists separated by |. Raises ValueError naming the bad part.
     """
-    names = {'tare': HeavierBody, **EFFECTS}
+    names = {'tare': HeavierBody, **EFFECTS, **ALTERNATIVE_EFFECTS}
     effects: list[Effect] = []
     for part in (p.strip() for p in (spec or '').split(';')):
         if not part:
