@@ -1,58 +1,202 @@
-"""Residual plots in the style of TM-663 Figs. 4-9: residual (% FS, eqs. (38)-(43)) against point
-number, six panels per model, residuals beyond ±0.5 % drawn at ±0.5 % as the memo does."""
+"""Residual plots of a refit in the style of TM-663 Figs. 4-9, one figure per model.
+
+Every model (linear, quadratic, cubic and the adopted one) gets the same figure: six panels in
+three rows of two (forces left, moments right), residual (exp − th, % FS, eqs. (38)-(43)) against
+load point number on a fixed ±0.5 % FS axis as in the memo. Single-component loads, combined loads
+and zero points have their own marker and colour (the memo's point: the linear model fails at
+combined loads); points beyond ±0.5 % are drawn on the edge as open triangles and counted in the
+panel title. Each effect the diagnosis adopted gets a figure of its partial residual against the
+variable that explains it, at most two panels wide, axes in words and units.
+
+Figures use `matplotlib.figure.Figure` with the Agg canvas (no pyplot state), so plotting is safe
+inside a node's worker thread. 100 dpi: a figure is about 1000 px wide.
+"""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
 
-CLIP_PCT = 0.5
+from .report_sections import PLOT_RANGE_PCT_FS, combined_load_mask
+
+CLIP_PCT = PLOT_RANGE_PCT_FS
+DPI = 100
+_NICE = {'FX': 'F_X', 'FY': 'F_Y', 'FZ': 'F_Z', 'MX': 'M_X', 'MY': 'M_Y', 'MZ': 'M_Z'}
+_CATEGORIES = (  # key, legend, marker, colour
+    ('single', 'single-component load', 'o', 'tab:blue'),
+    ('combined', 'combined load', 's', 'tab:orange'),
+    ('zero', 'zero point (body only)', 'x', '0.45'),
+)
 
 
-def residual_panels(residuals_pct: np.ndarray, labels, components, title: str, path: Path,
-                    after_pct: np.ndarray | None = None) -> Path:
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
+def _nice(name: str) -> str:
+    return _NICE.get(name, name)
 
-    fig, axes = plt.subplots(3, 2, figsize=(11, 8.5), sharex=True)
-    for k, (ax, component) in enumerate(zip(axes.T.reshape(-1), components)):
-        series = [('before' if after_pct is not None else None, residuals_pct[:, k], 'tab:blue')]
-        if after_pct is not None:
-            series.append(('after', after_pct[:, k], 'tab:red'))
-        for name, values, colour in series:
-            clipped = np.clip(values, -CLIP_PCT, CLIP_PCT)
-            sigma = float(np.sqrt(np.mean(values ** 2)))
-            ax.plot(labels, clipped, '.', ms=3, color=colour,
-                    label=f'{name + ": " if name else ""}σ = {sigma:.3f} %')
-        ax.axhline(0.0, color='k', lw=0.5)
-        ax.set_ylim(-CLIP_PCT * 1.05, CLIP_PCT * 1.05)
-        ax.set_ylabel(f'Δ{component}/FS (%)')
-        ax.legend(loc='upper right', fontsize=7)
-    for ax in axes[-1]:
-        ax.set_xlabel('load point number')
-    fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+
+def _save(figure, path: Path) -> Path:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    FigureCanvasAgg(figure)
+    figure.savefig(path, dpi=DPI)
+    return Path(path)
+
+
+def residual_figure(residuals_pct: np.ndarray, labels, categories: np.ndarray, components, title: str,
+                    path: Path) -> Path:
+    """Six panels (3 rows x 2 columns) of residual % FS vs point number; returns path.
+
+    residuals_pct (N, n_components); categories (N,) of 'single', 'combined', 'zero'.
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+
+    labels = np.asarray(labels, dtype=float)
+    rows = int(np.ceil(len(components) / 2))
+    figure = Figure(figsize=(10.0, 2.75 * rows + 1.2))
+    for k, component in enumerate(components):
+        # forces in the left column, moments in the right, as the memo's figures pair them
+        column, row = divmod(k, rows)
+        axes = figure.add_subplot(rows, 2, 2 * row + column + 1)
+        values = residuals_pct[:, k]
+        sigma = float(np.sqrt(np.mean(values ** 2)))
+        beyond = int(np.sum(np.abs(values) > CLIP_PCT))
+        axes.axhline(0.0, color='0.6', linewidth=0.8)
+        for key, _, marker, colour in _CATEGORIES:
+            chosen = categories == key
+            inside = chosen & (np.abs(values) <= CLIP_PCT)
+            axes.plot(labels[inside], values[inside], linestyle='none', marker=marker, markersize=3.5,
+                      markerfacecolor=colour if marker != 'x' else None, markeredgewidth=0.8, color=colour)
+            for sign, edge_marker in ((1, '^'), (-1, 'v')):
+                out = chosen & (sign * values > CLIP_PCT)
+                if out.any():
+                    axes.plot(labels[out], np.full(out.sum(), sign * CLIP_PCT * 0.96), linestyle='none',
+                              marker=edge_marker, markersize=6, markerfacecolor='none', markeredgewidth=1.0,
+                              color=colour)
+        axes.set_ylim(-CLIP_PCT * 1.04, CLIP_PCT * 1.04)
+        axes.grid(True, linewidth=0.3)
+        clipped = f'; {beyond} beyond ±{CLIP_PCT:g} %' if beyond else ''
+        axes.set_title(f'{_nice(component)}: σ = {sigma:.3f} %, 2σ = {2 * sigma:.3f} %{clipped}', fontsize=10)
+        axes.set_ylabel(f'residual {_nice(component)} (% FS)', fontsize=9)
+        if row == rows - 1:
+            axes.set_xlabel('load point number', fontsize=9)
+        axes.tick_params(labelsize=8)
+    handles = [Line2D([], [], linestyle='none', marker=m, color=c, markerfacecolor=c if m != 'x' else None,
+                      label=name) for _, name, m, c in _CATEGORIES]
+    handles.append(Line2D([], [], linestyle='none', marker='^', markerfacecolor='none', color='k',
+                          label=f'beyond ±{CLIP_PCT:g} % FS, drawn on the edge'))
+    figure.legend(handles=handles, loc='upper center', ncol=4, fontsize=9, frameon=False,
+                  bbox_to_anchor=(0.5, 1.0 - 0.45 / figure.get_figheight()))
+    figure.suptitle(title, fontsize=12)
+    figure.tight_layout(rect=(0, 0, 1, 1.0 - 0.75 / figure.get_figheight()))
+    return _save(figure, path)
+
+
+def point_categories(points, config) -> np.ndarray:
+    """'single', 'combined' or 'zero' per load point (TM-663 Table 2 blocks when the config has them)."""
+    categories = np.full(len(points.label), 'single', dtype=object)
+    categories[combined_load_mask(points, config)] = 'combined'
+    categories[np.asarray(points.is_zero_point)] = 'zero'
+    return categories
+
+
+_FACTOR_WORDS = [
+    (re.compile(r'^dT$'), '(T − T_ref)', 'K'),
+    (re.compile(r'^dir_(\w+)$'), '{0} load direction, referred to the zero points (+1 rising, −1 falling)', ''),
+    (re.compile(r'^\|(\w+)V\|$'), '|{0} bridge output|', 'mV'),
+    (re.compile(r'^(\w+)V$'), '{0} bridge output', 'mV'),
+    (re.compile(r'^drift_(sin|cos)_(\d+)$'), 'zero-drift {0} basis, harmonic {1}', ''),
+]
+
+
+def describe_variable(name: str) -> tuple[str, str]:
+    """Words and unit for a diagnosis variable or term name ('dT*FXV' -> ('ΔT × F_X bridge output', 'K·mV'))."""
+    if name.startswith('time'):
+        return 'time since the first point', 'h'
+    if name.startswith('orientation'):
+        return 'calibration body orientation I_g', ''
+    words, units = [], []
+    for factor in name.split('*'):
+        base, _, power = factor.partition('^')
+        text, unit = base, ''
+        for pattern, template, factor_unit in _FACTOR_WORDS:
+            match = pattern.match(base)
+            if match:
+                text = template.format(*(_nice(g) for g in match.groups()))
+                unit = factor_unit
+                break
+        if power:
+            text = f'({text})^{power}' if ' ' in text else f'{text}^{power}'
+            unit = f'{unit}^{power}' if unit else ''
+        words.append(text)
+        if unit:
+            units.append(unit)
+    return ' × '.join(words), '·'.join(units)
+
+
+def effect_figure(balance: str, effect, residuals_after: np.ndarray, capacity, components, path: Path) -> Path:
+    """Partial residual (residual of the adopted model + this effect, % FS) against the variable
+    that explains it, with the fitted effect; at most two panels per row."""
+    from matplotlib.figure import Figure
+
+    chosen = list(effect.components)
+    columns = min(2, len(chosen))
+    rows = int(np.ceil(len(chosen) / columns))
+    figure = Figure(figsize=(max(6.5, 5.0 * columns), 3.6 * rows + 0.8))
+    figure.suptitle(f'{balance}: {effect.name} — residual with the effect put back', fontsize=11)
+    for i, component in enumerate(chosen):
+        k = list(components).index(component)
+        scale = 100.0 / float(capacity[k])
+        variable = effect.explaining_variable.get(component, '')
+        x = np.asarray(effect.explaining_values[component], dtype=float)
+        if variable.startswith('time'):
+            x = (x - np.nanmin(x)) / 3600.0
+        contribution = np.asarray(effect.contribution[component], dtype=float) * scale
+        partial = residuals_after[:, k] * scale + contribution
+        axes = figure.add_subplot(rows, columns, i + 1)
+        axes.plot(x, partial, linestyle='none', marker='o', markersize=3, color='tab:blue',
+                  label='residual + effect')
+        order = np.argsort(x, kind='stable')
+        axes.plot(x[order], contribution[order], linestyle='none', marker='.', markersize=4, color='tab:red',
+                  label='fitted effect')
+        words, unit = describe_variable(variable)
+        axes.set_xlabel(f'{words} ({unit})' if unit else words, fontsize=9)
+        axes.set_ylabel(f'residual {_nice(component)} (% FS)', fontsize=9)
+        axes.ticklabel_format(axis='x', useOffset=False, style='plain')
+        axes.set_title(f'{_nice(component)}: r = {effect.correlation[component]:.2f}, '
+                       f'removes {effect.removed_pct_fs[component]:.3f} % FS', fontsize=10)
+        axes.grid(True, linewidth=0.3)
+        axes.tick_params(labelsize=8)
+        if i == 0:
+            axes.legend(fontsize=8, loc='best')
+    figure.tight_layout(rect=(0, 0, 1, 1.0 - 0.5 / figure.get_figheight()))
+    return _save(figure, path)
 
 
 def residual_figures(result, directory: Path) -> list[Path]:
-    """One figure per model (linear, quadratic, cubic), and before/after for an adopted model."""
+    """One figure per model (linear, quadratic, cubic, and the adopted one when the diagnosis
+    adopted effects), then one per effect."""
     config = result.config
     labels = result.points.label
-    capacity = np.asarray(config.capacity)
+    capacity = np.asarray(config.capacity, dtype=float)
+    categories = point_categories(result.points, config)
     figures = []
     for order, model_fit in result.fits.items():
         pct = model_fit.fit.residuals / capacity * 100.0
-        figures.append(residual_panels(pct, labels, config.components,
-                                       f'{config.name}: {order} model residuals (cf. TM-663 Figs. 4-9)',
+        figures.append(residual_figure(pct, labels, categories, config.components,
+                                       f'{config.name}: residuals of the {order} model (cf. TM-663 Figs. 4-9)',
                                        directory / f'residuals_{order}.png'))
-    if result.diagnosis is not None and result.diagnosis.effects:
-        from ..diagnosis.plots import plot_effect, plot_residuals
-        diagnosis = result.diagnosis        # 'before' is the base model's figure above
-        figures.append(plot_residuals(diagnosis, directory / 'residuals_adopted.png', which='after'))
-        figures.extend(plot_effect(diagnosis, effect, directory / f'effect_{effect.name}.png')
+    diagnosis = result.diagnosis
+    if diagnosis is not None and diagnosis.effects:
+        adopted_labels = np.asarray(diagnosis.point_labels)
+        adopted_categories = categories
+        if not np.array_equal(adopted_labels, np.asarray(labels)):
+            lookup = dict(zip(np.asarray(labels).tolist(), categories))
+            adopted_categories = np.array([lookup.get(label, 'single') for label in adopted_labels.tolist()], object)
+        pct = diagnosis.residuals_after / capacity * 100.0
+        figures.append(residual_figure(pct, adopted_labels, adopted_categories, config.components,
+                                       f'{config.name}: residuals of the adopted model {diagnosis.adopted.name}',
+                                       directory / 'residuals_adopted.png'))
+        figures.extend(effect_figure(config.name, effect, diagnosis.residuals_after, capacity, config.components,
+                                     directory / f'effect_{effect.name}.png')
                        for effect in diagnosis.effects)
     return figures

@@ -102,21 +102,27 @@ def build_report(config, points, reduction, fits, base_model, diagnosis, cut, so
         'sources': list(sources),
         'fitted_at': now_iso(),
     }
+    from .report_sections import calibration_record
+    report['record'] = calibration_record(config, points, reduction, fits, diagnosis, body)
     if cut is not None:
         report['samples'] = {'used': cut.samples_used, 'rejected_outliers': cut.samples_rejected_outliers,
                              'rejected_nan': cut.samples_rejected_nan, 'empty_points': cut.empty_points}
     return report
 
 
-def report_markdown(report: Mapping, result=None) -> str:
+def report_markdown(report: Mapping, result=None, units: str = 'si') -> str:
+    """report.md; `units` 'lbf' or 'kgf' adds the loads in those lab units (SI stays the record)."""
+    from .report_sections import (coefficient_quality_markdown, lab_units_markdown, record_markdown,
+                                  residual_markdown)
     components = list(report['sigma_pct_fs']['before'])
     lines = [f'# Calibration report: {report["balance"]}', '',
              f'{report["points"]} load points; base model **{report["base_model"]}** (TM-663 §2); '
              f'adopted model **{report.get("adopted_model", report["base_model"])}**.', '',
              f'Calibration body: {report["calibration_body"]["weight_N"]:.2f} N, CG {report["calibration_body"]["cg_x_m"]:.4f} m '
              f'forward ({report["calibration_body"]["source"]}; declared '
-             f'{report["calibration_body_detail"]["declared_weight_N"]:.2f} N).', '',
-             '## σ in % of full scale (Table 17 style, eqs. (44)-(49))', '', '```']
+             f'{report["calibration_body_detail"]["declared_weight_N"]:.2f} N).', '']
+    lines += record_markdown(report)
+    lines += ['## σ in % of full scale (Table 17 style, eqs. (44)-(49))', '', '```']
     rows = {}
     memo = report.get('table17_memo', {})
     for order, values in report.get('models', {}).items():
@@ -128,7 +134,9 @@ def report_markdown(report: Mapping, result=None) -> str:
     rows['after (adopted)'] = report['sigma_pct_fs']['after']
     rows['before, cross-validated'] = report['sigma_pct_fs_crossval']['before']
     rows['after, cross-validated'] = report['sigma_pct_fs_crossval']['after']
-    lines += [format_sigma_table(rows, components), '```', '', '## Effects found in the residuals', '']
+    lines += [format_sigma_table(rows, components), '```', '']
+    lines += residual_markdown(report) + lab_units_markdown(report, units)
+    lines += ['## Effects found in the residuals', '']
     if not report['effects']:
         lines.append('None: the residuals of the base model show nothing it lacks (nothing adopted).')
     for i, effect in enumerate(report['effects'], 1):
@@ -139,6 +147,7 @@ def report_markdown(report: Mapping, result=None) -> str:
         lines += ['', '## Residual plots', ''] + [f'![{p}]({p})' for p in report['plots']]
     if result is not None:
         lines += ['', '## Coefficients (layout of Tables 10-16; N or N·m per mV^k)', '']
+        lines += coefficient_quality_markdown(report, result)
         for order, fit in result.fits.items():
             lines += [f'### {order}', '', '```', format_coefficient_tables(fit.fit.model), '```', '']
         adopted = result.calibration.model()
