@@ -20,9 +20,19 @@ class CommandError(Exception):
     """Bad input: printed as one line on stderr, exit status 2."""
 
 
+DESCRIPTION = ('Calibrate six-component wind-tunnel strain-gauge balances after NAL TM-663 '
+               '(linear, quadratic and cubic models, calibration-body tare, zero points, σ in % of full '
+               'scale) and the one-axis thrust stand. Loads are N and N·m, bridge outputs mV.')
+EPILOG = ('Run "balance-calib COMMAND --help" for the options of one command. Exit status 0 on success; '
+          'on bad input one line on stderr saying what is wrong with which file, and status 2. '
+          'The ROS 2 nodes (bridge_publisher, balance_calibrator, balance_recorder, thrust_analyzer) '
+          'are separate executables; see launchless_scripts/ and the README.')
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog='balance-calib', description=__doc__.split('\n')[0])
-    subparsers = parser.add_subparsers(dest='command', required=True)
+    parser = argparse.ArgumentParser(prog='balance-calib', description=DESCRIPTION, epilog=EPILOG)
+    subparsers = parser.add_subparsers(dest='command', required=True, metavar='COMMAND',
+                                       title='commands')
     for module_name in COMMAND_MODULES:
         try:
             module = importlib.import_module(module_name)

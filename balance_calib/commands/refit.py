@@ -18,6 +18,9 @@ def register(subparsers) -> None:
     parser.add_argument('--no-diagnosis', action='store_true', help='do not look for effects the model lacks')
     parser.add_argument('--declared-body', action='store_true',
                         help='use the declared calibration body instead of estimating it from zero points')
+    parser.add_argument('--report-units', default='si', choices=['si', 'lbf', 'kgf'],
+                        help='also show loads in report.md in these lab units: lbf and in-lbf, or kgf and '
+                             'kgf·m (default si: N and N·m only; the calibration itself is always SI)')
     parser.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                         help='progress lines on stderr (default: when stderr is a terminal)')
     parser.set_defaults(func=run)
@@ -37,6 +40,9 @@ def run(args) -> int:
                            progress=progress)
     except RefitError as err:
         raise CommandError(str(err)) from None
+    if args.report_units != 'si':
+        from ..refit.report_sections import add_lab_units_to_report
+        add_lab_units_to_report(result.out_dir / 'report.md', result.report, args.report_units)
     print(result.summary)
     print(f'report: {result.out_dir / "report.md"}')
     return 0

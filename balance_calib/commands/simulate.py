@@ -10,13 +10,21 @@ import numpy as np
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser('simulate', help='simulate a calibration campaign and fit it',
-                                   description=__doc__)
+                                   description='Simulate a full calibration campaign of a balance (the memo\'s '
+                                               'cubic matrix as the truth, its Appendix A/B load schedule, noise '
+                                               'like Table 17\'s cubic row), fit the linear, quadratic and cubic '
+                                               'models and print Table 17 with the memo\'s numbers beside ours; '
+                                               'optionally the fitted cubic matrix in the layout of Tables 12/16 '
+                                               'and the campaign as a calibration bag.')
     parser.add_argument('--balance', action='append', help='lmc6522, b660h or a config path (repeatable; default both)')
-    parser.add_argument('--seed', type=int, default=1)
+    parser.add_argument('--seed', type=int, default=1,
+                        help='random seed of the simulated noise (default 1; the same seed gives the same numbers)')
     parser.add_argument('--effects', default='', help='effects the base model lacks, e.g. "temperature:sensitivity_per_k=2e-4"')
     parser.add_argument('--bag', help='also write the campaign as a calibration bag (directory, must not exist)')
-    parser.add_argument('--samples-per-point', type=int, default=1)
-    parser.add_argument('--no-diagnosis', action='store_true')
+    parser.add_argument('--samples-per-point', type=int, default=1,
+                        help='bridge samples averaged per load point (default 1: one noisy reading per point)')
+    parser.add_argument('--no-diagnosis', action='store_true',
+                        help='do not examine the residuals for effects the base model lacks')
     parser.add_argument('--matrix', action='store_true', help='print the fitted cubic matrix (memo layout)')
     parser.set_defaults(func=run)
 

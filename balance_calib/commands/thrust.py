@@ -33,7 +33,8 @@ def register(subparsers) -> None:
         'line-fit', help='least-squares line y = a x + b with σ_a (manual eqs. 25-27) as JSON',
         description='Fit y = a x + b to a CSV with columns x,y and optional sx,sy (per-point σ). '
                     'Without sx, sy the σ come from the scatter about the line.')
-    line.add_argument('csv_file', metavar='FILE.csv')
+    line.add_argument('csv_file', metavar='FILE.csv',
+                      help='points in the order they were taken: columns x,y; optional sx,sy and direction')
     line.set_defaults(func=run_line_fit)
 
 

@@ -276,3 +276,19 @@ def lab_units_markdown(report: Mapping, system: str) -> list[str]:
     if 'weight_N' in body:
         lines += ['', f'Calibration body weight: {loads_to_display([body["weight_N"]], ["FZ"], system)[0]:.4g} {force}.']
     return lines + ['']
+
+
+def add_lab_units_to_report(markdown_path, report: Mapping, system: str) -> None:
+    """Insert the lab-units section into a written report.md (before the effects), atomically."""
+    from pathlib import Path
+    path = Path(markdown_path)
+    section = lab_units_markdown(report, system)
+    if not section:
+        return
+    text = path.read_text()
+    anchor = '## Effects found in the residuals'
+    block = '\n'.join(section) + '\n'
+    text = text.replace(anchor, block + anchor, 1) if anchor in text else text + '\n' + block
+    staging = path.with_name(f'.{path.name}.tmp')
+    staging.write_text(text)
+    staging.replace(path)
