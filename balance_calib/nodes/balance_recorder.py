@@ -131,6 +131,8 @@ class BalanceRecorder(Node):
 
 
 def main(args=None):
+    from ._help import exit_if_help
+    exit_if_help(__name__, args)     # --help: print the parameters and exit before rclpy starts
     # rclpy's own handlers for SIGINT and SIGTERM (ALL) shut the context down, so spin() returns
     # or raises ExternalShutdownException and the bag is closed in destroy_node() either way.
     # With SIGINT's default action in place, rclpy's handler does not chain to Python's, so

@@ -251,6 +251,8 @@ class ThrustAnalyzer(Node):
 
 
 def main(args=None):
+    from ._help import exit_if_help
+    exit_if_help(__name__, args)     # --help: print the parameters and exit before rclpy starts
     # SIGINT and SIGTERM both shut the context down; the report is written in destroy_node().
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
     analyzer = None
