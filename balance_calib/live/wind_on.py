@@ -12,6 +12,11 @@ Tunnel-axis components here: F_X axial force, F_Y side force, F_Z normal force, 
 M_Y pitching, M_Z yawing moment, N and N·m, turned into balance axes by the installation
 (TM-663 §10.2). The model weight is a constant load (-W on tunnel F_Z) present wind-off and
 wind-on alike, which the calibrator's tare removes; its change with α is deliberately not modelled.
+
+`aero_run_profile` is the physical run of TM-663 §10.3 for the data reduction (aero/): a model
+file's reference lengths and moment reference centre, a dynamic pressure, the model's weight acting
+at its centre of gravity at each attitude, and the sting's deflection under the total load, so the
+balance feels what a real one does; a wind-off α/φ sweep first, the wind-on α sweep, wind-off again.
 """
 from __future__ import annotations
 
@@ -21,6 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..aero.axes import wind_coefficients
+from ..aero.coefficients import air_loads_from_coefficients
+from ..aero.deflection import iterate_attitude
+from ..aero.model_file import ModelDescription
+from ..aero.weight_tare import weight_loads
 from ..model.balance_model import BalanceModel
 from ..model.inverse import outputs_for_loads
 from ..tunnel_axes import Installation
@@ -90,6 +100,74 @@ def aoa_sweep_profile(capacity, installation: Installation, rate_hz: float, *,
     labels = ('wind off',) + tuple(f'alpha={a:+.1f} deg' for a in alphas)
     return WindOnProfile(times, condition, labels, aero_tunnel,
                          installation.from_tunnel(aero_tunnel + weight_tunnel))
+
+
+@dataclass(frozen=True)
+class AeroRunProfile:
+    """Per-sample state of a simulated tunnel run (aero_run_profile)."""
+
+    times_s: np.ndarray            # (S,)
+    condition: np.ndarray          # (S,) hold index
+    label: tuple[str, ...]         # per hold
+    support_attitude: np.ndarray   # (S, 3) (φ, α, β) rad as the support reports it (/model/attitude)
+    q_pa: np.ndarray               # (S,) /tunnel/dynamic_pressure
+    attitude: np.ndarray           # (S, 3) the model's true attitude: support + deflection
+    body_coefficients: np.ndarray  # (S, 6) true C_AF, C_Y, C_N, C_l, C_m, C_n about the MRC (NaN wind-off)
+    wind_coefficients: np.ndarray  # (S, 6) true C_D, C_Y,w, C_L, C_l,s, C_m,s, C_n,s (NaN wind-off)
+    aero_tunnel: np.ndarray        # (S, 6) air loads about the balance centre, tunnel axes of §10.2
+    loads_tunnel: np.ndarray       # (S, 6) everything the balance carries (air + weight), tunnel axes
+    loads_balance: np.ndarray      # (S, 6) the same in balance calibration axes
+
+
+DEFAULT_WIND_OFF_ATTITUDES_DEG = tuple((roll, alpha) for roll in (0.0, 90.0, 180.0, 270.0)
+                                       for alpha in (-2.0, 10.0, 22.0))
+
+
+def aero_run_profile(model: ModelDescription, installation: Installation, rate_hz: float, *, q_pa: float,
+                     weight_n: float, cg_m, alphas_deg=tuple(range(-2, 23, 2)), hold_s: float = 0.5,
+                     wind_off_attitudes_deg=DEFAULT_WIND_OFF_ATTITUDES_DEG, wind_off_hold_s: float = 0.3,
+                     aero: AeroModel = AeroModel()) -> AeroRunProfile:
+    """A tunnel run: wind-off holds at (φ, α) pairs (degrees), the wind-on α sweep at q_pa (φ = β = 0),
+    then one wind-off hold at α = 0 (the tunnel shut down). Each hold sampled at rate_hz.
+
+    The model's true attitude solves attitude = support + deflection(air + weight loads at that
+    attitude) (aero/deflection.py); the air loads are the AeroModel's coefficients at the true α
+    (about the model file's moment reference centre), the weight is weight_n at cg_m.
+    """
+    if rate_hz <= 0 or hold_s <= 0 or wind_off_hold_s <= 0:
+        raise ValueError('rate_hz, hold_s and wind_off_hold_s must be positive')
+    if not q_pa > 0 or not weight_n >= 0:
+        raise ValueError(f'dynamic pressure must be positive and weight not negative (q {q_pa} Pa, W {weight_n} N)')
+    off = np.radians(np.asarray(wind_off_attitudes_deg, float).reshape(-1, 2))
+    alphas = np.radians(np.asarray(alphas_deg, float))
+    support_holds = np.vstack([np.column_stack([off[:, 0], off[:, 1], np.zeros(len(off))]),
+                               np.column_stack([np.zeros(len(alphas)), alphas, np.zeros(len(alphas))]),
+                               np.zeros((1, 3))])
+    q_holds = np.concatenate([np.zeros(len(off)), np.full(len(alphas), float(q_pa)), [0.0]])
+    counts = np.concatenate([np.full(len(off), max(1, round(wind_off_hold_s * rate_hz))),
+                             np.full(len(alphas), max(1, round(hold_s * rate_hz))), [max(1, round(wind_off_hold_s * rate_hz))]])
+    labels = tuple(f'wind off, roll={np.degrees(r):+.0f} deg, alpha={np.degrees(a):+.1f} deg' for r, a in off) \
+        + tuple(f'alpha={np.degrees(a):+.1f} deg' for a in alphas) + ('wind off, alpha=+0.0 deg',)
+
+    def body_at(attitude):
+        body = aero.coefficients(np.degrees(attitude[:, 1]))
+        return np.where(q_holds[:, None] > 0, body, 0.0)
+
+    def total_at(attitude):
+        return air_loads_from_coefficients(body_at(attitude), q_holds, model) + weight_loads(attitude, weight_n, cg_m)
+
+    attitude = iterate_attitude(support_holds, model.deflection, total_at)
+    body = body_at(attitude)
+    aero_loads = air_loads_from_coefficients(body, q_holds, model)
+    total = aero_loads + weight_loads(attitude, weight_n, cg_m)
+    wind = wind_coefficients(body, attitude[:, 1], attitude[:, 2])
+    body[q_holds <= 0] = np.nan
+    wind[q_holds <= 0] = np.nan
+    condition = np.repeat(np.arange(len(q_holds)), counts)
+    times = (np.arange(len(condition)) + 0.5) / rate_hz
+    return AeroRunProfile(times, condition, labels, support_holds[condition], q_holds[condition], attitude[condition],
+                          body[condition], wind[condition], aero_loads[condition], total[condition],
+                          installation.from_tunnel(total[condition]))
 
 
 def csv_profile(path: str | Path, installation: Installation, rate_hz: float) -> WindOnProfile:
