@@ -187,7 +187,7 @@ def test_truncated_mcap_names_the_file(tmp_path, bare):
     content = mcap_path.read_bytes()
     mcap_path.write_bytes(content[:len(content) // 2])
     target = mcap_path if bare else bag
-    with pytest.raises(BagError, match=f'{target}: cannot open bag, the file is truncated'):
+    with pytest.raises(BagError, match=f'{mcap_path}: truncated or damaged: no valid footer'):
         read_bags(target)
 
 
@@ -197,7 +197,7 @@ def test_wrong_message_type_names_file_topic_and_types(tmp_path):
     bag = write_bag(tmp_path / 'bag', [('/balance/raw', 1, array)])
     with pytest.raises(BagError) as error:
         read_bags(bag)
-    assert str(error.value) == (f'{bag}: topic /balance/raw has type '
+    assert str(error.value) == (f'{bag / "bag_0.mcap"}: topic /balance/raw has type '
                                 f'std_msgs/msg/Float64MultiArray, expected {WRENCH}')
 
 
@@ -214,7 +214,7 @@ def test_corrupt_payload_names_file_and_topic(tmp_path):
     with BagWriter(bag) as writer:
         writer.add_topic('/balance/raw', WRENCH)
         writer.write('/balance/raw', 1, cdr(wrench(1, [0] * 6))[:30])
-    with pytest.raises(BagError, match=f'{bag}: topic /balance/raw: message 0 is shorter'):
+    with pytest.raises(BagError, match=f'{bag / "bag_0.mcap"}: topic /balance/raw: message 0 is shorter'):
         read_bags(bag)
 
 
@@ -225,5 +225,5 @@ def test_damaged_chunk_names_the_file(tmp_path):
     content = bytearray(mcap_path.read_bytes())
     content[1000:1100] = bytes(b ^ 0x55 for b in content[1000:1100])
     mcap_path.write_bytes(bytes(content))
-    with pytest.raises(BagError, match=f'{bag}: cannot read messages, the file is corrupt'):
+    with pytest.raises(BagError, match=f'{mcap_path}: damaged data at byte offset \\d+: '):
         read_bags(bag)

@@ -13,22 +13,24 @@ docs/interfaces.md come back as arrays:
 
 The messages of these four types are decoded straight from their CDR bytes, all at once with
 numpy (a header and a row of float64, see _decode_header_and_doubles); any other topic asked for
-comes back as deserialized messages (rosbags). Iterating the MCAP files is rosbags' (faster than
-the mcap package's reader here); the one Python loop left is the per-message append.
+comes back as deserialized messages (rosbags). The MCAP files are walked record by record and
+checked against their own summary and index (bags/mcap_scan.py); the one Python loop left is the
+per-message append.
 """
 from __future__ import annotations
 
 import os
+import stat
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Callable, Collection, Iterable, Mapping, Sequence
 
 import numpy as np
-from rosbags.interfaces import MessageDefinitionFormat
-from rosbags.rosbag2 import Reader, ReaderError
+import yaml
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
 from balance_calib.bags.errors import BagError
+from balance_calib.bags.mcap_scan import check_regular_file, McapDamage, Scan, scan_mcap
 
 ProgressCallback = Callable[[int, int], None]
 BagPath = str | os.PathLike
@@ -117,11 +119,13 @@ class BagData:
     gravity: GravitySeries
     temperature: StampedSeries
     extra: Mapping[str, TopicMessages] = field(default_factory=dict)
+    losses: tuple[str, ...] = ()              # with salvage: what could not be read, one line each
+    message_counts: Mapping[str, int] = field(default_factory=dict)   # read per topic (wanted ones)
 
 
 def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicNames(),
               required: Collection[str] = ('raw',), extra_topics: Iterable[str] = (),
-              progress: ProgressCallback | None = None) -> BagData:
+              progress: ProgressCallback | None = None, salvage: bool = False) -> BagData:
     """Read one or more bags (rosbag2 directories or bare .mcap files) of one campaign.
 
     required names TopicNames fields ('raw', 'applied_load', 'gravity', 'temperature') that must
@@ -129,9 +133,14 @@ def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicN
     extra_topics are returned in BagData.extra, deserialized. progress(done, total) is called
     every few thousand messages and at the end.
 
-    Raises BagError naming the file (and topic) for: a missing path, a path that is not a bag, a
-    truncated or corrupt file, a topic of the wrong message type, a required topic without
-    messages.
+    Every file is checked against its own summary and index (bags/mcap_scan.py): a damaged or
+    missing chunk, a CRC failure, fewer messages than the summary counts, or a gap in a topic's
+    sequence numbers is a BagError naming the file and the byte offset. With salvage, what is
+    intact is read and BagData.losses says, one line each, what was lost.
+
+    Raises BagError naming the file (and topic) for: a missing path, a path that is not a bag (a
+    FIFO or device is refused before it is opened), a truncated or corrupt file, a topic of the
+    wrong message type, a required topic without messages.
     """
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
@@ -146,48 +155,41 @@ def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicN
     by_topic = {getattr(topics, name): name for name in _LAYOUTS}
     wanted = set(by_topic) | set(extra_topics)
 
-    readers: list[Reader] = []
-    try:
-        for source in sources:
-            readers.append(_open(source))
-            _check_types(source, readers[-1], topics)
-        recorded_topics = sorted({c.topic for r in readers for c in r.connections})
-        counts = {t: sum(c.msgcount for r in readers for c in r.connections if c.topic == t)
-                  for t in wanted}
-        for name in required:  # fail before reading a long campaign for nothing
-            if counts[getattr(topics, name)] == 0:
-                raise BagError(_no_messages(sources, getattr(topics, name), recorded_topics))
-        total = sum(counts.values())
-        # topic -> one (receive times, CDR payloads, source) per bag
-        collected: dict[str, list[tuple[list[int], list[bytes], Path]]] = {t: [] for t in wanted}
-        msgtypes: dict[str, str] = {}
-        done = 0
-        for source, reader in zip(sources, readers):
-            connections = [c for c in reader.connections if c.topic in wanted]
-            per_topic: dict[str, tuple[list[int], list[bytes]]] = {
-                c.topic: ([], []) for c in connections}
-            for connection in connections:
-                msgtypes.setdefault(connection.topic, connection.msgtype)
+    files = [(source, _mcap_files(source)) for source in sources]
+    scans: list[tuple[Path, Scan]] = []
+    losses: list[str] = []
+    for source, mcap_files in files:
+        for mcap_file in mcap_files:
             try:
-                for connection, timestamp, data in reader.messages(connections):
-                    times, payloads = per_topic[connection.topic]
-                    times.append(timestamp)
-                    payloads.append(data)
-                    done += 1
-                    if progress is not None and done % _PROGRESS_EVERY == 0:
-                        progress(done, total)
-            except Exception as error:  # a damaged chunk fails in the decompressor or parser
-                raise BagError(f'{source}: cannot read messages, the file is corrupt '
-                               f'({type(error).__name__}: {error})') from None
-            for topic, (times, payloads) in per_topic.items():
-                collected[topic].append((times, payloads, source))
-        if progress is not None:
-            progress(done, total)
-        typestore = _typestore_for([c for r in readers for c in r.connections
-                                    if c.topic in extra_topics])
-    finally:
-        for reader in readers:
-            reader.close()
+                scan = scan_mcap(mcap_file, wanted, salvage=salvage)
+            except McapDamage as error:
+                raise BagError(str(error)) from None
+            _check_types(mcap_file, scan, topics)
+            losses += scan.losses + _sequence_gaps(mcap_file, scan, salvage)
+            scans.append((mcap_file, scan))
+    recorded_topics = sorted({c.topic for _, scan in scans for c in scan.channels.values()})
+    counts = {t: sum(scan.counts.get(t, 0) for _, scan in scans) for t in wanted}
+    for name in required:
+        if counts[getattr(topics, name)] == 0:
+            raise BagError(_no_messages(sources, getattr(topics, name), recorded_topics))
+    total = sum(counts.values())
+    # topic -> one (receive times, CDR payloads, source) per file
+    collected: dict[str, list[tuple[list[int], list[bytes], Path]]] = {t: [] for t in wanted}
+    msgtypes: dict[str, str] = {}
+    done = 0
+    for mcap_file, scan in scans:
+        for channel in scan.channels.values():
+            if channel.topic in wanted:
+                msgtypes.setdefault(channel.topic, channel.schema_name)
+        for topic, (times, payloads) in scan.messages.items():
+            collected[topic].append((times, payloads, mcap_file))
+            done += len(times)
+            if progress is not None:
+                progress(min(done, total), total)
+    if progress is not None:
+        progress(done, total)
+    typestore = _typestore_for([c for _, scan in scans for c in scan.channels.values()
+                                if c.topic in extra_topics])
 
     series = {}
     for topic, name in by_topic.items():
@@ -214,37 +216,89 @@ def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicN
             raise BagError(f'{files}: cannot decode {topic} messages as {msgtype} '
                            f'({error})') from None
         extra[topic] = TopicMessages(msgtype, _frozen(times[order]), messages)
-    return BagData(sources=sources, topics=topics, extra=extra, **series)
+    return BagData(sources=sources, topics=topics, extra=extra, losses=tuple(losses),
+                   message_counts={t: n for t, n in counts.items() if n}, **series)
 
 
 # -- opening and checking -------------------------------------------------------------------------
 
-def _open(source: Path) -> Reader:
-    if not source.exists():
+_METADATA_MAX_BYTES = 16 * 1024 * 1024
+
+
+def _mcap_files(source: Path) -> list[Path]:
+    """The MCAP files of a bag: a bare .mcap, or those metadata.yaml lists in a rosbag2 directory."""
+    if not source.exists() and not source.is_symlink():
         raise BagError(f'{source}: no such file or directory')
-    if source.is_dir():
-        if not (source / 'metadata.yaml').is_file():
+    try:
+        mode = source.stat().st_mode
+    except OSError as error:
+        raise BagError(f'{source}: cannot read ({error.strerror})') from None
+    if stat.S_ISDIR(mode):
+        metadata = source / 'metadata.yaml'
+        if not metadata.exists():
             inside = sorted(p.name for p in source.glob('*.mcap'))
             hint = (f'; pass its .mcap files ({", ".join(inside)}) instead' if inside else '')
             raise BagError(f'{source}: not a rosbag2 bag (no metadata.yaml){hint}')
-    elif source.suffix != '.mcap':
+        try:
+            check_regular_file(metadata)
+        except McapDamage as error:
+            raise BagError(str(error)) from None
+        if metadata.stat().st_size > _METADATA_MAX_BYTES:
+            raise BagError(f'{metadata}: {metadata.stat().st_size} bytes, too large for bag metadata')
+        try:
+            info = yaml.safe_load(metadata.read_text(encoding='utf-8'))['rosbag2_bagfile_information']
+            storage = info.get('storage_identifier', 'mcap')
+            names = [str(p) for p in (info.get('relative_file_paths') or [])]
+        except (yaml.YAMLError, UnicodeDecodeError, KeyError, TypeError, AttributeError, OSError) as error:
+            raise BagError(f'{metadata}: not rosbag2 metadata ({type(error).__name__}: '
+                           f'{str(error).splitlines()[0] if str(error) else ""})') from None
+        if storage != 'mcap':
+            raise BagError(f'{metadata}: storage {storage!r}; only MCAP bags are read')
+        if not names:
+            names = sorted(p.name for p in source.glob('*.mcap'))
+        if not names:
+            raise BagError(f'{source}: its metadata.yaml lists no files')
+        files = [source / name for name in names]
+        for path in files:
+            if not path.exists():
+                raise BagError(f'{path}: listed in {metadata} but missing')
+        return files
+    if source.suffix != '.mcap':
         raise BagError(f'{source}: not a bag (expected a rosbag2 directory or an .mcap file)')
-    try:
-        reader = Reader(source)
-        reader.open()
-    except (ReaderError, OSError, ValueError, KeyError, EOFError) as error:
-        raise BagError(f'{source}: cannot open bag, the file is truncated or corrupt '
-                       f'({error})') from None
-    return reader
+    return [source]
 
 
-def _check_types(source: Path, reader: Reader, topics: TopicNames) -> None:
+def _check_types(source: Path, scan: Scan, topics: TopicNames) -> None:
     for name, (msgtype, _, _) in _LAYOUTS.items():
         topic = getattr(topics, name)
-        for connection in reader.connections:
-            if connection.topic == topic and connection.msgtype != msgtype:
-                raise BagError(f'{source}: topic {topic} has type {connection.msgtype}, '
+        for channel in scan.channels.values():
+            if channel.topic == topic and channel.schema_name != msgtype:
+                raise BagError(f'{source}: topic {topic} has type {channel.schema_name}, '
                                f'expected {msgtype}')
+
+
+def _sequence_gaps(source: Path, scan: Scan, salvage: bool) -> list[str]:
+    """Messages missing from a topic whose writer numbers them consecutively (rosbag2, ours)."""
+    lost = []
+    for topic, sequence in scan.sequences.items():
+        numbers = np.asarray(sequence, dtype=np.int64)
+        if len(numbers) < 3:
+            continue
+        steps = np.diff(numbers)
+        if np.count_nonzero(steps == 1) < 0.9 * len(steps):
+            continue  # not a per-topic counter (all zero, or the publisher's own numbering)
+        gaps = np.flatnonzero(steps > 1)
+        if not len(gaps):
+            continue
+        missing = int(np.sum(steps[gaps] - 1))
+        first = int(gaps[0])
+        problem = (f'{source}: {topic}: {missing} message(s) missing (sequence jumps from '
+                   f'{int(numbers[first])} to {int(numbers[first + 1])} at log time '
+                   f'{scan.messages[topic][0][first + 1]} ns; {len(gaps)} gap(s))')
+        if not salvage:
+            raise BagError(problem + ' (--salvage reads what is intact)')
+        lost.append(problem)
+    return lost
 
 
 def _no_messages(sources: Sequence[Path], topic: str, recorded: Sequence[str]) -> str:
@@ -257,10 +311,12 @@ def _typestore_for(connections):
     """A typestore knowing Jazzy's types plus the definitions stored in the bags."""
     typestore = get_typestore(Stores.ROS2_JAZZY)
     types = {}
-    for connection in connections:
-        if (connection.msgtype not in typestore.fielddefs
-                and connection.msgdef.format == MessageDefinitionFormat.MSG):
-            types.update(get_types_from_msg(connection.msgdef.data, connection.msgtype))
+    for channel in connections:
+        if channel.schema_name not in typestore.fielddefs and channel.schema_encoding == 'ros2msg':
+            try:
+                types.update(get_types_from_msg(channel.schema_data.decode('utf-8'), channel.schema_name))
+            except Exception:  # a definition rosbags cannot parse: decoding fails by name below
+                pass
     if types:
         typestore.register(types)
     return typestore

@@ -21,6 +21,12 @@ def register(subparsers) -> None:
     parser.add_argument('--report-units', default='si', choices=['si', 'lbf', 'kgf'],
                         help='also show loads in report.md in these lab units: lbf and in-lbf, or kgf and '
                              'kgf·m (default si: N and N·m only; the calibration itself is always SI)')
+    parser.add_argument('--force', action='store_true',
+                        help='write the calibration even if an acceptance gate fails (marked in the report)')
+    parser.add_argument('--salvage', action='store_true',
+                        help='read what is intact of damaged bags; the report says exactly what was lost')
+    parser.add_argument('--active', metavar='CAL.yaml', default=None,
+                        help='the calibration in use: the new sensitivities must stay near its ones')
     parser.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                         help='progress lines on stderr (default: when stderr is a terminal)')
     parser.set_defaults(func=run)
@@ -37,12 +43,24 @@ def run(args) -> int:
     try:
         result = run_refit(args.bags, args.balance, Path(args.out), model=args.model,
                            diagnose=not args.no_diagnosis, estimate_body=not args.declared_body,
-                           progress=progress)
+                           progress=progress, force=args.force, salvage=args.salvage,
+                           active_calibration=args.active)
     except RefitError as err:
-        raise CommandError(str(err)) from None
+        raise CommandError(_one_line(str(err))) from None
+    except OSError as err:  # the disk filled, a file vanished: still one line naming it
+        raise CommandError(_one_line(f'{err.filename or args.out}: {err.strerror or err}')) from None
+    acceptance = result.report.get('acceptance', {})
+    if acceptance.get('forced'):
+        failed = [g['name'] for g in acceptance['gates'] if not g['passed']]
+        print(f'balance-calib refit: written with --force although gate(s) failed: {", ".join(failed)}',
+              file=sys.stderr)
     if args.report_units != 'si':
         from ..refit.report_sections import add_lab_units_to_report
         add_lab_units_to_report(result.out_dir / 'report.md', result.report, args.report_units)
     print(result.summary)
     print(f'report: {result.out_dir / "report.md"}')
     return 0
+
+
+def _one_line(text: str) -> str:
+    return ' '.join(text.split())

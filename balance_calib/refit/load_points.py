@@ -4,6 +4,13 @@ interfaces.md: a load point's samples are the /balance/raw messages stamped from
 message up to the next applied_load message; an all-NaN applied_load means "between points" and
 the samples after it belong to no point. Gravity is the last /calibration/gravity before the
 point. Each point is averaged per bridge after rejecting outliers (median ± k·MAD).
+
+Everything is cut by the data's structure, never by arrays spanning wall time: markers are taken
+in stamp order (a marker whose stamp goes back against the recorder's order is counted for the
+acceptance gates), the last point ends one typical point period after its marker (a sample after a
+clock jump joins no point), and pauses between sessions (a lunch break, a night) are shortened on
+the points' time axis to one typical point spacing, so a campaign split over days refits like the
+unsplit one and nothing downstream grows with the length of a pause.
 """
 from __future__ import annotations
 
@@ -26,6 +33,62 @@ class CutSummary:
     samples_rejected_outliers: int
     samples_rejected_nan: int
     empty_points: int            # applied_load messages with no samples before the next one
+    markers_out_of_order: int = 0        # applied_load stamps going back against receive order
+    first_marker_out_of_order: int = -1  # its index (0-based, receive order), -1: none
+    duplicate_marker_stamps: int = 0
+    samples_outside_points: int = 0      # raw samples in no point (between points, beyond a point's end)
+    pauses_s: tuple[float, ...] = ()     # pauses between sessions that were shortened, seconds
+    clipped: tuple[tuple[str, float, int, int], ...] = ()  # (bridge, mV, samples, points) flat-topped
+
+
+# A pause longer than this many typical point spacings separates two sessions.
+PAUSE_SPACINGS = 10.0
+# A point's samples end at most this many typical marker periods after its marker.
+POINT_PERIODS = 4
+
+
+def shorten_pauses(times_s: np.ndarray) -> tuple[np.ndarray, tuple[float, ...]]:
+    """Point times with every pause longer than PAUSE_SPACINGS typical spacings cut to one spacing.
+
+    times_s (P,) s. Returns the new times (same order, same first time) and the pauses found (s).
+    Within a session nothing moves; the zero points of §5(4) bracket each block in either case.
+    """
+    times = np.asarray(times_s, dtype=float)
+    if len(times) < 3:
+        return times, ()
+    order = np.argsort(times, kind='stable')
+    steps = np.diff(times[order])
+    positive = steps[steps > 0]
+    spacing = float(np.median(positive)) if len(positive) else 0.0
+    if spacing <= 0:
+        return times, ()
+    long = steps > PAUSE_SPACINGS * spacing
+    if not np.any(long):
+        return times, ()
+    shortened = np.where(long, spacing, steps)
+    new = np.empty_like(times)
+    new[order] = times[order[0]] + np.concatenate([[0.0], np.cumsum(shortened)])
+    return new, tuple(float(x) for x in steps[long])
+
+
+def _flat_tops(values: np.ndarray, point_of_sample: np.ndarray, bridges) -> tuple:
+    """Bridges whose samples pile up on one extreme value in several points: a clipped amplifier.
+
+    values (S, n) mV of samples inside points; point_of_sample (S,) the point of each. A real
+    bridge's noise makes equal extremes in two points practically impossible.
+    """
+    found = []
+    for k, bridge in enumerate(bridges):
+        column = values[:, k]
+        if len(column) < 3:
+            continue
+        for extreme in (column.max(), column.min()):
+            at = column == extreme
+            samples = int(np.count_nonzero(at))
+            points = len(np.unique(point_of_sample[at]))
+            if samples >= 3 and points >= 2:
+                found.append((bridge, float(extreme), samples, points))
+    return tuple(found)
 
 
 def _orientation_index(gravity: np.ndarray, config: BalanceConfig | None) -> np.ndarray:
@@ -62,8 +125,13 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
     stamps = raw.stamps_ns[order]
     values = np.asarray(raw.values, dtype=float)[order]
 
-    marker_stamps = applied.stamps_ns
+    marker_stamps = np.asarray(applied.stamps_ns)
     marker_loads = np.asarray(applied.values, dtype=float)
+    # the recorder's order and the publisher's stamps must agree; points follow the stamps
+    backwards = np.flatnonzero(np.diff(marker_stamps) < 0)
+    by_stamp = np.argsort(marker_stamps, kind='stable')
+    marker_stamps, marker_loads = marker_stamps[by_stamp], marker_loads[by_stamp]
+    duplicates = int(np.count_nonzero(np.diff(marker_stamps) == 0))
     is_point = ~np.all(np.isnan(marker_loads), axis=1)
     if np.any(np.isnan(marker_loads[is_point])):
         bad = np.flatnonzero(is_point & np.any(np.isnan(marker_loads), axis=1))[0]
@@ -75,9 +143,17 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
     if marker_stamps[point_index[0]] < first_gravity:
         raise LoadPointError(f'{source} has no {names.gravity} messages before its first load point')
 
+    # a point ends at the next marker, or at most POINT_PERIODS typical marker periods after its
+    # own: samples beyond (a session ended without a marker, a clock jump, a recorder left
+    # running over a pause) belong to no point
+    periods = np.diff(marker_stamps)
+    period = int(np.median(periods[periods > 0])) if np.any(periods > 0) else 10 ** 9
     boundaries = np.append(marker_stamps, np.iinfo(np.int64).max)
+    point_ends = np.minimum(boundaries[point_index + 1],
+                            marker_stamps[point_index] + min(POINT_PERIODS * period, 2 ** 62))
     starts = np.searchsorted(stamps, marker_stamps[point_index], side='left')
-    ends = np.searchsorted(stamps, boundaries[point_index + 1], side='left')
+    ends = np.searchsorted(stamps, point_ends, side='left')
+    outside = int(len(stamps) - np.sum(ends - starts))
 
     g_order = np.argsort(gravity.stamps_ns, kind='stable')
     g_stamps = gravity.stamps_ns[g_order]
@@ -96,12 +172,15 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
     times = np.full(len(point_index), np.nan)
     temps = np.full(len(point_index), np.nan)
     used = outliers = nans = empty = 0
+    inside_values, inside_points = [], []
     for p, (a, b) in enumerate(zip(starts, ends)):
         block = values[a:b]
         finite = np.all(np.isfinite(block), axis=1)
         nans += int(np.count_nonzero(~finite))
         block = block[finite]
         block_stamps = stamps[a:b][finite]
+        inside_values.append(block)
+        inside_points.append(np.full(len(block), p))
         if len(block) == 0:
             empty += 1
             continue
@@ -120,7 +199,15 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
         raise LoadPointError(f'{source}: no {names.raw} samples fall inside any load point')
     keep_points = has_samples
     labels = np.arange(1, len(point_index) + 1)
-    points = LoadPoints(labels[keep_points], means[keep_points], times[keep_points], temps[keep_points],
+    session_times, pauses = shorten_pauses(times[keep_points])
+    points = LoadPoints(labels[keep_points], means[keep_points], session_times, temps[keep_points],
                         _orientation_index(point_gravity, config)[keep_points], point_gravity[keep_points],
                         marker_loads[point_index][keep_points])
-    return points, CutSummary(int(keep_points.sum()), used, outliers, nans, empty)
+    bridges = config.bridge_outputs if config else tuple(f'output {k + 1}' for k in range(values.shape[1]))
+    clipped = _flat_tops(np.concatenate(inside_values), np.concatenate(inside_points), bridges) \
+        if inside_values else ()
+    return points, CutSummary(int(keep_points.sum()), used, outliers, nans, empty,
+                              markers_out_of_order=len(backwards),
+                              first_marker_out_of_order=int(backwards[0] + 1) if len(backwards) else -1,
+                              duplicate_marker_stamps=duplicates, samples_outside_points=outside,
+                              pauses_s=pauses, clipped=clipped)

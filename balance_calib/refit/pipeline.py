@@ -2,12 +2,15 @@
 
 bags -> load points -> zero points + tare (corrected data, §5(4), §6-7) -> linear, quadratic and
 cubic fits (§2-3) -> diagnosis of the residuals (what the base model lacks) -> calibration.yaml,
-report.json, report.md and residual plots (interfaces.md). Everything is written into a staging
-directory and moved into place only when complete, so a failure leaves `out_dir` as it was.
+report.json, report.md and residual plots (interfaces.md). Before anything is written the
+acceptance gates (refit/gates.py) must pass: a failed gate raises RefitError with one line, unless
+`force` (then the report says so). Everything is written into a staging directory beside `out_dir`
+and moved into place only when complete, so a failure or a kill leaves `out_dir` as it was.
 """
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import tempfile
 import time
@@ -55,6 +58,7 @@ class CalibrationResult:
     calibration: Calibration
     report: dict
     cut: CutSummary | None = None
+    gates: tuple = ()                      # refit.gates.Gate, in order
 
 
 @dataclass(frozen=True)
@@ -84,8 +88,14 @@ def _fit_all(reduction: Reduction, config: BalanceConfig, orders: Sequence[str])
 
 def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: str = 'cubic',
                      diagnose: bool = True, estimate_body: bool = True, progress: Progress | None = None,
-                     cut: CutSummary | None = None, sources: Sequence[str] = ()) -> CalibrationResult:
-    """Everything after the load points; pure (writes nothing)."""
+                     cut: CutSummary | None = None, sources: Sequence[str] = (),
+                     active: Calibration | None = None, force: bool = False) -> CalibrationResult:
+    """Everything after the load points; pure (writes nothing).
+
+    Raises RefitError when an acceptance gate fails (refit/gates.py), unless force; active is the
+    calibration in use, whose sensitivities the new one must stay near.
+    """
+    from .gates import acceptance_limits, evaluate_gates, failed, gates_report
     say = progress or (lambda message: None)
     if base_model not in MODEL_ORDERS:
         raise RefitError(f'base model {base_model!r}: expected one of {", ".join(MODEL_ORDERS)}')
@@ -100,8 +110,19 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
         # tare outputs from the fitted model's inverse instead of the linear eqs. (32)-(37), then refit
         reduction = retare_with_model(reduction, fits[base_model].fit.model)
         fits = _fit_all(reduction, config, orders)
-    except (ZeroPointError, InverseDidNotConverge, LoadPointError) as err:
+        limits = acceptance_limits(config, base_model)
+    except (ZeroPointError, InverseDidNotConverge, LoadPointError, ConfigError) as err:
         raise RefitError(str(err)) from None
+    except (np.linalg.LinAlgError, FloatingPointError) as err:
+        raise RefitError(f'{_where(sources)}: the load points cannot be fitted ({err})') from None
+    gates = evaluate_gates(config, points, reduction, fits, base_model, cut, active, limits)
+    bad = failed(gates)
+    for gate in gates:
+        say(f'gate {gate.name}: {"ok" if gate.passed else "FAILED"}: {gate.reason}')
+    if bad and not force:
+        also = f' (also failed: {", ".join(g.name for g in bad[1:])})' if len(bad) > 1 else ''
+        raise RefitError(f'{_where(sources)}: refused by acceptance gate {bad[0].name}: {bad[0].reason}{also}; '
+                         f'nothing written (--force writes it anyway)')
     say('fits: ' + ', '.join(f'{o} σFX {fits[o].sigma_pct_fs[config.components[0]]:.3f} % FS' for o in orders))
 
     diagnosis = None
@@ -111,7 +132,18 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
     from .report import build_calibration, build_report
     calibration = build_calibration(config, reduction, fits, base_model, diagnosis, sources)
     report = build_report(config, points, reduction, fits, base_model, diagnosis, cut, sources)
-    return CalibrationResult(config, points, reduction, fits, base_model, diagnosis, calibration, report, cut)
+    report['acceptance'] = gates_report(gates, forced=force)
+    if cut is not None:
+        report['sessions'] = {'count': len(cut.pauses_s) + 1, 'pauses_s': [round(p, 1) for p in cut.pauses_s]}
+    if bad:
+        calibration.extra['acceptance'] = {'forced': True, 'failed': [g.name for g in bad]}
+    return CalibrationResult(config, points, reduction, fits, base_model, diagnosis, calibration, report, cut,
+                             tuple(gates))
+
+
+def _where(sources: Sequence[str]) -> str:
+    return ', '.join(str(s) for s in sources) if sources else 'campaign'
+
 
 
 def _run_diagnosis(reduction, config, base_model, base_fit, say):
@@ -126,28 +158,48 @@ def _run_diagnosis(reduction, config, base_model, base_fit, say):
 
 def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str | Path, *,
               model: str = 'cubic', diagnose: bool = True, estimate_body: bool = True,
-              progress: Progress | None = None, plots: bool = True) -> RefitResult:
-    """Refit from bags and write calibration.yaml, report.json, report.md and plots into out_dir."""
+              progress: Progress | None = None, plots: bool = True, force: bool = False,
+              salvage: bool = False, active_calibration: Calibration | str | Path | None = None) -> RefitResult:
+    """Refit from bags and write calibration.yaml, report.json, report.md and plots into out_dir.
+
+    Every input error, integrity failure (bags/reader.py) and failed acceptance gate raises
+    RefitError with one line naming the file; `out_dir` is checked before any work. force writes
+    a calibration that failed a gate (marked in the report); salvage reads what is intact of a
+    damaged bag and the report says what was lost; active_calibration (a Calibration or a file)
+    is the calibration in use, which the new one's sensitivities must stay near.
+    """
     from ..bags.errors import BagError
     from ..bags.reader import read_bags
+    from ..calibration_file import load_calibration
     say = progress or (lambda message: None)
     started = time.monotonic()
     paths = [Path(p) for p in bag_paths]
     if not paths:
         raise RefitError('no bags given (parameter calibration_bags is empty)')
+    out_dir = Path(out_dir)
+    check_out_dir(out_dir)
     try:
         config = load_balance_config(balance)
     except ConfigError as err:
         raise RefitError(str(err)) from None
+    active = active_calibration
+    if isinstance(active, (str, Path)):
+        try:
+            active = load_calibration(active)
+        except (ConfigError, OSError) as err:
+            raise RefitError(f'active calibration {active}: {err}') from None
     say(f'reading {len(paths)} bag(s)...')
 
     def bag_progress(done, total):
         say(f'read {done}/{total} messages ({100 * done / max(total, 1):.0f} %)')
 
     try:
-        bag = read_bags(paths, required=('raw', 'applied_load', 'gravity'), progress=bag_progress)
+        bag = read_bags(paths, required=('raw', 'applied_load', 'gravity'), progress=bag_progress,
+                        salvage=salvage)
     except BagError as err:
         raise RefitError(str(err)) from None
+    for loss in bag.losses:
+        say(f'salvaged: {loss}')
     source = ', '.join(str(p) for p in paths)
     try:
         points, cut = cut_load_points(bag, config, source=source)
@@ -155,13 +207,19 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
         raise RefitError(str(err)) from None
     say(f'{cut.points} load points, {cut.samples_used} samples used, {cut.samples_rejected_outliers} outliers '
         f'and {cut.samples_rejected_nan} NaN samples rejected')
+    if cut.pauses_s:
+        say(f'{len(cut.pauses_s) + 1} sessions: pauses of {", ".join(f"{p:.0f}" for p in cut.pauses_s)} s '
+            f'shortened on the time axis')
     result = calibrate_points(points, config, base_model=model, diagnose=diagnose, estimate_body=estimate_body,
-                              progress=say, cut=cut, sources=[str(p) for p in paths])
+                              progress=say, cut=cut, sources=[str(p) for p in paths], active=active,
+                              force=force)
+    result.report['bag_integrity'] = {'salvaged': bool(salvage and bag.losses), 'lost': list(bag.losses),
+                                      'messages_read': dict(bag.message_counts)}
     result.report['wall_time_s'] = round(time.monotonic() - started, 3)
-    out = write_outputs(result, Path(out_dir), plots=plots)
+    out = write_outputs(result, out_dir, plots=plots)
     say(f'wrote {out}')
-    return RefitResult(result.calibration, Path(out_dir) / 'calibration.yaml', result.report,
-                       summary_line(result.report), Path(out_dir))
+    return RefitResult(result.calibration, out_dir / 'calibration.yaml', result.report,
+                       summary_line(result.report), out_dir)
 
 
 def summary_line(report: Mapping) -> str:
@@ -171,14 +229,60 @@ def summary_line(report: Mapping) -> str:
     return f'{report["balance"]}: {report["points"]} points; σ % FS {parts}; effects: {effects}'
 
 
+def check_out_dir(out_dir: Path) -> None:
+    """Refuse, before any work, an --out that is not a directory or cannot be written."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise RefitError(f'{out_dir}: --out exists and is not a directory')
+    parent = next((p for p in [out_dir, *out_dir.parents] if p.exists()), Path('.'))
+    if not parent.is_dir():
+        raise RefitError(f'{out_dir}: cannot create the output directory ({parent} is not a directory)')
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise RefitError(f'{out_dir}: output directory not writable ({parent} is not writable)')
+    staging_parent = out_dir.parent if out_dir.parent.exists() else None
+    if staging_parent is not None and not os.access(staging_parent, os.W_OK | os.X_OK):
+        raise RefitError(f'{out_dir}: its parent {staging_parent} is not writable (the refit stages there)')
+
+
+_STAGING_PREFIX = '.refit-staging-'
+
+
+def _clean_stale_staging(parent: Path, name: str) -> None:
+    """Remove staging directories of killed refits (their process is gone)."""
+    for stale in parent.glob(f'{_STAGING_PREFIX}{name}-*'):
+        try:
+            pid = int(stale.name.rsplit('-', 2)[-2])
+        except (ValueError, IndexError):
+            continue
+        if pid != os.getpid() and not _alive(pid):
+            shutil.rmtree(stale, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def write_outputs(result: CalibrationResult, out_dir: Path, *, plots: bool = True) -> Path:
-    """Write the files into a staging directory, then move each into out_dir (nothing half-written)."""
+    """Write the files into a staging directory beside out_dir, then move them in (nothing half-written).
+
+    The staging directory (named after this process, so that a later run removes it if this one is
+    killed) lies in out_dir's parent: a new out_dir appears whole with one rename; into an existing
+    one each file is replaced by a rename. Files are readable by others (0644, directory 0755).
+    """
     from .report import report_markdown
-    out_dir.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix='.refit-', dir=out_dir))
+    out_dir = Path(out_dir)
+    check_out_dir(out_dir)
+    parent = out_dir.absolute().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    _clean_stale_staging(parent, out_dir.name)
+    staging = Path(tempfile.mkdtemp(prefix=f'{_STAGING_PREFIX}{out_dir.name}-{os.getpid()}-', dir=parent))
     try:
         save_calibration(staging / 'calibration.yaml', result.calibration)
-        (staging / 'report.json').write_text(json.dumps(result.report, indent=2, allow_nan=False) + '\n')
         figures = []
         if plots:
             from .plots import residual_figures
@@ -186,8 +290,16 @@ def write_outputs(result: CalibrationResult, out_dir: Path, *, plots: bool = Tru
         result.report.setdefault('plots', [f.name for f in figures])
         (staging / 'report.json').write_text(json.dumps(result.report, indent=2, allow_nan=False) + '\n')
         (staging / 'report.md').write_text(report_markdown(result.report, result))
-        for item in sorted(staging.iterdir()):
-            item.replace(out_dir / item.name)
+        for item in staging.iterdir():
+            os.chmod(item, 0o644)
+        os.chmod(staging, 0o755)
+        try:
+            os.rename(staging, out_dir)       # a new or empty out_dir: one atomic rename
+        except OSError:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            # calibration.yaml last: whoever watches it sees the report of the same refit
+            for item in sorted(staging.iterdir(), key=lambda p: p.name == 'calibration.yaml'):
+                item.replace(out_dir / item.name)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return out_dir

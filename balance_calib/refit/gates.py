@@ -1,0 +1,303 @@
+"""Acceptance gates: a refit is adopted only when its data and its result look like a calibration.
+
+As AIAA R-091 practice checks a calibration before it is used, every refit is checked before
+calibration.yaml is written or swapped in:
+
+    sigma              σ of the base model per component (TM-663 eqs. (44)-(49)) within its limit
+    outliers           no load point whose loads disagree with its outputs (leave-one-out residual
+                       beyond k robust σ): a weight typo, a misplaced marker, a clipped point
+    sensitivity        fitted linear sensitivities (N per mV) near the balance's nominal ones
+                       (config Table 10/14 linear matrix, else capacity / rated output): loads
+                       recorded in kgf or the wrong --balance cannot pass
+    active_calibration ... and near the active calibration's, when one is given
+    body_weight        calibration body weight positive and near its declaration
+    capacity           applied loads within the rated loads
+    clipping           no bridge flat-topped at one value (an amplifier or ADC at its limit)
+    marker_order       applied_load stamps in the order they were recorded
+
+Limits come from the balance config's `acceptance:` mapping, with the defaults below. Each gate
+gives one line a person can act on. A failed gate raises nothing here: the pipeline decides
+(RefitError, unless forced).
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from ..config import BalanceConfig, ConfigError
+from ..fit.crossval import press_residuals
+from ..model.inverse import linear_part
+
+DEFAULT_SIGMA_LIMIT_PCT_FS = 0.25      # per component, or 3x the memo's Table 17 σ if larger
+DEFAULT_OUTLIER_ROBUST_SIGMAS = 7.0    # leave-one-out residual / (1.4826 MAD)
+DEFAULT_OUTLIER_FLOOR_PCT_FS = 0.05    # and at least this far off
+DEFAULT_SENSITIVITY_NOMINAL_TOLERANCE = 0.15
+DEFAULT_SENSITIVITY_ACTIVE_TOLERANCE = 0.05
+DEFAULT_BODY_WEIGHT_TOLERANCE = 0.10
+DEFAULT_CAPACITY_MARGIN = 0.05
+
+
+@dataclass(frozen=True)
+class AcceptanceLimits:
+    sigma_limit_pct_fs: Mapping[str, float]
+    outlier_robust_sigmas: float = DEFAULT_OUTLIER_ROBUST_SIGMAS
+    outlier_floor_pct_fs: float = DEFAULT_OUTLIER_FLOOR_PCT_FS
+    sensitivity_nominal_tolerance: float = DEFAULT_SENSITIVITY_NOMINAL_TOLERANCE
+    sensitivity_active_tolerance: float = DEFAULT_SENSITIVITY_ACTIVE_TOLERANCE
+    body_weight_tolerance: float = DEFAULT_BODY_WEIGHT_TOLERANCE
+    capacity_margin: float = DEFAULT_CAPACITY_MARGIN
+
+
+def acceptance_limits(config: BalanceConfig, base_model: str = 'cubic') -> AcceptanceLimits:
+    """The config's `acceptance:` limits over the defaults; ConfigError naming a bad key."""
+    where = f'{config.path or config.name}: acceptance'
+    data = config.raw.get('acceptance') or {}
+    if not isinstance(data, Mapping):
+        raise ConfigError(f'{where}: expected a mapping')
+    memo = config.table17_sigma_pct_fs.get(base_model, {}) if config.table17_sigma_pct_fs else {}
+    sigma = {c: max(DEFAULT_SIGMA_LIMIT_PCT_FS, 3.0 * float(memo.get(c, 0.0))) for c in config.components}
+    given = data.get('sigma_limit_pct_fs', {})
+    if isinstance(given, (int, float)):
+        given = {c: given for c in config.components}
+    if not isinstance(given, Mapping):
+        raise ConfigError(f'{where}.sigma_limit_pct_fs: expected a number or a mapping per component')
+    for component, value in given.items():
+        if component not in config.components:
+            raise ConfigError(f'{where}.sigma_limit_pct_fs: unknown component {component!r}')
+        sigma[component] = _positive(value, f'{where}.sigma_limit_pct_fs.{component}')
+    numbers = {}
+    for key in ('outlier_robust_sigmas', 'outlier_floor_pct_fs', 'sensitivity_nominal_tolerance',
+                'sensitivity_active_tolerance', 'body_weight_tolerance', 'capacity_margin'):
+        if key in data:
+            numbers[key] = _positive(data[key], f'{where}.{key}')
+    unknown = set(data) - {'sigma_limit_pct_fs', *AcceptanceLimits.__dataclass_fields__}
+    if unknown:
+        raise ConfigError(f'{where}: unknown key(s) {", ".join(sorted(unknown))}')
+    return AcceptanceLimits(sigma, **numbers)
+
+
+def _positive(value, where: str) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f'{where}: {value!r} is not a number') from None
+    if not np.isfinite(number) or number <= 0:
+        raise ConfigError(f'{where}: must be a positive finite number, not {value!r}')
+    return number
+
+
+@dataclass(frozen=True)
+class Gate:
+    name: str
+    passed: bool
+    reason: str                              # one line
+    details: Mapping[str, Any] = field(default_factory=dict)
+
+
+def failed(gates: Sequence[Gate]) -> list[Gate]:
+    return [g for g in gates if not g.passed]
+
+
+def gates_report(gates: Sequence[Gate], *, forced: bool) -> dict:
+    """report.json's `acceptance` entry."""
+    return {'passed': not failed(gates), 'forced': bool(forced and failed(gates)),
+            'gates': [{'name': g.name, 'passed': g.passed, 'reason': g.reason, **_plain(g.details)}
+                      for g in gates]}
+
+
+def _plain(value):
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in value]
+    if isinstance(value, (np.floating, float)):
+        return round(float(value), 6) if np.isfinite(value) else None
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    return value
+
+
+# -- the gates ------------------------------------------------------------------------------------
+
+def evaluate_gates(config: BalanceConfig, points, reduction, fits, base_model: str, cut=None,
+                   active=None, limits: AcceptanceLimits | None = None) -> list[Gate]:
+    """All gates on a refit before diagnosis. points: LoadPoints; fits: order -> ModelFit;
+    cut: load_points.CutSummary or None; active: calibration_file.Calibration or None."""
+    limits = limits or acceptance_limits(config, base_model)
+    gates = [
+        _sigma_gate(config, fits[base_model], limits),
+        _outlier_gate(config, points, reduction, fits[base_model], limits),
+        _sensitivity_gate(config, fits, limits),
+    ]
+    if active is not None:
+        gates.append(_active_gate(config, fits, active, limits))
+    gates += [_body_gate(config, reduction, limits), _capacity_gate(config, points, limits)]
+    if cut is not None:
+        gates += [_clipping_gate(cut), _marker_gate(cut)]
+    return gates
+
+
+def _sigma_gate(config, base_fit, limits) -> Gate:
+    sigma = base_fit.sigma_pct_fs
+    over = [c for c in config.components if not (sigma[c] <= limits.sigma_limit_pct_fs[c])]
+    details = {'sigma_pct_fs': dict(sigma), 'limit_pct_fs': dict(limits.sigma_limit_pct_fs)}
+    if over:
+        text = ', '.join(f'{c} {sigma[c]:.3g} % FS > {limits.sigma_limit_pct_fs[c]:.3g}' for c in over)
+        return Gate('sigma', False, f'σ beyond its limit: {text}', details)
+    worst = max(config.components, key=lambda c: sigma[c] / limits.sigma_limit_pct_fs[c])
+    return Gate('sigma', True, f'σ within limits (closest: {worst} {sigma[worst]:.3g} of '
+                               f'{limits.sigma_limit_pct_fs[worst]:.3g} % FS)', details)
+
+
+def _outlier_gate(config, points, reduction, base_fit, limits) -> Gate:
+    model = base_fit.fit.model
+    design = model.design(reduction.corrected.bridge_outputs_mv)
+    residuals = base_fit.fit.residuals
+    press = press_residuals(design, residuals)           # (P, 6) N, N·m: r / (1 - h)
+    press_pct = press / config.capacity * 100.0
+    # r / sqrt(1 - h): the same variance for every point whatever its leverage
+    with np.errstate(divide='ignore', invalid='ignore'):
+        scale = np.sqrt(np.clip(np.where(press != 0, residuals / press, 1.0), 0.0, 1.0))
+    standardized = press_pct * scale
+    # zero points carry (almost) no residual after §5(4): the scale comes from the loaded ones
+    loaded = ~points.is_zero_point
+    basis = standardized[loaded] if np.count_nonzero(loaded) >= 10 else standardized
+    robust = 1.4826 * np.median(np.abs(basis - np.median(basis, axis=0)), axis=0)
+    threshold = np.maximum(limits.outlier_robust_sigmas * robust, limits.outlier_floor_pct_fs)
+    finite = np.all(np.isfinite(standardized), axis=1)
+    flagged = (np.abs(standardized) > threshold) | ~finite[:, None]
+    rows = np.flatnonzero(np.any(flagged, axis=1))
+    entries = []
+    for i in rows[:20]:
+        k = int(np.nanargmax(np.where(flagged[i], np.abs(standardized[i]) / threshold, -np.inf)))
+        entries.append({'point': int(points.label[i]), 'orientation': int(points.orientation[i]),
+                        'component': config.components[k], 'residual_pct_fs': float(press_pct[i, k]),
+                        'robust_sigmas': float(abs(standardized[i, k]) / max(robust[k], 1e-12)),
+                        'applied_load': [float(x) for x in points.applied_loads[i]]})
+    with np.errstate(divide='ignore', invalid='ignore'):
+        largest = float(np.nanmax(np.abs(standardized) / np.maximum(robust, 1e-12)))
+    details = {'threshold_pct_fs': dict(zip(config.components, threshold)), 'points': entries,
+               'count': int(len(rows)), 'largest_robust_sigmas': largest}
+    if not len(rows):
+        return Gate('outliers', True, f'no point beyond {limits.outlier_robust_sigmas:g} robust σ '
+                                      f'(largest {largest:.1f}; leave-one-out residuals)', details)
+    first = entries[0]
+    more = f' and {len(rows) - 1} more (points {", ".join(str(e["point"]) for e in entries[1:6])}' \
+           f'{"…" if len(rows) > 6 else ""})' if len(rows) > 1 else ''
+    return Gate('outliers', False,
+                f'point {first["point"]} (I_g {first["orientation"]}): its {first["component"]} load '
+                f'disagrees with its outputs by {first["residual_pct_fs"]:+.3g} % FS '
+                f'({first["robust_sigmas"]:.0f} robust σ; a weight, unit or marker error?){more}', details)
+
+
+def _nominal_sensitivity(config) -> tuple[np.ndarray, str]:
+    if 'linear' in config.matrices:
+        return np.diag(linear_part(config.matrices['linear'])), 'the config\'s linear matrix'
+    return config.capacity / config.rated_output_mv, 'capacity / rated output'
+
+
+def _fitted_sensitivity(fits) -> np.ndarray:
+    model = fits['linear'].fit.model if 'linear' in fits else next(iter(fits.values())).fit.model
+    return np.diag(linear_part(model))
+
+
+def _ratio_gate(name, config, fitted, reference, tolerance, against) -> Gate:
+    with np.errstate(divide='ignore', invalid='ignore'):
+        ratio = fitted / reference
+    bad = [i for i, r in enumerate(ratio) if not (abs(r - 1.0) <= tolerance)]
+    details = {'ratio': dict(zip(config.components, ratio)), 'tolerance': tolerance,
+               'fitted_n_per_mv': dict(zip(config.components, fitted))}
+    if bad:
+        text = ', '.join(f'{config.components[i]} ×{ratio[i]:.3g}' for i in bad)
+        hint = ''
+        if np.all(np.isfinite(ratio)) and np.allclose(ratio[bad], 1 / 9.80665, rtol=0.05):
+            hint = '; loads recorded in kgf?'
+        elif np.all(np.isfinite(ratio)) and np.allclose(ratio[bad], 9.80665, rtol=0.05):
+            hint = '; outputs or loads off by g?'
+        return Gate(name, False, f'sensitivities differ from {against} beyond ±{100 * tolerance:g} %: '
+                                 f'{text}{hint}', details)
+    worst = int(np.argmax(np.abs(ratio - 1)))
+    return Gate(name, True, f'sensitivities within ±{100 * tolerance:g} % of {against} (largest: '
+                            f'{config.components[worst]} ×{ratio[worst]:.4f})', details)
+
+
+def _sensitivity_gate(config, fits, limits) -> Gate:
+    reference, what = _nominal_sensitivity(config)
+    return _ratio_gate('sensitivity', config, _fitted_sensitivity(fits), reference,
+                       limits.sensitivity_nominal_tolerance, f'{config.name}\'s nominal ({what}; wrong --balance?)')
+
+
+def _active_gate(config, fits, active, limits) -> Gate:
+    name = 'linear' if 'linear' in active.models else active.adopted
+    try:
+        reference = np.diag(linear_part(active.model(name)))
+    except Exception as error:  # an active model without a linear part
+        return Gate('active_calibration', False, f'cannot compare with the active calibration ({error})')
+    if tuple(active.components) != tuple(config.components) or len(reference) != len(config.components):
+        return Gate('active_calibration', False, f'the active calibration ({active.balance}) has components '
+                                                 f'{list(active.components)}, this balance {list(config.components)}')
+    gate = _ratio_gate('active_calibration', config, _fitted_sensitivity(fits), reference,
+                       limits.sensitivity_active_tolerance, f'the active calibration ({active.balance})')
+    if gate.passed and str(active.balance).lower() != str(config.name).lower():
+        return Gate('active_calibration', False, f'the active calibration is of balance {active.balance}, '
+                                                 f'this refit of {config.name}', gate.details)
+    return gate
+
+
+def _body_gate(config, reduction, limits) -> Gate:
+    weight = float(reduction.body.weight_n)
+    declared = float(config.calibration_body.weight_n)
+    details = {'weight_n': weight, 'declared_n': declared, 'source': reduction.body_source,
+               'tolerance': limits.body_weight_tolerance}
+    if not declared > 0:
+        return Gate('body_weight', False, f'declared calibration body weight {declared:g} N is not positive '
+                                          f'({config.path or config.name}: calibration_body.weight_n)', details)
+    if not weight > 0:
+        return Gate('body_weight', False, f'calibration body weight {weight:.4g} N ({reduction.body_source}) '
+                                          f'is not positive: gravity vectors or output signs reversed?', details)
+    off = weight / declared - 1.0
+    if not abs(off) <= limits.body_weight_tolerance:
+        return Gate('body_weight', False, f'calibration body weight {weight:.4g} N ({reduction.body_source}) is '
+                                          f'{100 * off:+.1f} % from the declared {declared:.4g} N '
+                                          f'(limit ±{100 * limits.body_weight_tolerance:g} %)', details)
+    return Gate('body_weight', True, f'body {weight:.2f} N ({reduction.body_source}), {100 * off:+.2f} % '
+                                     f'from the declared {declared:.2f} N', details)
+
+
+def _capacity_gate(config, points, limits) -> Gate:
+    fraction = np.abs(points.applied_loads) / config.capacity
+    worst = np.unravel_index(int(np.argmax(fraction)), fraction.shape)
+    details = {'max_fraction_of_capacity': dict(zip(config.components, fraction.max(axis=0))),
+               'margin': limits.capacity_margin}
+    if not fraction[worst] <= 1.0 + limits.capacity_margin:
+        count = int(np.count_nonzero(np.any(fraction > 1.0 + limits.capacity_margin, axis=1)))
+        return Gate('capacity', False, f'point {int(points.label[worst[0]])}: applied {config.components[worst[1]]} '
+                                       f'{points.applied_loads[worst]:.4g} is {100 * fraction[worst]:.0f} % of '
+                                       f'capacity ({count} point(s) beyond {100 * (1 + limits.capacity_margin):g} %; '
+                                       f'wrong units or wrong --balance?)', details)
+    return Gate('capacity', True, f'applied loads within capacity (largest {100 * fraction[worst]:.1f} %, '
+                                  f'{config.components[worst[1]]})', details)
+
+
+def _clipping_gate(cut) -> Gate:
+    if cut.clipped:
+        bridge, value, samples, npoints = cut.clipped[0]
+        return Gate('clipping', False, f'bridge {bridge} is flat-topped at {value:.6g} mV in {samples} samples of '
+                                       f'{npoints} points: its amplifier or ADC clipped',
+                    {'clipped': [list(c) for c in cut.clipped]})
+    return Gate('clipping', True, 'no bridge flat-topped at its extremes')
+
+
+def _marker_gate(cut) -> Gate:
+    details = {'out_of_order': cut.markers_out_of_order, 'duplicate_stamps': cut.duplicate_marker_stamps}
+    if cut.markers_out_of_order:
+        return Gate('marker_order', False, f'applied_load message {cut.first_marker_out_of_order + 1} is stamped '
+                                           f'before the one recorded ahead of it ({cut.markers_out_of_order} '
+                                           f'marker(s) out of time order): points cannot be trusted', details)
+    return Gate('marker_order', True, 'applied_load markers in time order', details)
+
+
+def as_dicts(gates: Sequence[Gate]) -> list[dict]:
+    return [asdict(g) for g in gates]
