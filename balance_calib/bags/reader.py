@@ -401,8 +401,10 @@ def _frame_ids(buffer: np.ndarray, starts: np.ndarray, lengths_with_nul: np.ndar
         if length == 0:
             frame_ids[rows] = ''
             continue
-        raw = np.ascontiguousarray(_gather(buffer, starts[rows], int(length))).view(f'S{length}')
+        # void, not 'S': numpy's bytes type drops trailing NULs that belong to the string
+        raw = np.ascontiguousarray(_gather(buffer, starts[rows], int(length))).view(f'V{length}')
         unique, inverse = np.unique(raw[:, 0], return_inverse=True)
-        names = np.array([u.decode('utf-8', errors='replace') for u in unique], dtype=object)
+        names = np.array([bytes(u).decode('utf-8', errors='replace') for u in unique], dtype=object)
         frame_ids[rows] = names[inverse.ravel()]
-    return frame_ids.astype(str) if len(frame_ids) else np.zeros(0, dtype=str)
+    # object, not numpy's str type, which would drop trailing NULs too
+    return frame_ids
