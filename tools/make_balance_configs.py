@@ -141,6 +141,17 @@ def main():
             'load_types': {k: Flow(v) for k, v in memo['load_types'].items()},
             'matrices': {order: matrix(seeds[name], order) for order in ('linear', 'quadratic', 'cubic')},
             'table17_sigma_pct_fs': {order: dict(zip(COMP, v)) for order, v in memo['sigma'].items()},
+            # refit acceptance gates (balance_calib/refit/gates.py): a refit failing one is not adopted
+            'acceptance': {
+                # σ of the base (cubic) model, eqs. (44)-(49): 3x Table 17's cubic row, at least 0.25 % FS
+                'sigma_limit_pct_fs': {c: max(0.25, round(3 * s, 3)) for c, s in zip(COMP, memo['sigma']['cubic'])},
+                'outlier_robust_sigmas': 7.0,        # leave-one-out residual of one point / robust σ
+                'outlier_floor_pct_fs': 0.05,        # ... and at least this far off
+                'sensitivity_nominal_tolerance': 0.15,   # fitted / Table 10-14 linear sensitivity - 1
+                'sensitivity_active_tolerance': 0.05,    # fitted / active calibration's - 1
+                'body_weight_tolerance': 0.10,       # body weight / declared - 1
+                'capacity_margin': 0.05,             # applied load / capacity - 1
+            },
             'schedule': {
                 'columns': Flow(['point', 'Ig', 'FX_kgf', 'FY_kgf', 'FZ_kgf', 'MX_kgfm', 'MY_kgfm', 'MZ_kgfm',
                                  'byproduct']),
