@@ -113,8 +113,8 @@ def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -
     try:
         components = tuple(data.get('components', COMPONENTS))
         outputs = tuple(data.get('bridge_outputs', BRIDGE_OUTPUTS))
-        models = {name: BalanceModel.from_dict({'name': name, 'components': components, 'inputs': outputs, **m},
-                                               where=f'{where}: models.{name}')
+        models = {name: _model_from_dict({'name': name, 'components': components, 'inputs': outputs, **m},
+                                         where=f'{where}: models.{name}')
                   for name, m in (data['models'] or {}).items()}
         if not models:
             raise ConfigError(f'{where}: no models')
@@ -135,6 +135,15 @@ def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -
         raise ConfigError(f'{where}: missing key {err.args[0]!r}') from None
     except (TypeError, ValueError, AttributeError) as err:
         raise ConfigError(f'{where}: {err}') from None
+
+
+def _model_from_dict(data: Mapping[str, Any], where: str):
+    """A direct (TM-663) model, or with `form: iterative` an AIAA R-091 model (outputs from loads,
+    inverted per sample by Newton iteration; same `loads(outputs, extra)` interface)."""
+    if data.get('form', 'direct') == 'iterative':
+        from .model.r091 import IterativeModel
+        return IterativeModel.from_dict(data, where=where)
+    return BalanceModel.from_dict(data, where=where)
 
 
 def load_calibration(path: str | Path) -> Calibration:

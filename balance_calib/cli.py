@@ -13,6 +13,8 @@ COMMAND_MODULES = (
     'balance_calib.commands.simulate',
     'balance_calib.commands.refit',
     'balance_calib.commands.thrust',
+    'balance_calib.commands.fit',
+    'balance_calib.commands.reduce',
 )
 
 

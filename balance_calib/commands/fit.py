@@ -1,0 +1,159 @@
+"""balance-calib fit TABLE.csv ... --out DIR (interfaces.md, "Calibration data tables from other tools"),
+and balance-calib export-table BAG ... --balance CONFIG --out FILE.csv (a bag campaign as a table)."""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        'fit', help='calibrate from BALFIT-style tables (direct TM-663 or iterative AIAA R-091 method)',
+        description='Fit a calibration with series tares from calibration tables and write calibration.yaml, '
+                    'report.json, report.md, point_uncertainty.csv and residual plots into DIR.')
+    parser.add_argument('tables', nargs='+', help='calibration table(s) of one campaign (CSV)')
+    parser.add_argument('--out', required=True, help='output directory')
+    parser.add_argument('--validate', nargs='+', default=[], metavar='VAL.csv',
+                        help='validation table(s): same series, the calibration\'s tares applied')
+    parser.add_argument('--method', default='auto', choices=['auto', 'direct', 'iterative'])
+    parser.add_argument('--terms', default='auto', help='auto, tm663-cubic, r091-96 or a file of term names')
+    parser.add_argument('--excitation-v', type=float, default=None,
+                        help='bridge excitation (V): turns mV/V tables into mV calibrations')
+    parser.add_argument('--no-plots', action='store_true', help='skip the residual figures')
+    parser.set_defaults(func=run)
+
+    export = subparsers.add_parser(
+        'export-table', help='write a recorded campaign (bags) as a BALFIT-style table',
+        description='Cut the bags into load points, apply the zero points and the calibration-body tare '
+                    'as refit does, and write the corrected points as one load series.')
+    export.add_argument('bags', nargs='+')
+    export.add_argument('--balance', required=True, help='balance config: lmc6522, b660h or a path')
+    export.add_argument('--out', required=True, help='CSV file to write')
+    export.set_defaults(func=run_export)
+
+
+def run(args) -> int:
+    from ..cli import CommandError
+    from ..tables.balfit_reader import TableError, read_tables
+    from ..tables.calibrate import TableCalibrationError, calibrate_table
+    if args.excitation_v is not None and not args.excitation_v > 0:
+        raise CommandError(f'--excitation-v must be positive, not {args.excitation_v}')
+    try:
+        table = read_tables(args.tables)
+        validation = read_tables(args.validate) if args.validate else None
+        result = calibrate_table(table, method=args.method, terms=args.terms, validation=validation,
+                                 excitation_v=args.excitation_v)
+    except (TableError, TableCalibrationError) as err:
+        raise CommandError(str(err)) from None
+    out = write_fit_outputs(result, Path(args.out), plots=not args.no_plots)
+    report = result.report
+    sigma = report['sigma_pct_capacity']
+    line = ' '.join(f'{k} {v:.4f}' for k, v in sigma['calibration'].items())
+    print(f'{report["balance"]}: {report["points"]["calibration"]} points, method {report["method"]} '
+          f'({report["method_choice"]}); σ % capacity {line}')
+    if 'validation' in sigma:
+        print('validation σ % capacity ' + ' '.join(f'{k} {v:.4f}' for k, v in sigma['validation'].items()))
+    print(f'report: {out / "report.md"}')
+    return 0
+
+
+def write_fit_outputs(result, out_dir: Path, *, plots: bool = True) -> Path:
+    """Everything into a staging directory first, then moved in (nothing half-written)."""
+    from ..calibration_file import save_calibration
+    out_dir.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix='.fit-', dir=out_dir))
+    try:
+        save_calibration(staging / 'calibration.yaml', result.calibration)
+        (staging / 'point_uncertainty.csv').write_text(_rows_csv(result.point_rows))
+        figures = _plots(result, staging) if plots else []
+        result.report['plots'] = [f.name for f in figures]
+        (staging / 'report.json').write_text(json.dumps(result.report, indent=2, allow_nan=False) + '\n')
+        (staging / 'report.md').write_text(report_markdown(result.report))
+        for item in sorted(staging.iterdir()):
+            item.replace(out_dir / item.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return out_dir
+
+
+def _rows_csv(rows) -> str:
+    buffer = io.StringIO()
+    if rows:
+        writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator='\n')
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: (f'{v:.6g}' if isinstance(v, float) else v) for k, v in row.items()})
+    return buffer.getvalue()
+
+
+def _plots(result, directory: Path):
+    from ..tables.plots import residual_figure
+    table = result.table
+    capacity = table.load_capacity_si
+    return [residual_figure(fit.load_residuals / capacity * 100.0, table.load_symbols,
+                            f'{table.balance_name or "balance"}: {method} method residuals',
+                            directory / f'residuals_{method}.png')
+            for method, fit in result.fits.items()]
+
+
+def report_markdown(report) -> str:
+    from ..accuracy.sigma import format_sigma_table
+    loads = report['load_symbols']
+    lines = [f'# Calibration from tables: {report["balance"]}', '',
+             f'{report["points"]["calibration"]} calibration points, {report["points"]["validation"]} validation '
+             f'points ({report["disabled_points"]["calibration"]} + {report["disabled_points"]["validation"]} '
+             f'switched off). Loads {", ".join(f"{s} [{u}]" for s, u in zip(loads, report["load_units"]))}.', '',
+             f'**Method adopted: {report["method"]}** ({len(report["terms"])} terms, set '
+             f'{report["term_set"]}). Why: {report["method_choice"]}.', '',
+             '## σ in % of capacity (sample standard deviation of applied − predicted)', '', '```']
+    rows = {}
+    for method, entry in report['methods_compared'].items():
+        rows[f'{method} / calibration'] = entry['calibration']
+        rows[f'{method} / cross-validated'] = entry['crossval']
+        if 'validation' in entry:
+            rows[f'{method} / validation'] = entry['validation']
+    rows['95 % prediction interval (RMS)'] = report['prediction_interval_95_pct_capacity']
+    lines += [format_sigma_table(rows, loads, digits=4).replace('(%)', '   '), '```', '']
+    coverage = {m: e.get('validation_coverage_1.96u') for m, e in report['methods_compared'].items()
+                if 'validation_coverage_1.96u' in e}
+    if coverage:
+        lines += ['Validation points inside ±1.96 u: ' + ', '.join(f'{m} {100 * c:.1f} %' for m, c in coverage.items()),
+                  '']
+    lines += ['## Series tares (file units; total = applied + tare) ± standard error', '',
+              '| series | ' + ' | '.join(loads) + ' |', '|---|' + '---|' * len(loads)]
+    for series, tares in report['series_tares'].items():
+        sig = report['series_tares_sigma'][series]
+        lines.append(f'| {series} | ' + ' | '.join(f'{tares[s]:.4g} ± {sig[s]:.2g}' for s in loads) + ' |')
+    lines += ['', '## Terms (VIF, significance, PRESS)', '']
+    for method, rows_ in report.get('term_statistics', {}).items():
+        weak = report['weak_terms'].get(method, [])
+        high_vif = [r['term'] for r in rows_ if r['vif'] > 10]
+        lines += [f'- {method}: {len(rows_)} terms; {len(high_vif)} with VIF > 10; '
+                  f'{len(weak)} insignificant everywhere (p ≥ 0.01) whose removal lowers PRESS: '
+                  f'{", ".join(weak[:20]) or "none"}{" ..." if len(weak) > 20 else ""}']
+    lines += ['', 'Per term and load in report.json (`term_statistics`): VIF, p-value of the coefficient, '
+              'PRESS without the term / PRESS with it.', '', '## Uncertainty of each point', '',
+              f'k = 1 standard uncertainty from the coefficient covariance, the residual scatter and the series '
+              f'tare; 95 % prediction interval = t({report["uncertainty"]["t_95"]}) × u. Every point in '
+              f'`point_uncertainty.csv`.', '']
+    if report.get('warnings'):
+        lines += ['## Warnings', ''] + [f'- {w}' for w in report['warnings']] + ['']
+    if report.get('plots'):
+        lines += ['## Residual plots', ''] + [f'![{p}]({p})' for p in report['plots']] + ['']
+    lines += [f'Fitted {report["fitted_at"]} from {", ".join(report["sources"])}.']
+    return '\n'.join(lines) + '\n'
+
+
+def run_export(args) -> int:
+    from ..cli import CommandError
+    from ..tables.export import ExportError, export_bags_table
+    try:
+        path, points = export_bags_table(args.bags, args.balance, Path(args.out))
+    except ExportError as err:
+        raise CommandError(str(err)) from None
+    print(f'wrote {points} points to {path}')
+    return 0

@@ -1,0 +1,149 @@
+"""Series tares estimated with the model (AIAA R-091 practice), and the direct (TM-663) form.
+
+Every load series s carries an unknown tare load T_s: total load = applied + T_s. In the direct form
+(TM-663 eqs. (1)-(18): loads as a polynomial of the outputs) the tares are per-series load intercepts
+of one linear least-squares problem:
+
+    applied_i = C · x(V_i) - T_{s(i)}          (x without the constant: T takes its role)
+
+solved with scaled columns by SVD (never the normal equations), giving coefficients, tares and their
+full covariance, from all points of each series rather than its zero-load point alone.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+import scipy.linalg
+
+from ..model.balance_model import BalanceModel
+from ..model.terms import Term, as_variables, design_matrix
+from .least_squares import UnexcitedTermsError
+from .term_selection import TermStatistics, term_statistics
+
+RANK_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class LinearSolution:
+    coefficients: np.ndarray           # (q, k)
+    covariance_unscaled: np.ndarray    # (q, q) = (ZᵀZ)⁻¹
+    leverage: np.ndarray               # (N,)
+    basis: np.ndarray                  # (N, q) orthonormal basis of the design's columns
+    condition_number: float
+
+
+def solve_scaled(design: np.ndarray, targets: np.ndarray, column_names: Sequence[str],
+                 model_name: str = 'model') -> LinearSolution:
+    """Least squares with columns scaled to unit norm; raises UnexcitedTermsError naming dependent columns."""
+    scales = np.linalg.norm(design, axis=0)
+    scales[scales == 0] = 1.0
+    scaled = design / scales
+    _, r_factor, pivots = scipy.linalg.qr(scaled, mode='economic', pivoting=True)
+    diagonal = np.abs(np.diag(r_factor))
+    if diagonal.size < design.shape[1] or np.any(diagonal < RANK_TOLERANCE * diagonal[0]):
+        bad = [column_names[pivots[i]] for i in range(design.shape[1])
+               if i >= diagonal.size or diagonal[i] < RANK_TOLERANCE * diagonal[0]]
+        raise UnexcitedTermsError(bad, model_name)
+    u, singular, vt = np.linalg.svd(scaled, full_matrices=False)
+    v_scaled = vt.T / singular
+    coefficients = (v_scaled @ (u.T @ targets)) / scales[:, None]
+    covariance = (v_scaled @ v_scaled.T) / np.outer(scales, scales)
+    return LinearSolution(coefficients, covariance, np.sum(u ** 2, axis=1), u,
+                          float(singular[0] / singular[-1]))
+
+
+def series_indicator(series) -> tuple[tuple[int, ...], np.ndarray, np.ndarray]:
+    """(labels, index of each point's series (N,), one-hot (N, n_series))."""
+    series = np.asarray(series, dtype=int)
+    labels, index = np.unique(series, return_inverse=True)
+    onehot = np.zeros((len(series), len(labels)))
+    onehot[np.arange(len(series)), index] = 1.0
+    return tuple(int(x) for x in labels), index, onehot
+
+
+@dataclass(frozen=True)
+class SeriesTareFit:
+    """A model fitted with its series tares, in SI, with what the report needs."""
+
+    method: str                        # 'direct' | 'iterative'
+    model: object                      # BalanceModel (direct) or IterativeModel (iterative)
+    series_labels: tuple[int, ...]
+    tares: np.ndarray                  # (n_series, n_loads) N / N·m, total = applied + tare
+    tare_sigma: np.ndarray             # (n_series, n_loads) standard errors
+    load_residuals: np.ndarray         # (N, n_loads) applied - predicted applied
+    press_load_residuals: np.ndarray   # (N, n_loads) the same with each point left out of the fit
+    point_uncertainty: np.ndarray      # (N, n_loads) k = 1 standard uncertainty of each point's load
+    residual_sigma: np.ndarray         # (n_targets,) σ of the fit's own residuals (loads or outputs)
+    dof: int
+    statistics: TermStatistics | None
+    condition_number: float
+    iterations: int = 1
+    notes: tuple[str, ...] = field(default_factory=tuple)
+    full_covariance_unscaled: np.ndarray | None = None   # (p + n_series, p + n_series) of [terms, series]
+
+    def tare_rows(self, series) -> np.ndarray:
+        """(N, n_loads) the calibration's tare of each point's series; KeyError names a series it lacks."""
+        lookup = {s: i for i, s in enumerate(self.series_labels)}
+        missing = sorted({int(s) for s in series} - set(lookup))
+        if missing:
+            raise KeyError(f'load series {", ".join(map(str, missing))} not in the calibration '
+                           f'(it has {", ".join(map(str, self.series_labels))})')
+        return self.tares[[lookup[int(s)] for s in series]]
+
+    def predict_applied(self, outputs, series) -> np.ndarray:
+        """Applied loads predicted for validation points: model loads minus the calibration's tares."""
+        return np.atleast_2d(self.model.loads(outputs)) - self.tare_rows(series)
+
+
+def fit_direct(terms: Sequence[Term], outputs, applied_loads, series, *, components: Sequence[str],
+               inputs: Sequence[str], name: str = 'direct', statistics: bool = True) -> SeriesTareFit:
+    """TM-663's form with per-series load intercepts (the tares), eq. (19) plus tares."""
+    terms = tuple(t for t in terms if not t.is_constant)
+    outputs = np.atleast_2d(np.asarray(outputs, float))
+    applied = np.atleast_2d(np.asarray(applied_loads, float))
+    labels, index, onehot = series_indicator(series)
+    x = design_matrix(terms, as_variables(tuple(inputs), outputs), len(outputs))
+    design = np.hstack([x, -onehot])
+    names = [t.name for t in terms] + [f'tare of series {s}' for s in labels]
+    solution = solve_scaled(design, applied, names, name)
+    p = len(terms)
+    coefficients = solution.coefficients[:p].T
+    tares = solution.coefficients[p:]
+    residuals = applied - design @ solution.coefficients
+    dof = len(outputs) - design.shape[1]
+    if dof <= 0:
+        raise UnexcitedTermsError(names[len(outputs):], name)
+    sigma = np.sqrt((residuals ** 2).sum(axis=0) / dof)
+    cov_diag = np.diag(solution.covariance_unscaled)
+    tare_sigma = np.sqrt(np.outer(cov_diag[p:], sigma ** 2))
+    h = np.minimum(solution.leverage, 1 - 1e-12)
+    press = residuals / (1 - h)[:, None]
+    uncertainty = sigma[None, :] * np.sqrt(1.0 + h)[:, None]
+    metadata = {'uncertainty': {'residual_sigma': sigma.tolist(),
+                                'covariance_unscaled': solution.covariance_unscaled[:p, :p].tolist(),
+                                'dof': int(dof)}}
+    model = BalanceModel(name, terms, coefficients, tuple(components), tuple(inputs), metadata)
+    stats = term_statistics(design, applied, solution.coefficients, solution.covariance_unscaled, p,
+                            [t.name for t in terms], list(components)) if statistics else None
+    return SeriesTareFit('direct', model, labels, tares, tare_sigma, residuals, press, uncertainty, sigma,
+                         dof, stats, solution.condition_number, 1, (), solution.covariance_unscaled)
+
+
+def series_rows(fit: SeriesTareFit, series) -> np.ndarray:
+    """(N, n_series) one-hot rows of the calibration's series for new points (KeyError if unknown)."""
+    fit.tare_rows(series)
+    rows = np.zeros((len(series), len(fit.series_labels)))
+    rows[np.arange(len(series)), [fit.series_labels.index(int(s)) for s in series]] = 1.0
+    return rows
+
+
+def direct_point_uncertainty(fit: SeriesTareFit, outputs, series) -> np.ndarray:
+    """k = 1 uncertainty of applied loads predicted at new points with the calibration's tares:
+    u² = σ² (1 + z (ZᵀZ)⁻¹ zᵀ), z = [x(V), -e_s]: coefficients, the tare's own uncertainty and
+    their correlation, plus the residual scatter."""
+    outputs = np.atleast_2d(np.asarray(outputs, float))
+    z = np.hstack([fit.model.design(outputs), -series_rows(fit, series)])
+    h = np.einsum('ij,jk,ik->i', z, fit.full_covariance_unscaled, z)
+    return fit.residual_sigma[None, :] * np.sqrt(1.0 + h)[:, None]

@@ -1,0 +1,97 @@
+"""The standard uncertainty (k = 1, GUM) of each calibrated load, sample by sample.
+
+For a direct (TM-663) model L = C·x(V), component k:
+
+    u_k² = σ_k² · (1 + x (XᵀX)⁻¹ xᵀ)  [+ u_tare,k²]
+
+x (XᵀX)⁻¹ xᵀ is the full design-row prediction variance of the fitted coefficients (including their
+correlation with the series tares they were fitted with); it is small where the schedule put
+points and grows where it did not (six loads at once). σ_k is the calibration's residual scatter.
+For an iterative (R-091) model V = A·g(L) the same is computed in output space at the solved loads
+and mapped to loads by the inverse Jacobian: cov_L = J⁻¹ diag(σ_V² (1 + g C gᵀ)) J⁻ᵀ.
+The pieces are stored by the fit in each model's `metadata.uncertainty` in calibration.yaml.
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+_CACHE: dict[int, tuple[object, np.ndarray, np.ndarray]] = {}
+
+
+class UncertaintyUnavailable(ValueError):
+    """The calibration carries no coefficient covariance (e.g. the memo's published matrices)."""
+
+
+def _pieces(model) -> tuple[np.ndarray, np.ndarray] | None:
+    cached = _CACHE.get(id(model))
+    if cached is not None and cached[0] is model:
+        return cached[1], cached[2]
+    metadata = getattr(model, 'metadata', None) or {}
+    meta = metadata.get('uncertainty') if isinstance(metadata, Mapping) else None
+    if not meta:
+        return None
+    covariance = np.asarray(meta['covariance_unscaled'], dtype=float)
+    sigma = np.asarray(meta['residual_sigma'], dtype=float)
+    if covariance.shape != (len(model.terms), len(model.terms)):
+        return None
+    if len(_CACHE) > 64:
+        _CACHE.clear()
+    _CACHE[id(model)] = (model, covariance, sigma)
+    return covariance, sigma
+
+
+def _resolve(calibration_or_model, model: str):
+    if hasattr(calibration_or_model, 'models') and hasattr(calibration_or_model, 'model'):
+        return calibration_or_model.model(model)
+    return calibration_or_model
+
+
+def has_uncertainty(calibration_or_model, model: str = 'adopted') -> bool:
+    return _pieces(_resolve(calibration_or_model, model)) is not None
+
+
+def require_covariance(calibration_or_model, model: str = 'adopted') -> None:
+    chosen = _resolve(calibration_or_model, model)
+    if _pieces(chosen) is None:
+        raise UncertaintyUnavailable(f'model {getattr(chosen, "name", "?")} carries no coefficient covariance '
+                                     f'(metadata.uncertainty); refit it with balance-calib fit or refit')
+
+
+def load_standard_uncertainty(calibration_or_model, outputs_mv, extra: Mapping[str, np.ndarray] | None = None,
+                              *, model: str = 'adopted', tare_sigma=None) -> np.ndarray:
+    """(N, n_components) standard uncertainty (k = 1) of each load, N / N·m, model component order.
+
+    outputs_mv (N, n_inputs) as passed to model.loads; extra likewise. tare_sigma: optional
+    (n_components,) standard uncertainty of a live load tare, added in quadrature. NaN rows where
+    the model has no stored covariance or the outputs are not finite.
+    """
+    chosen = _resolve(calibration_or_model, model)
+    outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
+    n = outputs.shape[0]
+    pieces = _pieces(chosen)
+    result = np.full((n, len(chosen.components)), np.nan)
+    finite = np.all(np.isfinite(outputs), axis=1)
+    if pieces is None or not finite.any():
+        return result
+    covariance, sigma = pieces
+    good = outputs[finite]
+    if getattr(chosen, 'form', 'direct') == 'iterative':
+        loads = np.atleast_2d(chosen.loads(good))
+        _, jac = chosen.output_jacobian(loads)
+        design = chosen.design(loads)
+        h = np.einsum('ij,jk,ik->i', design, covariance, design)
+        variance_out = sigma[None, :] ** 2 * (1.0 + h)[:, None]
+        inverse = np.linalg.inv(jac)
+        variance = np.einsum('nmk,nk->nm', inverse ** 2, variance_out)
+    else:
+        sub_extra = None if extra is None else {
+            k: (np.asarray(v)[finite] if np.ndim(v) and np.shape(v)[0] == n else v) for k, v in extra.items()}
+        design = chosen.design(good, sub_extra)
+        h = np.einsum('ij,jk,ik->i', design, covariance, design)
+        variance = sigma[None, :] ** 2 * (1.0 + h)[:, None]
+    if tare_sigma is not None:
+        variance = variance + np.asarray(tare_sigma, dtype=float)[None, :] ** 2
+    result[finite] = np.sqrt(variance)
+    return result

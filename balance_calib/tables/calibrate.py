@@ -1,0 +1,270 @@
+"""Table -> calibration: both model forms with series tares, method choice, validation, uncertainty.
+
+Pure (writes nothing): `calibrate_table` returns the Calibration (loadable by balance_calibrator),
+the report dict (interfaces.md keys) and per-point rows; `commands/fit.py` writes them.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+import scipy.stats
+
+from ..calibration_file import Calibration, now_iso
+from ..fit.iterative import IterationDidNotConverge, fit_iterative, iterative_point_uncertainty
+from ..fit.least_squares import UnexcitedTermsError
+from ..fit.series_tares import SeriesTareFit, direct_point_uncertainty, fit_direct
+from ..model.inverse import InverseDidNotConverge
+from ..model.r091 import term_set
+from .balfit_reader import CalibrationTable, TableError
+
+METHODS = ('direct', 'iterative')
+_NAME_RE = re.compile(r'^[A-Za-z_][A-Za-z0-9_]*$')
+
+
+class TableCalibrationError(ValueError):
+    """The table cannot be calibrated as asked; one line saying why."""
+
+
+@dataclass(frozen=True)
+class TableCalibration:
+    table: CalibrationTable
+    validation: CalibrationTable | None
+    fits: Mapping[str, SeriesTareFit]
+    method: str
+    calibration: Calibration
+    report: dict
+    point_rows: list[dict]
+
+
+def _sigma_pct(residuals, capacity, symbols) -> dict[str, float]:
+    """Sample standard deviation of (applied - predicted) x 100 / capacity (interfaces.md)."""
+    sigma = np.std(residuals, axis=0, ddof=1) / capacity * 100.0
+    return {s: round(float(v), 5) for s, v in zip(symbols, sigma)}
+
+
+def _check_names(table: CalibrationTable) -> None:
+    for symbol in table.load_symbols + table.bridge_symbols:
+        if not _NAME_RE.match(symbol):
+            raise TableCalibrationError(f'{table.source}: symbol {symbol!r} cannot name a model variable '
+                                        f'(letters, digits and _ only, not starting with a digit)')
+
+
+def _outputs(table: CalibrationTable, excitation_v: float | None) -> np.ndarray:
+    outputs = table.bridge_outputs
+    if excitation_v is not None and table.output_internal_unit == 'mV/V':
+        outputs = outputs * excitation_v
+    return outputs
+
+
+def _normality(residuals, symbols) -> dict[str, float]:
+    """p-value of D'Agostino-Pearson's normality test per load (small: structured residual)."""
+    result = {}
+    for k, symbol in enumerate(symbols):
+        column = residuals[:, k]
+        result[symbol] = float(f'{scipy.stats.normaltest(column).pvalue:.3g}') if len(column) >= 20 else 1.0
+    return result
+
+
+def _choose(fits: Mapping[str, SeriesTareFit], capacity, symbols) -> tuple[str, str]:
+    """Adopt the form with the lower mean cross-validated σ (% capacity); say why, with the residual structure."""
+    cv = {m: np.sqrt(np.mean(f.press_load_residuals ** 2, axis=0)) / capacity * 100 for m, f in fits.items()}
+    score = {m: float(np.mean(v)) for m, v in cv.items()}
+    chosen = min(score, key=score.get)
+    other = [m for m in fits if m != chosen][0]
+    better = [s for s, a, b in zip(symbols, cv[chosen], cv[other]) if a < b]
+    structure = []
+    for method, fit in fits.items():
+        normal = _normality(fit.load_residuals, symbols)
+        odd = [f'{s} (p={p:.2g})' for s, p in normal.items() if p < 1e-3]
+        if odd:
+            structure.append(f'{method} residuals non-normal on {", ".join(odd)}')
+    why = (f'{chosen}: cross-validated σ {score[chosen]:.4f} % capacity (mean over loads) against '
+           f'{score[other]:.4f} % for {other}, lower on {len(better)} of {len(symbols)} loads '
+           f'({", ".join(better) or "none"})')
+    if structure:
+        why += '; ' + '; '.join(structure)
+    return chosen, why
+
+
+def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str = 'auto',
+                    validation: CalibrationTable | None = None, excitation_v: float | None = None,
+                    statistics: bool = True) -> TableCalibration:
+    if method not in ('auto',) + METHODS:
+        raise TableCalibrationError(f'--method {method!r}: expected auto, direct or iterative')
+    _check_names(table)
+    loads_si = table.applied_loads_si
+    outputs = _outputs(table, excitation_v)
+    capacity = table.load_capacity_si
+    loads, inputs = table.load_symbols, table.bridge_symbols
+    if validation is not None:
+        if validation.load_symbols != loads or validation.bridge_symbols != inputs or \
+                validation.load_units != table.load_units or validation.output_units != table.output_units:
+            raise TableCalibrationError(f'{validation.source}: symbols or units differ from the calibration '
+                                        f'table {table.source}')
+    methods = METHODS if (method == 'auto' or validation is not None) else (method,)
+    if len(inputs) != len(loads) and 'iterative' in methods:
+        if method == 'iterative':
+            raise TableCalibrationError(f'{table.source}: the iterative method needs as many bridge outputs as '
+                                        f'loads ({len(inputs)} outputs, {len(loads)} loads)')
+        methods = ('direct',)
+    try:
+        term_sets = {
+            'direct': term_set('tm663-cubic' if terms == 'auto' else terms, inputs, loads),
+            'iterative': term_set('r091-96' if terms == 'auto' else terms, loads, inputs)}
+    except ValueError as err:
+        raise TableCalibrationError(str(err)) from None
+    fits: dict[str, SeriesTareFit] = {}
+    try:
+        for m in methods:
+            if m == 'direct':
+                fits[m] = fit_direct(term_sets[m], outputs, loads_si, table.series, components=loads,
+                                     inputs=inputs, name='direct', statistics=statistics)
+            else:
+                fits[m] = fit_iterative(term_sets[m], loads_si, outputs, table.series, components=loads,
+                                        inputs=inputs, capacity=capacity, name='iterative', statistics=statistics)
+    except (UnexcitedTermsError, IterationDidNotConverge, InverseDidNotConverge) as err:
+        raise TableCalibrationError(f'{table.source}: {err}') from None
+
+    if method == 'auto' and len(fits) == 2:
+        chosen, why = _choose(fits, capacity, loads)
+    else:
+        chosen = method if method != 'auto' else next(iter(fits))
+        why = f'{chosen}: asked for with --method {method}' if method != 'auto' else \
+            f'{chosen}: the only form the table allows (outputs and loads differ in number)'
+    fit = fits[chosen]
+
+    # validation with the calibration's tares (never re-estimated)
+    validation_sigma, validation_u, val_outputs = {}, {}, None
+    if validation is not None:
+        val_outputs = _outputs(validation, excitation_v)
+        for m, f in fits.items():
+            try:
+                predicted = f.predict_applied(val_outputs, validation.series)
+            except KeyError as err:
+                raise TableCalibrationError(f'{validation.source}: {err.args[0]}') from None
+            except InverseDidNotConverge as err:
+                raise TableCalibrationError(f'{validation.source}: {err}') from None
+            residual = validation.applied_loads_si - predicted
+            validation_sigma[m] = (_sigma_pct(residual, capacity, loads), residual)
+            validation_u[m] = (direct_point_uncertainty if m == 'direct' else iterative_point_uncertainty)(
+                f, val_outputs, validation.series)
+
+    t95 = float(scipy.stats.t.ppf(0.975, fit.dof))
+    factor = table.load_factor
+    report = _report(table, validation, fits, chosen, why, term_sets, validation_sigma, validation_u, t95, terms)
+    point_rows = _point_rows(table, fit, t95, 'calibration', fit.load_residuals, fit.point_uncertainty)
+    if validation is not None:
+        point_rows += _point_rows(validation, fit, t95, 'validation', validation_sigma[chosen][1],
+                                  validation_u[chosen])
+    rated = table.output_capacity[list(table.bridge_columns)] * table.output_factor[list(table.bridge_columns)]
+    if excitation_v is not None and table.output_internal_unit == 'mV/V':
+        rated = rated * excitation_v
+    rated = np.where(np.isfinite(rated) & (rated > 0), rated, np.max(np.abs(outputs), axis=0))
+    models = {m: f.model for m, f in fits.items()}
+    output_unit = 'mV' if excitation_v is not None or table.output_internal_unit == 'mV' else table.output_internal_unit
+    calibration = Calibration(
+        table.balance_name or 'balance', models, chosen, chosen, capacity, rated, tuple(loads), tuple(inputs),
+        report['sigma_pct_fs']['after'], now_iso(), None,
+        {'format': 'balfit', 'source': table.source, 'method_choice': why, 'output_unit': output_unit,
+         'load_units_si': list(table.load_si_units),
+         'series_tares_si': {str(s): [float(x) for x in row] for s, row in zip(fit.series_labels, fit.tares)},
+         'series_tares_sigma_si': {str(s): [float(x) for x in row] for s, row in zip(fit.series_labels, fit.tare_sigma)},
+         'points': table.points})
+    del factor
+    return TableCalibration(table, validation, fits, chosen, calibration, report, point_rows)
+
+
+def _point_rows(table, fit, t95, kind, residuals, uncertainty) -> list[dict]:
+    capacity = table.load_capacity_si
+    rows = []
+    for i in range(table.points):
+        row = {'set': kind, 'point_id': table.point_id[i], 'series': int(table.series[i])}
+        for k, symbol in enumerate(table.load_symbols):
+            row[f'{symbol}_residual_pct'] = residuals[i, k] / capacity[k] * 100
+            row[f'{symbol}_u_pct'] = uncertainty[i, k] / capacity[k] * 100
+            row[f'{symbol}_pi95_pct'] = t95 * uncertainty[i, k] / capacity[k] * 100
+        rows.append(row)
+    return rows
+
+
+def _in_file_units(values_si, table) -> np.ndarray:
+    return np.asarray(values_si) / table.load_factor
+
+
+def _report(table, validation, fits, chosen, why, term_sets, validation_sigma, validation_u, t95, terms_spec) -> dict:
+    fit = fits[chosen]
+    loads = table.load_symbols
+    capacity = table.load_capacity_si
+    sigma_cal = _sigma_pct(fit.load_residuals, capacity, loads)
+    sigma_cv = {s: round(float(v), 5) for s, v in
+                zip(loads, np.sqrt(np.mean(fit.press_load_residuals ** 2, axis=0)) / capacity * 100)}
+    pi = np.sqrt(np.mean(fit.point_uncertainty ** 2, axis=0)) * t95 / capacity * 100
+    tares = _in_file_units(fit.tares, table)
+    tare_sigma = _in_file_units(fit.tare_sigma, table)
+    compared = {}
+    for m, f in fits.items():
+        entry = {'calibration': _sigma_pct(f.load_residuals, capacity, loads),
+                 'crossval': {s: round(float(v), 5) for s, v in
+                              zip(loads, np.sqrt(np.mean(f.press_load_residuals ** 2, axis=0)) / capacity * 100)},
+                 'terms': len(term_sets[m]), 'iterations': f.iterations,
+                 'condition_number': float(f'{f.condition_number:.4g}'),
+                 'residual_normality_p': _normality(f.load_residuals, loads)}
+        if m in validation_sigma:
+            entry['validation'] = validation_sigma[m][0]
+            u = validation_u[m]
+            residual = validation_sigma[m][1]
+            entry['validation_coverage_1.96u'] = round(float(np.mean(np.abs(residual) <= 1.96 * u)), 4)
+        compared[m] = entry
+    stats = {m: f.statistics.to_report() for m, f in fits.items() if f.statistics is not None}
+    weak = {m: f.statistics.weak_terms() for m, f in fits.items() if f.statistics is not None}
+    report = {
+        'balance': table.balance_name or 'balance',
+        'format': 'balfit',
+        'method': chosen,
+        'method_choice': why,
+        'terms': [t.name for t in term_sets[chosen]],
+        'term_set': terms_spec if terms_spec != 'auto' else ('tm663-cubic' if chosen == 'direct' else 'r091-96'),
+        'load_symbols': list(loads),
+        'load_units': list(table.load_units),
+        'output_symbols': list(table.bridge_symbols),
+        'output_units': [table.output_units[i] for i in table.bridge_columns],
+        'capacities': {s: float(c) for s, c in zip(loads, table.load_capacity)},
+        'points': {'calibration': table.points, 'validation': validation.points if validation is not None else 0},
+        'disabled_points': {'calibration': table.disabled_points,
+                            'validation': validation.disabled_points if validation is not None else 0},
+        'base_model': chosen,
+        'sigma_pct_capacity': {'calibration': sigma_cal,
+                               **({'validation': validation_sigma[chosen][0]} if validation_sigma else {})},
+        'sigma_pct_fs': {'before': sigma_cal, 'after': sigma_cal},
+        'sigma_pct_fs_crossval': {'before': sigma_cv, 'after': sigma_cv},
+        'series_tares': {str(s): {sym: float(f'{v:.6g}') for sym, v in zip(loads, row)}
+                         for s, row in zip(fit.series_labels, tares)},
+        'series_tares_sigma': {str(s): {sym: float(f'{v:.4g}') for sym, v in zip(loads, row)}
+                               for s, row in zip(fit.series_labels, tare_sigma)},
+        'prediction_interval_95_pct_capacity': {s: round(float(v), 5) for s, v in zip(loads, pi)},
+        'uncertainty': {'k': 1, 't_95': round(t95, 4),
+                        'how': 'u² = σ²(1 + z (ZᵀZ)⁻¹ zᵀ), z the point\'s design row with its series; '
+                               'iterative: in output space, mapped by the inverse Jacobian; per point in '
+                               'point_uncertainty.csv'},
+        'methods_compared': compared,
+        'term_statistics': stats,
+        'weak_terms': weak,
+        'effects': [],
+        'adopted': False,
+        'unexplained': [],
+        'warnings': [],
+        'natural_zeros': {label: [float(x) for x in zero] for label, zero in table.natural_zeros.items()},
+        'fitted_at': now_iso(),
+        'sources': [table.source] + ([validation.source] if validation is not None else []),
+    }
+    if not table.natural_zeros:
+        report['warnings'].append(f'{table.source} has no natural zeros: outputs used as written')
+    extra = [table.output_symbols[i] for i in range(len(table.output_symbols)) if i not in table.bridge_columns]
+    if extra:
+        report['warnings'].append(f'channels {", ".join(extra)} are not bridge outputs: not used by the fit')
+    report['warnings'].append('diagnosis of effects (temperature, drift, hysteresis, body tare) not run: '
+                              'a table has no sample times, temperatures or gravity directions')
+    return report
