@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import os
+import stat
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +23,7 @@ from .model.balance_model import BalanceModel
 from .units import BRIDGE_OUTPUTS, COMPONENTS
 
 FORMAT = 'balance_calib/calibration 1'
+MAX_CALIBRATION_BYTES = 16 << 20
 
 # Extra model variables and the live input each needs.
 VARIABLE_INPUTS = {'dT': 'temperature', 'dT2': 'temperature', 'dir_FX': 'load_history', 'dir_FY': 'load_history',
@@ -159,6 +161,11 @@ def load_calibration(path: str | Path) -> Calibration:
         except ConfigError:
             pass
     try:
+        info = os.stat(path)
+        if not stat.S_ISREG(info.st_mode) or info.st_size > MAX_CALIBRATION_BYTES:
+            # a FIFO would block the reader, /dev/zero never ends
+            raise ConfigError(f'{path}: not a calibration file (not a regular file of at most '
+                              f'{MAX_CALIBRATION_BYTES >> 20} MB)')
         text = path.read_text()
     except OSError as err:
         raise ConfigError(f'{path}: cannot read calibration file: {err.strerror or err}') from None

@@ -6,8 +6,9 @@ from hypothesis.extra.numpy import arrays
 
 from balance_calib.calibration_file import Calibration, load_calibration
 from balance_calib.config import CONFIG_DIR
-from balance_calib.live.calibrator_core import (OK, WARN, InputCounters, LiveState, LoadHistory, TareWindow,
-                                                activate, compute_wrench, describe_tare, diagnostics, tare_zero)
+from balance_calib.live.calibrator_core import (OK, STALE, WARN, InputCounters, LiveState, LoadHistory, TareWindow,
+                                                activate, compute_wrench, describe_tare, describe_zero, diagnostics,
+                                                tare_zero)
 from balance_calib.model.balance_model import BalanceModel
 from balance_calib.model.inverse import outputs_for_loads
 from balance_calib.model.terms import parse_terms
@@ -105,10 +106,13 @@ def test_wind_on_load_is_read_from_the_tared_outputs(fractions, zero_mv, install
                                installation.to_tunnel(loads) / installation.to_tunnel(CAPACITY), atol=1e-9)
 
 
-def test_tare_description_gives_units_per_component():
-    text = describe_tare(np.full(6, 0.04), activate(MEMO, 'cubic', 'upright'))
+def test_zero_and_tare_descriptions_give_units_per_component():
+    text = describe_zero(np.full(6, 0.04), activate(MEMO, 'cubic', 'upright'))
     assert 'FXV=+0.04000 mV' in text and 'MZV=+0.04000 mV' in text
     assert ' N,' in text and 'N·m' in text and 'upright' in text
+    # a tare load is stated in tunnel axes: upright F_Z = -F_Z(balance) (§10.2.1)
+    text = describe_tare(np.array([0, 0, 2940.0, 0, 39.2, 0]), activate(MEMO, 'cubic', 'upright'))
+    assert 'FZ=-2940.000 N' in text and 'MY=+39.200 N·m' in text
 
 
 def temperature_calibration() -> Calibration:
@@ -158,7 +162,7 @@ def _state(**overrides):
 def test_diagnostics_report_rate_staleness_rejections_and_calibration():
     active = activate(MEMO, 'cubic', 'inverted')
     healthy = diagnostics(active, _state())
-    assert [r.level for r in healthy] == [OK, OK]
+    assert [r.level for r in healthy] == [OK, OK, OK]      # input, calibration, overload
     values = dict(healthy[0].values) | dict(healthy[1].values)
     assert values['input_rate_hz'] == '200.0' and values['stale'] == 'False'
     assert values['model'] == 'cubic' and values['installation'].startswith('inverted')
@@ -166,8 +170,8 @@ def test_diagnostics_report_rate_staleness_rejections_and_calibration():
     assert values['requires'] == 'none' and values['age_days'] == 'unknown'
 
     stale = diagnostics(active, _state(last_sample_age_s=3.0))
-    assert stale[0].level == WARN and 'stale' in stale[0].message
-    assert diagnostics(active, _state(last_sample_age_s=None))[0].level == WARN
+    assert stale[0].level == STALE and 'stale' in stale[0].message
+    assert diagnostics(active, _state(last_sample_age_s=None))[0].level == STALE
     rejected = diagnostics(active, _state(counters=InputCounters(received=10, rejected_nonfinite=3,
                                                                  period_rejected=3, period_out_of_envelope=2)))
     assert rejected[0].level == WARN and '3 NaN/inf' in rejected[0].message and '2 samples outside' in \
@@ -181,11 +185,14 @@ def test_diagnostics_report_rate_staleness_rejections_and_calibration():
     assert values['model_in_use'] == 'linear'
 
 
-def test_temperature_terms_act_on_the_change_since_the_tare():
-    """A tare at 25 °C zeroes the output there; at 27 °C the dT term adds 10 N/K x 2 K."""
+def test_temperature_terms_act_on_the_change_since_the_zero_or_the_tare():
+    """A zero (or a tare) at 25 °C zeroes the output there; at 27 °C the dT term adds 10 N/K x 2 K."""
     active = activate(temperature_calibration(), 'adopted', 'balance')
     zero = np.full(6, 0.02)
-    at_tare = compute_wrench(active, zero[None, :], zero_mv=zero, temperature_c=25.0, tare_temperature_c=25.0)
-    np.testing.assert_allclose(at_tare.wrench_tunnel, np.zeros((1, 6)), atol=1e-9)
-    later = compute_wrench(active, zero[None, :], zero_mv=zero, temperature_c=27.0, tare_temperature_c=25.0)
+    at_zero = compute_wrench(active, zero[None, :], zero_mv=zero, temperature_c=25.0, zero_temperature_c=25.0)
+    np.testing.assert_allclose(at_zero.wrench_tunnel, np.zeros((1, 6)), atol=1e-9)
+    later = compute_wrench(active, zero[None, :], zero_mv=zero, temperature_c=27.0, zero_temperature_c=25.0)
+    np.testing.assert_allclose(later.wrench_tunnel, [[0, 0, 20.0, 0, 0, 0]], atol=1e-9)
+    tare_load = compute_wrench(active, zero[None, :], temperature_c=25.0).loads_total[0]     # load space
+    later = compute_wrench(active, zero[None, :], tare_load=tare_load, temperature_c=27.0)
     np.testing.assert_allclose(later.wrench_tunnel, [[0, 0, 20.0, 0, 0, 0]], atol=1e-9)

@@ -206,7 +206,7 @@ def test_nan_samples_are_rejected_counted_and_reported(probe, tmp_path, calibrat
     assert np.all(np.isfinite(wrench_values(wrenches)))
 
 
-def test_tare_zeroes_the_output_and_says_what_it_subtracted(probe, tmp_path, calibration_file):
+def test_tare_subtracts_the_wind_off_load_and_says_what_it_subtracted(probe, tmp_path, calibration_file):
     node = start_calibrator(probe, tmp_path, calibration_file, tare_samples=10, tare_timeout_s=1.0)
     wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
     source = RawSource(probe)
@@ -217,11 +217,17 @@ def test_tare_zeroes_the_output_and_says_what_it_subtracted(probe, tmp_path, cal
     reply = probe.call_async(Trigger, '/balance_calibrator/tare')
     source.stream(200.0)
     wait_for(reply.done, 10.0, 'the tare reply')
-    assert reply.result().success and 'FXV=+0.30000 mV' in reply.result().message and 'N·m' in reply.result().message
+    # the load of the wind-off outputs with the cubic model on the full outputs, in tunnel axes (upright)
+    from balance_calib.live.calibrator_core import activate, compute_wrench
+    expected = compute_wrench(activate(MEMO, 'adopted', 'upright'), [SAMPLE_MV]).wrench_tunnel[0]
+    assert reply.result().success, reply.result().message
+    assert f'FX={expected[0]:+.3f} N' in reply.result().message and f'MZ={expected[5]:+.3f} N·m' in \
+        reply.result().message
     count = len(wrenches)
     wait_for(lambda: len(wrenches) >= count + 5, 10.0, 'wrenches after the tare')
     source.stop()
-    np.testing.assert_allclose(wrench_values(wrenches)[-1], 0.0, atol=1e-12)
+    np.testing.assert_allclose(wrench_values(wrenches)[-1], 0.0, atol=1e-9)
+    assert (tmp_path / 'calibration.tare.yaml').exists()        # persisted beside the calibration
 
 
 def test_bad_parameters_are_rejected_with_a_reason_and_good_ones_applied(probe, tmp_path, calibration_file):
@@ -243,7 +249,8 @@ def test_bad_parameters_are_rejected_with_a_reason_and_good_ones_applied(probe, 
         'model': ('quartic', "no 'quartic' model"),
         'installation': ('sideways', "installation 'sideways'"),
         'calibration_file': (str(tmp_path / 'missing.yaml'), 'missing.yaml: cannot read'),
-        'tare_samples': (0, 'at least 1'),
+        'tare_samples': (0, 'out of range'),
+        'diagnostics_period_s': (float('inf'), 'out of range'),
     }
     for name, (value, reason) in rejected.items():
         result = set_parameter(name, value)

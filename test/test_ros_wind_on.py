@@ -1,5 +1,5 @@
 """Wind-on through the graph: bridge_publisher (α sweep, LMC6522 cubic truth) -> balance_calibrator (memo
-cubic, ~/tare on the wind-off samples) -> /balance/wrench equals the true load in tunnel axes (§10.2)."""
+cubic, ~/zero on the wind-off samples: the simulated model weighs nothing, so they are the electrical zero) -> /balance/wrench equals the true load in tunnel axes (§10.2)."""
 import numpy as np
 import pytest
 from geometry_msgs.msg import WrenchStamped
@@ -28,7 +28,7 @@ def test_held_points_read_the_true_tunnel_axis_load_within_0_1_percent_fs(tmp_pa
         'installation': installation, 'tare_samples': 100})          # calibration_file: the memo's matrices
     publisher = None
     try:
-        tare = probe.call_async(Trigger, '/balance_calibrator/tare')    # waits for the next 100 samples
+        tare = probe.call_async(Trigger, '/balance_calibrator/zero')    # waits for the next 100 samples
         subscription = [s for s in probe.node.subscriptions if s.topic_name == '/balance/wrench'][0]
         wait_for(lambda: subscription.get_publisher_count() >= 1, 20.0, '/balance/wrench')
         publisher = NodeProcess('bridge_publisher', probe.domain_id, tmp_path, {
@@ -36,7 +36,7 @@ def test_held_points_read_the_true_tunnel_axis_load_within_0_1_percent_fs(tmp_pa
             'alpha_start_deg': -2.0, 'alpha_end_deg': 22.0, 'alpha_step_deg': 6.0, 'noise_sigma_pct_fs': 0.005,
             'exit_when_done': True, 'wait_for_subscribers': 2})
         assert publisher.wait(60.0) == 0, publisher.output()
-        wait_for(tare.done, 10.0, 'the tare reply')
+        wait_for(tare.done, 10.0, 'the zero reply')
         assert tare.result().success and 'mV' in tare.result().message, tare.result().message
         wait_for(lambda: len(truth) == 200 + 5 * 80 and len(wrenches) >= 0.95 * len(truth), 10.0,
                  'the truth and wrenches of the run')

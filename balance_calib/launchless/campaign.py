@@ -8,7 +8,7 @@ calibrator's ~/refit, then wind-on through the new calibration.
    processes on one ROS domain over loopback;
 2. when the publisher has played the schedule the recorder is stopped (the bag closes cleanly);
 3. ~/refit fits the bag (report in OUT/report) and the calibrator swaps to the new calibration;
-4. for each installation, bridge_publisher plays a wind-on α sweep, ~/tare zeroes on its wind-off
+4. for each installation, bridge_publisher plays a wind-on α sweep, ~/zero takes the electrical zero on its wind-off
    samples, and the mean /balance/wrench over every held point is compared with the true tunnel
    load (/balance/truth).
 """
@@ -134,8 +134,10 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
             _wait(done.done, 10, 'set installation')
             wrenches.clear()
             truths.clear()
-            tare_client = node.create_client(Trigger, '/balance_calibrator/tare')
-            _wait(tare_client.service_is_ready, 10, 'the ~/tare service')
+            # the simulated model weighs nothing: its wind-off outputs are the electrical zero (~/zero,
+            # output space); a model with weight would take ~/zero before mounting and ~/tare after
+            tare_client = node.create_client(Trigger, '/balance_calibrator/zero')
+            _wait(tare_client.service_is_ready, 10, 'the ~/zero service')
             tare = tare_client.call_async(Trigger.Request())
             wind = NodeProcess('bridge_publisher', domain, logs, {
                 'mode': 'wind_on', 'balance': balance, 'installation': installation, 'rate_hz': rate_hz,
@@ -145,7 +147,7 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
             processes.append(wind)
             if wind.wait(300) != 0:
                 raise RuntimeError(f'wind-on publisher failed; see {wind.stderr_path}')
-            _wait(tare.done, 10, 'the ~/tare reply')
+            _wait(tare.done, 10, 'the ~/zero reply')
             _wait(lambda: len(wrenches) >= len(truths) > 0, 10, 'the wind-on wrenches')
             errors = _held_point_errors(truths, wrenches, capacity)
             result.wind_on_error_pct_fs[f'{installation}/{model}'] = errors

@@ -2,14 +2,17 @@
 
 Per sample (or a batch of samples as one array):
 
-1. reject samples with a NaN or infinite output (nothing is published for them);
-2. subtract the tare: the mean bridge outputs of a wind-off window (`TareWindow`), mV. Outputs are
-   measured from that zero, which is why the wind-on model drops its constant terms (TM-663
-   §10.1: zero outputs must mean zero load). The tare is in the output domain, not in loads: the
-   electrical zero is several % of full scale, and model(V + z) - model(z) != model(V) for the
-   quadratic and cubic models, whereas model(V + z - z) = model(V);
-3. loads in balance calibration axes from the active model without its constants;
-4. flag loads beyond `envelope_margin` x capacity: the model is extrapolating there;
+1. reject samples with a NaN or infinite output, or an output beyond the bridge's range
+   (`output_range_factor` x rated output: saturated, the model would extrapolate into nonsense);
+   nothing is published for them;
+2. subtract the electrical zero (`~/zero`: mean bridge outputs with nothing on the balance), mV,
+   in output space as TM-663 §5(4) does with its zero points;
+3. loads in balance calibration axes from the active model without its constants (§10.1) on those
+   full outputs: what the balance carries (model weight included); flag loads beyond
+   `envelope_margin` x capacity (the model is extrapolating there);
+4. subtract the tare load (`~/tare`: the mean loads of a wind-off window, N and N·m) in load
+   space. The calibration is nonlinear, so model(V) - model(V0) != model(V - V0): a tare taken
+   in output space would be off by up to several % FS with the model's weight on the balance;
 5. turn the loads into the tunnel axes of the installation, TM-663 §10.2 (eqs. (50)-(85)).
 
 Step 3 then 5 is the memo's substitution: eqs. (50)-(55) evaluate the calibration-axis model on
@@ -37,10 +40,11 @@ from ..units import BRIDGE_OUTPUTS, COMPONENTS
 
 MODEL_CHOICES = ('linear', 'quadratic', 'cubic', 'adopted')
 DEFAULT_ENVELOPE_MARGIN = 1.1
+DEFAULT_OUTPUT_RANGE_FACTOR = 2.0
 UNITS = ('N', 'N', 'N', 'N·m', 'N·m', 'N·m')
 
 # diagnostic_msgs/DiagnosticStatus levels, repeated here so the core needs no ROS messages
-OK, WARN, ERROR = 0, 1, 2
+OK, WARN, ERROR, STALE = 0, 1, 2, 3
 
 
 def six_axis_loads(model: BalanceModel, outputs_mv, extra=None) -> np.ndarray:
@@ -58,7 +62,8 @@ def six_axis_loads(model: BalanceModel, outputs_mv, extra=None) -> np.ndarray:
 def six_axis(values, names, fill: float) -> np.ndarray:
     """A per-component vector over `names` spread onto FX..MZ, `fill` where a component is absent."""
     result = np.full(6, fill, dtype=float)
-    result[[COMPONENTS.index(n) for n in names]] = np.asarray(values, dtype=float)
+    result[[COMPONENTS.index(n) if n in COMPONENTS else BRIDGE_OUTPUTS.index(n) for n in names]] = \
+        np.asarray(values, dtype=float)
     return result
 
 
@@ -77,6 +82,8 @@ class ActiveCalibration:
     base_model: BalanceModel        # without constant terms
     installation: Installation
     envelope: np.ndarray            # (6,) |load| above this (N, N·m) is outside the calibrated range
+    output_range_mv: np.ndarray = field(default_factory=lambda: np.full(6, np.inf))
+    # (6,) |raw output| above this (mV) is a saturated bridge (inf for channels the calibration lacks)
 
     @cached_property
     def plan(self):
@@ -104,15 +111,25 @@ class ActiveCalibration:
 
 
 def activate(calibration: Calibration, model: str = 'adopted', installation: str | Installation = 'upright',
-             envelope_margin: float = DEFAULT_ENVELOPE_MARGIN, source: str = '') -> ActiveCalibration:
+             envelope_margin: float = DEFAULT_ENVELOPE_MARGIN, source: str = '',
+             output_range_factor: float = DEFAULT_OUTPUT_RANGE_FACTOR) -> ActiveCalibration:
     """Check that `model` and `installation` make sense for `calibration` and prepare it.
 
-    Raises ConfigError (model missing from the calibration) or ValueError (installation, margin).
+    Raises ConfigError (model missing from the calibration, capacities or rated outputs not
+    positive finite numbers) or ValueError (installation, margin, range factor).
     """
     if not isinstance(installation, Installation):
         installation = parse_installation(installation)
-    if not np.isfinite(envelope_margin) or envelope_margin <= 0:
-        raise ValueError(f'envelope_margin must be a positive number, not {envelope_margin}')
+    if not np.isfinite(envelope_margin) or not 0.5 <= envelope_margin <= 10.0:
+        raise ValueError(f'envelope_margin must be between 0.5 and 10 (x capacity), not {envelope_margin}')
+    if not np.isfinite(output_range_factor) or not 1.0 <= output_range_factor <= 100.0:
+        raise ValueError(f'output_range_factor must be between 1 and 100 (x rated output), not {output_range_factor}')
+    for what, values, names in (('capacity', calibration.capacity, calibration.components),
+                                ('rated_output_mv', calibration.rated_output_mv, calibration.bridge_outputs)):
+        bad = [f'{n}={v}' for n, v in zip(names, np.asarray(values, dtype=float)) if not (np.isfinite(v) and v > 0)]
+        if bad:
+            raise ConfigError(f'{source or calibration.balance}: {what} must be positive finite numbers '
+                              f'({", ".join(bad)})')
     chosen = calibration.model(model)            # ConfigError names the models it has
     model_name = calibration.adopted if model in ('adopted', '') else model
     requires = calibration.requires(model_name)
@@ -122,7 +139,9 @@ def activate(calibration: Calibration, model: str = 'adopted', installation: str
         base_name, base = model_name, chosen
     return ActiveCalibration(calibration, source, model, model_name, chosen.without_constant(), requires,
                              base_name, base.without_constant(), installation,
-                             float(envelope_margin) * six_axis(calibration.capacity, calibration.components, np.inf))
+                             float(envelope_margin) * six_axis(calibration.capacity, calibration.components, np.inf),
+                             float(output_range_factor) * np.abs(six_axis(calibration.rated_output_mv,
+                                                                          calibration.bridge_outputs, np.inf)))
 
 
 # --- live extra inputs ------------------------------------------------------------------------
@@ -179,19 +198,27 @@ def _extra_variables(model: BalanceModel, n: int, temperature_c: np.ndarray | No
 # --- samples -> wrench ------------------------------------------------------------------------
 @dataclass(frozen=True)
 class WrenchBatch:
-    accepted: np.ndarray            # (N,) False for samples with a NaN/inf output (not published)
-    loads_balance: np.ndarray       # (N, 6) tared loads, balance axes, N / N·m (NaN if rejected)
+    accepted: np.ndarray            # (N,) published; False for NaN/inf or saturated samples
+    loads_balance: np.ndarray       # (N, 6) loads after the tare load, balance axes, N / N·m (NaN if rejected)
     wrench_tunnel: np.ndarray       # (N, 6) the same in tunnel axes (what /balance/wrench carries)
     out_of_envelope: np.ndarray     # (N,) a load beyond the envelope (published, but flagged)
     model_used: str
     fallback_reason: str = ''       # why the base model ran instead of the requested one ('' = it did not)
+    loads_total: np.ndarray | None = None   # (N, 6) before the tare load: what the balance carries
+    saturated: np.ndarray | None = None     # (N,) an output beyond the bridge's range (or a non-finite load)
+
+    @property
+    def nonfinite(self) -> np.ndarray:
+        return ~self.accepted & ~self.saturated
 
 
 def model_loads(active: ActiveCalibration, outputs_mv, *, temperature_c=None,
                 load_direction=None) -> tuple[np.ndarray, str, str]:
-    """Balance-axis loads (N, 6) of finite, tared outputs (N, 6); also the model used and why a fallback."""
+    """Balance-axis loads (N, 6) of finite outputs (N, 6); also the model used and why a fallback."""
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
     n = outputs.shape[0]
+    if not active.model.extra_variables:
+        return _plain_loads(active, outputs), active.model_name, ''
     model, name, reason = active.model, active.model_name, ''
     extra = _extra_variables(model, n, None if temperature_c is None else np.asarray(temperature_c, float),
                              active.calibration.reference_temperature_c, load_direction)
@@ -204,76 +231,136 @@ def model_loads(active: ActiveCalibration, outputs_mv, *, temperature_c=None,
     return six_axis_loads(model, outputs, extra or None), name, reason
 
 
-def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, temperature_c=None,
-                   load_direction=None, tare_temperature_c=None, tare_direction=None) -> WrenchBatch:
-    """Raw outputs (N, 6) mV, tare zero_mv (6,) -> wrench in tunnel axes (N, 6); see the module docstring."""
-    outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
-    if outputs.shape[0] == 1 and not active.model.extra_variables:
-        return _one_plain_sample(active, outputs, zero_mv)
-    accepted = np.all(np.isfinite(outputs), axis=1)
-    tared = outputs - (np.zeros(6) if zero_mv is None else np.asarray(zero_mv, dtype=float))
-    loads = np.full(outputs.shape, np.nan)
-    name, reason = active.model_name, ''
-    if accepted.any():
-        temps = None if temperature_c is None else np.broadcast_to(np.asarray(temperature_c, float),
-                                                                    (len(outputs),))[accepted]
-        direction = None if load_direction is None else np.broadcast_to(load_direction, outputs.shape)[accepted]
-        loads[accepted], name, reason = model_loads(active, tared[accepted], temperature_c=temps,
-                                                    load_direction=direction)
-        if zero_mv is not None and active.model.extra_variables and name == active.model_name:
-            # The tare zeroed the outputs at the temperature and load direction of its moment; what
-            # the model's pure temperature / direction terms gave then belongs to that zero too, so
-            # the output reads 0 there and those terms act on the change since the tare.
-            offset, offset_name, _ = model_loads(
-                active, np.zeros((1, 6)),
-                temperature_c=None if tare_temperature_c is None else np.array([tare_temperature_c], float),
-                load_direction=None if tare_direction is None else np.atleast_2d(tare_direction))
-            if offset_name == name:
-                loads[accepted] -= offset[0]
-    wrench = active.installation.to_tunnel(loads)          # TM-663 §10.2
-    with np.errstate(invalid='ignore'):
-        outside = accepted & np.any(np.abs(loads) > active.envelope, axis=1)
-    return WrenchBatch(accepted, loads, wrench, outside, name, reason)
-
-
-def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv) -> WrenchBatch:
-    """compute_wrench for the live path: one sample, a model of the bridge outputs only (~10 µs)."""
+def _plain_loads(active: ActiveCalibration, outputs: np.ndarray) -> np.ndarray:
+    """A model of the bridge outputs only, as one power-product and one matrix product (TM-663 eqs. (1)-(18))."""
     columns, positions, plain, absolute, coefficients = active.plan
-    tared = outputs[0] if zero_mv is None else outputs[0] - zero_mv
-    values = tared[columns]
-    loads = np.zeros((1, 6))
-    accepted = bool(np.isfinite(values).all() and np.isfinite(outputs).all())
-    if not accepted:
-        loads[:] = np.nan
-        return WrenchBatch(np.array([False]), loads, loads.copy(), np.array([False]), active.model_name)
-    design = power_products(values[None, :], plain, absolute)[0]
-    loads[0, positions] = coefficients @ design
-    outside = bool((np.abs(loads[0]) > active.envelope).any())
-    return WrenchBatch(np.array([True]), loads, active.installation.to_tunnel(loads), np.array([outside]),
-                       active.model_name)
+    loads = np.zeros((outputs.shape[0], 6))
+    loads[:, positions] = power_products(outputs[:, columns], plain, absolute) @ coefficients.T
+    return loads
 
 
-# --- tare -------------------------------------------------------------------------------------
+def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tare_load=None, temperature_c=None,
+                   load_direction=None, zero_temperature_c=None, zero_direction=None) -> WrenchBatch:
+    """Raw outputs (N, 6) mV -> wrench in tunnel axes (N, 6); see the module docstring.
+
+    zero_mv (6,): the electrical zero, subtracted from the outputs; tare_load (6,) N / N·m, balance
+    axes: the tare load, subtracted from the loads. zero_temperature_c / zero_direction: the
+    conditions when the zero was taken (for models with temperature or load-direction terms).
+    """
+    outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
+    with np.errstate(invalid='ignore', over='ignore'):
+        finite = np.isfinite(outputs).all(axis=1)
+        saturated = finite & (np.abs(outputs) > active.output_range_mv).any(axis=1)
+    accepted = finite & ~saturated
+    zeroed = outputs if zero_mv is None else outputs - np.asarray(zero_mv, dtype=float)
+    name, reason = active.model_name, ''
+    if accepted.all():
+        totals, name, reason = _loads_with_zero(active, zeroed, temperature_c, load_direction, zero_mv,
+                                                zero_temperature_c, zero_direction)
+    else:
+        totals = np.full(outputs.shape, np.nan)
+        if accepted.any():
+            temps = None if temperature_c is None else np.broadcast_to(np.asarray(temperature_c, float),
+                                                                        (len(outputs),))[accepted]
+            direction = None if load_direction is None else np.broadcast_to(load_direction, outputs.shape)[accepted]
+            totals[accepted], name, reason = _loads_with_zero(active, zeroed[accepted], temps, direction, zero_mv,
+                                                              zero_temperature_c, zero_direction)
+    with np.errstate(invalid='ignore', over='ignore'):
+        overflow = accepted & ~np.isfinite(totals).all(axis=1)    # finite outputs, loads beyond float range
+        if overflow.any():
+            saturated, accepted = saturated | overflow, accepted & ~overflow
+            totals[overflow] = np.nan
+        outside = accepted & np.any(np.abs(totals) > active.envelope, axis=1)
+    loads = totals if tare_load is None else totals - np.asarray(tare_load, dtype=float)
+    wrench = active.installation.to_tunnel(loads)          # TM-663 §10.2
+    return WrenchBatch(accepted, loads, wrench, outside, name, reason, totals, saturated)
+
+
+def _loads_with_zero(active, zeroed, temperature_c, load_direction, zero_mv, zero_temperature_c, zero_direction):
+    loads, name, reason = model_loads(active, zeroed, temperature_c=temperature_c, load_direction=load_direction)
+    if zero_mv is not None and active.model.extra_variables and name == active.model_name:
+        # The zero removed the outputs at the temperature and load direction of its moment; what the
+        # model's pure temperature / direction terms gave then belongs to that zero too, so those
+        # terms act on the change since the zero.
+        offset, offset_name, _ = model_loads(
+            active, np.zeros((1, 6)),
+            temperature_c=None if zero_temperature_c is None else np.array([zero_temperature_c], float),
+            load_direction=None if zero_direction is None else np.atleast_2d(zero_direction))
+        if offset_name == name:
+            loads = loads - offset[0]
+    return loads, name, reason
+
+
+# --- tare and zero ----------------------------------------------------------------------------
 def tare_zero(outputs_mv) -> np.ndarray:
-    """The zero a tare subtracts: mean bridge outputs (6,) mV over a wind-off window (N, 6)."""
+    """The electrical zero: mean bridge outputs (6,) mV over a window (N, 6) with nothing on the balance."""
     return np.mean(np.atleast_2d(np.asarray(outputs_mv, dtype=float)), axis=0)
+
+
+@dataclass(frozen=True)
+class Steadiness:
+    """Whether a window of samples holds one load, judged against the window's own noise."""
+
+    steady: bool
+    reason: str                 # '' when steady; else one line naming the component
+    scatter_ratio: float        # worst std / noise over the components
+    step_ratio: float           # worst |mean(second half) - mean(first half)| / noise
+
+
+def check_steady(values, names, units, scale, max_ratio: float) -> Steadiness:
+    """values (N, k): a window of loads (or outputs); scale (k,) full scale per column.
+
+    The noise σ of each column comes from successive differences (robust: 1.4826 x MAD / √2), which
+    a ramp or a single step barely moves; floor 1e-5 x scale so noise-free data has a scale too.
+    Not steady: std beyond max_ratio x σ (scatter), or the two halves' means apart by more than
+    max_ratio x σ (a step or a ramp inside the window). For white noise of n samples the std is σ
+    and the halves' difference has σ·2/√n, so a steady window passes at max_ratio = 3 or more.
+    """
+    values = np.atleast_2d(np.asarray(values, dtype=float))
+    n = values.shape[0]
+    scale = np.asarray(scale, dtype=float)
+    if n < 4:
+        return Steadiness(False, f'{n} samples cannot show whether the load is steady (at least 4)', np.inf, np.inf)
+    differences = np.diff(values, axis=0)
+    mad = np.median(np.abs(differences - np.median(differences, axis=0)), axis=0)
+    noise = np.maximum(1.4826 * mad / np.sqrt(2.0), 1e-5 * np.where(np.isfinite(scale), scale, 1.0))
+    scatter = np.std(values, axis=0) / noise
+    step = np.abs(values[n // 2:].mean(axis=0) - values[:n // 2].mean(axis=0)) / noise
+    worst_scatter, worst_step = int(np.argmax(scatter)), int(np.argmax(step))
+    if step[worst_step] > max_ratio:
+        k = worst_step
+        delta = values[n // 2:, k].mean() - values[:n // 2, k].mean()
+        return Steadiness(False, f'{names[k]} moved by {delta:+.4g} {units[k]} within the window '
+                                 f'({step[k]:.0f}x its noise {noise[k]:.3g} {units[k]}): a load step or ramp',
+                          float(scatter.max()), float(step.max()))
+    if scatter[worst_scatter] > max_ratio:
+        k = worst_scatter
+        return Steadiness(False, f'{names[k]} scatters by {np.std(values[:, k]):.4g} {units[k]} '
+                                 f'({scatter[k]:.1f}x its sample-to-sample noise {noise[k]:.3g} {units[k]})',
+                          float(scatter.max()), float(step.max()))
+    return Steadiness(True, '', float(scatter.max()), float(step.max()))
 
 
 @dataclass
 class TareWindow:
-    """Collects the next `samples` accepted samples after ~/tare."""
+    """Collects the next `samples` accepted raw samples after ~/tare or ~/zero (kind 'tare' or 'zero')."""
 
     samples: int
+    kind: str = 'tare'
     outputs_mv: list = field(default_factory=list)
+    temperatures_c: list = field(default_factory=list)
 
     def __post_init__(self):
         if int(self.samples) < 1:
             raise ValueError(f'tare needs at least one sample, not {self.samples}')
 
-    def add(self, outputs_mv) -> bool:
+    def add(self, outputs_mv, temperature_c: float | None = None) -> bool:
         """Add accepted raw samples (N, 6) mV; True once the window is full (the rest is ignored)."""
         outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
-        self.outputs_mv.extend(outputs[:max(0, self.samples - len(self.outputs_mv))])
+        taken = outputs[:max(0, self.samples - len(self.outputs_mv))]
+        self.outputs_mv.extend(taken)
+        if temperature_c is not None and len(taken):
+            self.temperatures_c.append(float(temperature_c))
         return self.complete
 
     @property
@@ -284,16 +371,79 @@ class TareWindow:
     def zero_mv(self) -> np.ndarray:
         return tare_zero(np.array(self.outputs_mv))
 
+    @property
+    def temperature_c(self) -> float | None:
+        return float(np.mean(self.temperatures_c)) if self.temperatures_c else None
 
-def describe_tare(zero_mv, active: ActiveCalibration) -> str:
+
+@dataclass(frozen=True)
+class TareResult:
+    ok: bool
+    message: str
+    zero_mv: np.ndarray | None = None      # for kind 'zero'
+    tare_load: np.ndarray | None = None    # for kind 'tare': balance axes, N / N·m
+
+
+def evaluate_window(window: TareWindow, active: ActiveCalibration, *, max_ratio: float, zero_mv=None,
+                    zero_temperature_c=None, zero_direction=None, load_direction=None) -> TareResult:
+    """The zero (output space) or tare load (load space) of a full window, or why it is refused."""
+    outputs = np.array(window.outputs_mv, dtype=float)
+    n = len(outputs)
+    if window.kind == 'zero':
+        names = active.calibration.bridge_outputs
+        columns = [BRIDGE_OUTPUTS.index(v) for v in names]
+        steady = check_steady(outputs[:, columns], names, ('mV',) * len(names),
+                              np.asarray(active.calibration.rated_output_mv, float), max_ratio)
+        if not steady.steady:
+            return TareResult(False, f'zero refused: the window of {n} samples is not steady: {steady.reason}')
+        zero = tare_zero(outputs)
+        return TareResult(True, f'zero: averaged {n} samples, steady (scatter {steady.scatter_ratio:.1f}x, step '
+                                f'{steady.step_ratio:.1f}x noise); electrical zero now subtracted: '
+                                f'{describe_zero(zero, active)}', zero_mv=zero)
+    batch = compute_wrench(active, outputs, zero_mv=zero_mv, temperature_c=window.temperature_c,
+                           load_direction=load_direction, zero_temperature_c=zero_temperature_c,
+                           zero_direction=zero_direction)
+    components = active.calibration.components
+    columns = [COMPONENTS.index(c) for c in components]
+    loads = batch.loads_total[:, columns]
+    units = tuple(UNITS[COMPONENTS.index(c)] for c in components)
+    steady = check_steady(loads, components, units, np.asarray(active.calibration.capacity, float), max_ratio)
+    if not steady.steady:
+        return TareResult(False, f'tare refused: the window of {n} samples is not steady: {steady.reason}')
+    tare_load = np.mean(batch.loads_total, axis=0)
+    mean_outputs = outputs.mean(axis=0)
+    return TareResult(True, f'tare: averaged {n} samples, steady (scatter {steady.scatter_ratio:.1f}x, step '
+                            f'{steady.step_ratio:.1f}x noise); tare load now subtracted: '
+                            f'{describe_tare(tare_load, active)}; mean wind-off outputs: ' +
+                      ', '.join(f'{b}={mean_outputs[BRIDGE_OUTPUTS.index(b)]:+.5f} mV'
+                                for b in active.calibration.bridge_outputs)
+                      + ('' if zero_mv is not None else '; no electrical zero taken (~/zero with nothing on the '
+                         'balance): the calibration sees outputs measured from the bridges\' own zero'),
+                      tare_load=tare_load)
+
+
+def describe_loads(loads_balance, active: ActiveCalibration) -> str:
+    """A load (6,) in balance axes, written per component in the installation's tunnel axes."""
+    tunnel = active.installation.to_tunnel(np.asarray(loads_balance, dtype=float))
+    return ', '.join(f'{c}={v:+.3f} {u}' for c, v, u in zip(COMPONENTS, tunnel, UNITS))
+
+
+def describe_tare(tare_load, active: ActiveCalibration) -> str:
+    """The tare load subtracted, N and N·m, in tunnel axes."""
+    return (f'{describe_loads(tare_load, active)} ({active.installation.name} tunnel axes, {active.model_name} '
+            f'model on the full outputs)')
+
+
+def describe_zero(zero_mv, active: ActiveCalibration) -> str:
     """The zero subtracted, per bridge output in mV, and the load it stands for in tunnel axes."""
     zero = np.asarray(zero_mv, dtype=float)
-    equivalent = active.installation.to_tunnel(six_axis_loads(active.base_model, zero[None, :])[0]) \
-        if not active.base_model.extra_variables else np.full(6, np.nan)
-    outputs = ', '.join(f'{c}={v:+.5f} mV' for c, v in zip(active.calibration.bridge_outputs, zero))
-    loads = ', '.join(f'{c}={v:+.3f} {u}' for c, v, u in zip(COMPONENTS, equivalent, UNITS))
+    equivalent = six_axis_loads(active.base_model, zero[None, :])[0] if not active.base_model.extra_variables \
+        else np.full(6, np.nan)
+    outputs = ', '.join(f'{c}={v:+.5f} mV' for c, v in zip(active.calibration.bridge_outputs,
+                                                           zero[[BRIDGE_OUTPUTS.index(b) for b in
+                                                                 active.calibration.bridge_outputs]]))
     return (f'{outputs} (the load these outputs read as, {active.installation.name} tunnel axes, '
-            f'{active.base_name} model: {loads})')
+            f'{active.base_name} model: {describe_loads(equivalent, active)})')
 
 
 # --- diagnostics ------------------------------------------------------------------------------
@@ -304,26 +454,29 @@ class InputCounters:
     received: int = 0
     published: int = 0
     rejected_nonfinite: int = 0
+    saturated: int = 0
     out_of_envelope: int = 0
     period_received: int = 0
     period_rejected: int = 0
+    period_saturated: int = 0
     period_out_of_envelope: int = 0
 
     def count(self, batch: WrenchBatch) -> None:
-        if len(batch.accepted) == 1:      # the live path: one sample, no numpy reductions
-            n, ok, out = 1, int(bool(batch.accepted[0])), int(bool(batch.out_of_envelope[0]))
-        else:
-            n, ok, out = len(batch.accepted), int(batch.accepted.sum()), int(batch.out_of_envelope.sum())
+        n, ok = len(batch.accepted), int(np.count_nonzero(batch.accepted))
+        saturated = 0 if batch.saturated is None else int(np.count_nonzero(batch.saturated))
+        out = int(np.count_nonzero(batch.out_of_envelope))
         self.received += n
         self.period_received += n
         self.published += ok
-        self.rejected_nonfinite += n - ok
-        self.period_rejected += n - ok
+        self.rejected_nonfinite += n - ok - saturated
+        self.period_rejected += n - ok - saturated
+        self.saturated += saturated
+        self.period_saturated += saturated
         self.out_of_envelope += out
         self.period_out_of_envelope += out
 
     def start_period(self) -> None:
-        self.period_received = self.period_rejected = self.period_out_of_envelope = 0
+        self.period_received = self.period_rejected = self.period_out_of_envelope = self.period_saturated = 0
 
 
 @dataclass(frozen=True)
@@ -347,27 +500,42 @@ class LiveState:
     stale_after_s: float
     temperature_age_s: float | None
     fallback_reason: str
-    tare_zero_mv: np.ndarray | None            # None: never tared
+    tare_zero_mv: np.ndarray | None            # the electrical zero (None: none taken)
     refit_running: bool = False
+    tare_load: np.ndarray | None = None        # balance axes, N / N·m (None: no tare)
+    tare_source: str = ''                      # where the tare was persisted / restored from
+    input_problems: tuple[tuple[str, int, int], ...] = ()   # (what, total, this period)
+    input_values: tuple[tuple[str, str], ...] = ()
+    overload: tuple[str, ...] | None = None    # components over the limit now (None = no overload)
+    overload_values: tuple[tuple[str, str], ...] = ()
+    lowpass_hz: float = 0.0
 
 
 def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'balance_calibrator',
                 now: _dt.datetime | None = None) -> list[StatusReport]:
-    """Input health and calibration status; levels OK / WARN / ERROR as DiagnosticStatus has them."""
+    """Input health, calibration status and overload; levels OK / WARN / ERROR / STALE as DiagnosticStatus."""
     c = state.counters
     hardware = active.calibration.balance
     rate = c.period_received / state.period_s if state.period_s > 0 else 0.0
     level, problems = OK, []
     if state.last_sample_age_s is None:
-        level, problems = WARN, ['no sample received yet']
+        level, problems = STALE, ['no sample received yet']
     elif state.last_sample_age_s > state.stale_after_s:
-        level, problems = WARN, [f'stale input: no sample for {state.last_sample_age_s:.1f} s']
+        level, problems = STALE, [f'stale input: no sample for {state.last_sample_age_s:.1f} s']
     if c.period_rejected:
-        level = max(level, WARN)
+        level = max(level, WARN) if level != STALE else level
         problems.append(f'{c.period_rejected} NaN/inf samples rejected')
+    if c.period_saturated:
+        level = ERROR
+        problems.append(f'{c.period_saturated} samples saturated (an output beyond '
+                        f'{", ".join(f"{v:.3g}" for v in active.output_range_mv)} mV): not published')
     if c.period_out_of_envelope:
-        level = max(level, WARN)
+        level = max(level, WARN) if level != STALE else level
         problems.append(f'{c.period_out_of_envelope} samples outside the calibrated envelope')
+    for what, total, period in state.input_problems:
+        if period:
+            level = max(level, WARN) if level != STALE else level
+            problems.append(f'{period} {what}')
     input_values = (
         ('input_rate_hz', f'{rate:.1f}'),
         ('last_sample_age_s', 'never' if state.last_sample_age_s is None else f'{state.last_sample_age_s:.3f}'),
@@ -375,8 +543,11 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('samples_received', str(c.received)),
         ('wrenches_published', str(c.published)),
         ('rejected_nonfinite', str(c.rejected_nonfinite)),
+        ('saturated', str(c.saturated)),
         ('out_of_envelope', str(c.out_of_envelope)),
         ('envelope', ', '.join(f'{k}={v:.4g}' for k, v in zip(COMPONENTS, active.envelope))),
+        *((what.replace(' ', '_'), str(total)) for what, total, _ in state.input_problems),
+        *state.input_values,
     )
     reports = [StatusReport(level, f'{node_name}: input', '; '.join(problems) or f'{rate:.1f} Hz',
                             hardware, input_values)]
@@ -395,7 +566,7 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
     cal_level = WARN if state.fallback_reason else OK
     message = (f'{active.model_name} model, {active.installation.name} installation'
                + (f'; FALLBACK to {active.base_name}: {state.fallback_reason}' if state.fallback_reason else ''))
-    tare = state.tare_zero_mv
+    zero = state.tare_zero_mv
     cal_values = (
         ('calibration_file', active.source),
         ('model', active.model_name),
@@ -408,11 +579,21 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('sigma_pct_fs', sigma),
         ('requires', ', '.join(active.requires) or 'none'),
         ('inputs', ', '.join(f'{k}: {v}' for k, v in inputs) or 'bridge outputs only'),
-        ('tare_zero_mv', 'none' if tare is None else
-         ', '.join(f'{c}={v:+.5f}' for c, v in zip(cal.bridge_outputs, tare))),
+        ('zero_mv', 'none' if zero is None else
+         ', '.join(f'{b}={zero[BRIDGE_OUTPUTS.index(b)]:+.5f}' for b in cal.bridge_outputs)),
+        ('tare_load', 'none' if state.tare_load is None else
+         f'{describe_loads(state.tare_load, active)} (tunnel axes)'),
+        ('tare_file', state.tare_source or 'none'),
+        ('lowpass_hz', f'{state.lowpass_hz:g}' if state.lowpass_hz else 'off'),
         ('refit_running', str(state.refit_running)),
     )
     reports.append(StatusReport(cal_level, f'{node_name}: calibration', message, hardware, cal_values))
+    if state.overload is None:
+        reports.append(StatusReport(OK, f'{node_name}: overload', 'no overload', hardware, state.overload_values))
+    else:
+        reports.append(StatusReport(ERROR, f'{node_name}: overload',
+                                    f'OVERLOAD: {", ".join(state.overload)} beyond the rated load limit',
+                                    hardware, state.overload_values))
     return reports
 
 

@@ -1,0 +1,303 @@
+"""The live calibrator's state between samples, without rclpy: what balance_calibrator orchestrates.
+
+`LiveCalibrator.process()` takes a batch of raw samples (outputs, stamps, frame ids) and returns the
+wrenches to publish; around the math of calibrator_core it keeps the electrical zero and the tare
+load (with their ~/zero and ~/tare windows), the overload state, the optional low-pass filter, the
+load history of hysteresis models and the input's health (stamps, frame ids, gaps). The node only
+turns messages into arrays and back.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..units import COMPONENTS
+from .calibrator_core import (ActiveCalibration, InputCounters, LiveState, LoadHistory, StatusReport, TareResult,
+                              TareWindow, WrenchBatch, compute_wrench, diagnostics, evaluate_window, six_axis_loads)
+from .tare_store import TareState, now_iso
+
+
+@dataclass(frozen=True)
+class LiveSettings:
+    stale_after_s: float = 1.0
+    overload_fraction: float = 1.0      # x rated load
+    overload_clear_s: float = 1.0
+    lowpass_hz: float = 0.0             # 0 = off
+    tare_max_ratio: float = 4.0         # steadiness: scatter and step limit, x the window's own noise
+
+
+class InputMonitor:
+    """Stamps out of order, duplicated or zero, frame ids naming another balance, and gaps (lost samples).
+
+    The nominal sample interval is the median of the last 256 positive stamp differences (re-taken
+    every 64 samples); a gap of d > 1.5 intervals counts round(d / interval) - 1 samples lost.
+    """
+
+    KINDS = ('stamps out of order', 'duplicate stamps', 'zero stamps', 'samples from another balance',
+             'samples lost (gaps in the stamps)')
+
+    def __init__(self, balance: str):
+        self.balance = balance.lower()
+        self.total = dict.fromkeys(self.KINDS, 0)
+        self.period = dict.fromkeys(self.KINDS, 0)
+        self.foreign_frames: set[str] = set()
+        self.last_stamp_ns: int | None = None
+        self.interval_ns: float | None = None
+        self._differences = np.zeros(256, dtype=np.int64)
+        self._filled = 0
+        self._since_estimate = 0
+
+    def _add(self, kind: str, count: int) -> None:
+        if count:
+            self.total[kind] += count
+            self.period[kind] += count
+
+    def update(self, stamps_ns: np.ndarray, frame_ids=None) -> None:
+        stamps = np.asarray(stamps_ns, dtype=np.int64)
+        if frame_ids is not None:
+            foreign = [f for f in frame_ids if f and f.lower() != self.balance]
+            if foreign:
+                self._add('samples from another balance', len(foreign))
+                if len(self.foreign_frames) < 8:
+                    self.foreign_frames.update(foreign[:8])
+        zero = stamps == 0
+        self._add('zero stamps', int(np.count_nonzero(zero)))
+        stamps = stamps[~zero]
+        if not len(stamps):
+            return
+        first = self.last_stamp_ns is None
+        prior = int(stamps[0]) if first else self.last_stamp_ns
+        before = np.maximum.accumulate(np.concatenate([[prior], stamps]))[:-1]
+        differences = stamps - before
+        if first:
+            differences = differences[1:]
+        self._add('stamps out of order', int(np.count_nonzero(differences < 0)))
+        self._add('duplicate stamps', int(np.count_nonzero(differences == 0)))
+        self.last_stamp_ns = int(max(prior, stamps.max()))
+        positive = differences[differences > 0]
+        if self.interval_ns is not None and len(positive):
+            gaps = positive[positive > 1.5 * self.interval_ns]
+            if len(gaps):
+                self._add('samples lost (gaps in the stamps)', int(np.sum(np.rint(gaps / self.interval_ns) - 1)))
+        take = positive[-256:]
+        start = self._filled % 256
+        indices = (start + np.arange(len(take))) % 256
+        self._differences[indices] = take
+        self._filled += len(take)
+        self._since_estimate += len(take)
+        if self._filled and (self.interval_ns is None or self._since_estimate >= 64):
+            self.interval_ns = float(np.median(self._differences[:min(self._filled, 256)]))
+            self._since_estimate = 0
+
+    def problems(self) -> tuple[tuple[str, int, int], ...]:
+        return tuple((kind, self.total[kind], self.period[kind]) for kind in self.KINDS)
+
+    def start_period(self) -> None:
+        self.period = dict.fromkeys(self.KINDS, 0)
+
+
+class OverloadMonitor:
+    """True as soon as any component's load exceeds capacity x fraction (or a bridge saturates); false
+    again once the samples have stayed inside for clear_s."""
+
+    def __init__(self, capacity: np.ndarray, fraction: float, clear_s: float):
+        self.limit = np.asarray(capacity, dtype=float) * fraction
+        self.fraction = fraction
+        self.clear_s = clear_s
+        self.active = False
+        self.components: tuple[str, ...] = ()
+        self.inside_since_s: float | None = None
+        self.peak_fraction = np.zeros(6)
+        self.events = 0
+
+    def update(self, loads_total: np.ndarray, saturated: np.ndarray, now_s: float) -> bool:
+        """Feed a batch (loads of the accepted samples (N, 6), saturated flags); True if the state changed."""
+        over = np.abs(loads_total) > self.limit
+        exceeded = over.any(axis=0)
+        if len(loads_total):
+            np.maximum(self.peak_fraction, np.max(np.abs(loads_total), axis=0) / (self.limit / self.fraction),
+                       out=self.peak_fraction)
+        if exceeded.any() or np.any(saturated):
+            names = tuple(COMPONENTS[k] for k in np.flatnonzero(exceeded)) + (('saturated bridge',)
+                                                                               if np.any(saturated) else ())
+            changed = not self.active
+            self.active, self.inside_since_s = True, None
+            self.components = names if changed else tuple(dict.fromkeys(self.components + names))
+            self.events += changed
+            return changed
+        if self.active and len(loads_total):
+            if self.inside_since_s is None:
+                self.inside_since_s = now_s
+            elif now_s - self.inside_since_s >= self.clear_s:
+                self.active, self.components, self.inside_since_s = False, (), None
+                return True
+        return False
+
+    def values(self) -> tuple[tuple[str, str], ...]:
+        return (('overload', str(self.active)), ('overload_fraction', f'{self.fraction:g}'),
+                ('overload_events', str(self.events)),
+                ('peak_load_fraction_of_rated', ', '.join(f'{c}={v:.3f}' for c, v in
+                                                          zip(COMPONENTS, self.peak_fraction))))
+
+
+class LowPass:
+    """First-order low-pass on each component, y += a (x - y) with a = 1 - exp(-2π f_c Δt), state carried
+    across batches (scipy.signal.lfilter for a batch)."""
+
+    def __init__(self, cutoff_hz: float):
+        self.cutoff_hz = cutoff_hz
+        self.state: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self.state = None
+
+    def apply(self, values: np.ndarray, interval_s: float | None) -> np.ndarray:
+        if self.cutoff_hz <= 0 or not len(values):
+            return values
+        if self.state is None:
+            self.state = values[0].copy()
+        if interval_s is None:
+            self.state = values[-1].copy()
+            return values
+        a = 1.0 - np.exp(-2.0 * np.pi * self.cutoff_hz * interval_s)
+        if len(values) == 1:
+            self.state = self.state + a * (values[0] - self.state)
+            return self.state[None, :].copy()
+        from scipy.signal import lfilter
+        out, _ = lfilter([a], [1.0, a - 1.0], values, axis=0, zi=((1.0 - a) * self.state)[None, :])
+        self.state = out[-1].copy()
+        return out
+
+
+@dataclass
+class Published:
+    """The samples of a batch to publish: their indices in the batch and their wrenches (M, 6)."""
+
+    indices: np.ndarray
+    wrench: np.ndarray
+    batch: WrenchBatch
+
+
+@dataclass
+class LiveCalibrator:
+    active: ActiveCalibration
+    settings: LiveSettings = field(default_factory=LiveSettings)
+    tare: TareState | None = None
+
+    def __post_init__(self):
+        self.tare = self.tare or TareState(self.active.calibration.balance)
+        self.counters = InputCounters()
+        self.inputs = InputMonitor(self.active.calibration.balance)
+        self.overload = OverloadMonitor(self.active.capacity, self.settings.overload_fraction,
+                                        self.settings.overload_clear_s)
+        self.lowpass = LowPass(self.settings.lowpass_hz)
+        self.history = LoadHistory(self.active.capacity)
+        self.window: TareWindow | None = None
+        self.fallback_reason = ''
+        self.overload_changed = False
+
+    # --- configuration --------------------------------------------------------------------------
+    def set_active(self, active: ActiveCalibration) -> None:
+        """A new calibration (refit, parameters), between two samples; zero and tare stay."""
+        self.active = active
+        self.history = LoadHistory(active.capacity)
+        self.overload.limit = active.capacity * self.settings.overload_fraction
+        self.inputs.balance = active.calibration.balance.lower()
+
+    def set_settings(self, settings: LiveSettings) -> None:
+        if settings.lowpass_hz != self.settings.lowpass_hz:
+            self.lowpass = LowPass(settings.lowpass_hz)
+        self.overload.fraction, self.overload.clear_s = settings.overload_fraction, settings.overload_clear_s
+        self.overload.limit = self.active.capacity * settings.overload_fraction
+        self.settings = settings
+
+    # --- the stream -----------------------------------------------------------------------------
+    def process(self, outputs_mv: np.ndarray, stamps_ns: np.ndarray, frame_ids=None, *, now_s: float,
+                temperature_c: float | None = None) -> Published:
+        """A batch of raw samples (N, 6) mV in arrival order -> what to publish."""
+        outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
+        self.inputs.update(stamps_ns, frame_ids)
+        active, tare = self.active, self.tare
+        direction = None
+        if 'load_history' in active.requires:
+            finite = np.isfinite(outputs).all(axis=1)
+            zeroed = outputs[finite] - (0.0 if tare.zero_mv is None else tare.zero_mv)
+            direction = np.ones((len(outputs), 6))
+            direction[finite] = self.history.update(six_axis_loads(active.base_model, zeroed))
+        batch = compute_wrench(active, outputs, zero_mv=tare.zero_mv, tare_load=tare.tare_load,
+                               temperature_c=temperature_c, load_direction=direction,
+                               zero_temperature_c=tare.zero_temperature_c, zero_direction=tare.zero_direction)
+        self.counters.count(batch)
+        self.fallback_reason = batch.fallback_reason
+        accepted = batch.accepted
+        all_accepted = bool(accepted.all())
+        indices = np.arange(len(outputs)) if all_accepted else np.flatnonzero(accepted)
+        loads_total = batch.loads_total if all_accepted else batch.loads_total[indices]
+        self.overload_changed = self.overload.update(loads_total, batch.saturated, now_s)
+        if self.window is not None and len(indices):
+            self.window.add(outputs[indices], temperature_c)
+        wrench = batch.wrench_tunnel if all_accepted else batch.wrench_tunnel[indices]
+        if self.lowpass.cutoff_hz > 0:
+            interval = None if self.inputs.interval_ns is None else self.inputs.interval_ns * 1e-9
+            wrench = self.lowpass.apply(wrench, interval)
+        return Published(indices, wrench, batch)
+
+    # --- ~/tare, ~/zero, ~/clear_tare ------------------------------------------------------------
+    def start_window(self, kind: str, samples: int) -> TareWindow:
+        self.window = TareWindow(samples, kind)
+        return self.window
+
+    def finish_window(self) -> TareResult:
+        """Evaluate the full window: adopt the zero or tare load if steady, else keep the old one."""
+        window, self.window = self.window, None
+        tare = self.tare
+        result = evaluate_window(window, self.active, max_ratio=self.settings.tare_max_ratio, zero_mv=tare.zero_mv,
+                                 zero_temperature_c=tare.zero_temperature_c, zero_direction=tare.zero_direction,
+                                 load_direction=self.history.direction)
+        if not result.ok:
+            return replace(result, message=result.message + f'; the previous {window.kind} stays')
+        if window.kind == 'zero':
+            # a tare load was taken above the old zero: it no longer holds once the zero moves
+            cleared = '; the tare load was cleared (take ~/tare again with the model on)' \
+                if tare.tare_load is not None else ''
+            self.tare = TareState(tare.balance, result.zero_mv, window.temperature_c, self.history.direction.copy(),
+                                  now_iso())
+            result = replace(result, message=result.message + cleared)
+        else:
+            self.tare = replace(tare, tare_load=result.tare_load, tare_taken_at=now_iso())
+        self.lowpass.reset()
+        return result
+
+    def cancel_window(self) -> TareWindow | None:
+        window, self.window = self.window, None
+        return window
+
+    def clear_tare(self) -> str:
+        had = self.tare.tare_load
+        self.tare = replace(self.tare, tare_load=None, tare_taken_at='')
+        self.lowpass.reset()
+        if had is None:
+            return 'clear_tare: there was no tare load; the electrical zero stays'
+        return 'clear_tare: tare load removed (it was ' + \
+            ', '.join(f'{c}={v:+.3f}' for c, v in zip(COMPONENTS, self.active.installation.to_tunnel(had))) + \
+            ' in tunnel axes); the electrical zero stays'
+
+    # --- /diagnostics ---------------------------------------------------------------------------
+    def report(self, *, period_s: float, last_sample_age_s: float | None, temperature_age_s: float | None,
+               refit_running: bool, tare_source: str, node_name: str) -> list[StatusReport]:
+        interval = self.inputs.interval_ns
+        state = LiveState(
+            period_s=period_s, counters=self.counters, last_sample_age_s=last_sample_age_s,
+            stale_after_s=self.settings.stale_after_s, temperature_age_s=temperature_age_s,
+            fallback_reason=self.fallback_reason, tare_zero_mv=self.tare.zero_mv, refit_running=refit_running,
+            tare_load=self.tare.tare_load, tare_source=tare_source, input_problems=self.inputs.problems(),
+            input_values=(('nominal_interval_ms', 'unknown' if interval is None else f'{interval * 1e-6:.4g}'),
+                          ('frame_ids_seen_from_other_balances', ', '.join(sorted(self.inputs.foreign_frames))
+                           or 'none')),
+            overload=self.overload.components if self.overload.active else None,
+            overload_values=self.overload.values(), lowpass_hz=self.settings.lowpass_hz)
+        reports = diagnostics(self.active, state, node_name)
+        self.counters.start_period()
+        self.inputs.start_period()
+        return reports
