@@ -1,0 +1,504 @@
+"""`launchless_scripts/ros`: the few `ros2` CLI habits this package's users need, over rclpy.
+
+There is no ros2cli in the venv (ROS 2 comes from PyPI wheels). This is not a re-implementation
+of it, only the everyday verbs, with the same spelling:
+
+    ros param list NODE                 ros2 param list NODE
+    ros param get NODE NAME             ros2 param get NODE NAME
+    ros param set NODE NAME VALUE       ros2 param set NODE NAME VALUE   (VALUE in YAML: 3, 0.5, true,
+                                        "[a.mcap, b.mcap]"; kept in the parameter's current type)
+    ros topic list                      ros2 topic list -t
+    ros topic echo TOPIC [--count N]    ros2 topic echo TOPIC            (YAML documents, ---)
+    ros topic hz TOPIC [--duration S]   ros2 topic hz TOPIC
+    ros service list                    ros2 service list -t
+    ros service call SERVICE            ros2 service call SERVICE std_srvs/srv/Trigger
+    ros bag info BAG                    ros2 bag info BAG                 (no DDS: reads the files)
+
+Parameters go through the node's rcl_interfaces services (~/list_parameters, ~/get_parameters,
+~/set_parameters), as ros2 param does. Exit status 0 on success, 1 when the node, topic or service
+does not answer within --timeout, 2 on bad arguments; errors are one line on stderr.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import math
+import sys
+import time
+from pathlib import Path
+
+DEFAULT_TIMEOUT_S = 10.0
+
+
+class ToolError(Exception):
+    """One line for stderr; exit status 1."""
+
+
+# ---------------------------------------------------------------------------- values
+
+_TYPE_NAMES = {1: 'bool', 2: 'integer', 3: 'double', 4: 'string', 5: 'byte array', 6: 'bool array',
+               7: 'integer array', 8: 'double array', 9: 'string array'}
+
+
+def parameter_value_to_python(value):
+    """rcl_interfaces/ParameterValue -> a Python value (None when the parameter is not set)."""
+    kind = value.type
+    fields = {1: 'bool_value', 2: 'integer_value', 3: 'double_value', 4: 'string_value',
+              5: 'byte_array_value', 6: 'bool_array_value', 7: 'integer_array_value',
+              8: 'double_array_value', 9: 'string_array_value'}
+    if kind not in fields:
+        return None
+    result = getattr(value, fields[kind])
+    return list(result) if kind >= 5 else result
+
+
+def python_to_parameter_value(text: str, current_type: int):
+    """VALUE as typed on the command line (YAML) -> ParameterValue, in the parameter's current type
+    when it has one (so `set calibration_bags bag1` gives a one-element string array, and
+    `set envelope_margin 2` stays a double)."""
+    import yaml
+    from rcl_interfaces.msg import ParameterType, ParameterValue
+
+    try:
+        value = yaml.safe_load(text) if text.strip() else ''
+    except yaml.YAMLError:
+        value = text
+    out = ParameterValue()
+    kind = current_type or _infer_type(value)
+    try:
+        if kind == ParameterType.PARAMETER_BOOL:
+            if not isinstance(value, bool):
+                raise ValueError
+            out.bool_value = value
+        elif kind == ParameterType.PARAMETER_INTEGER:
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ValueError
+            out.integer_value = value
+        elif kind == ParameterType.PARAMETER_DOUBLE:
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ValueError
+            out.double_value = float(value)
+        elif kind == ParameterType.PARAMETER_STRING:
+            out.string_value = text if not isinstance(value, str) else value
+        elif kind in (ParameterType.PARAMETER_STRING_ARRAY, ParameterType.PARAMETER_DOUBLE_ARRAY,
+                      ParameterType.PARAMETER_INTEGER_ARRAY, ParameterType.PARAMETER_BOOL_ARRAY):
+            items = value if isinstance(value, list) else ([] if value in ('', None) else [value])
+            if kind == ParameterType.PARAMETER_STRING_ARRAY:
+                out.string_array_value = [str(v) for v in items]
+            elif kind == ParameterType.PARAMETER_DOUBLE_ARRAY:
+                out.double_array_value = [float(v) for v in items]
+            elif kind == ParameterType.PARAMETER_INTEGER_ARRAY:
+                out.integer_array_value = [int(v) for v in items]
+            else:
+                out.bool_array_value = [bool(v) for v in items]
+        else:
+            raise ValueError
+    except (ValueError, TypeError):
+        raise ToolError(f'value {text!r} is not a {_TYPE_NAMES.get(kind, "supported")} '
+                        '(the parameter\'s type)') from None
+    out.type = kind
+    return out
+
+
+def _infer_type(value) -> int:
+    if isinstance(value, bool):
+        return 1
+    if isinstance(value, int):
+        return 2
+    if isinstance(value, float):
+        return 3
+    if isinstance(value, list):
+        if value and all(isinstance(v, bool) for v in value):
+            return 6
+        if value and all(isinstance(v, int) and not isinstance(v, bool) for v in value):
+            return 7
+        if value and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+            return 8
+        return 9
+    return 4
+
+
+def message_to_plain(message):
+    """A ROS message -> nested dicts/lists of plain values (what `topic echo` prints as YAML)."""
+    if hasattr(message, 'get_fields_and_field_types'):
+        return {name: message_to_plain(getattr(message, name)) for name in message.get_fields_and_field_types()}
+    if isinstance(message, (list, tuple)) or type(message).__name__ == 'ndarray':
+        return [message_to_plain(v) for v in message]
+    if isinstance(message, float) and not math.isfinite(message):
+        return str(message)
+    if isinstance(message, (bytes, bytearray)):
+        return list(message)
+    return message
+
+
+def message_class(type_name: str):
+    """'geometry_msgs/msg/WrenchStamped' -> the class."""
+    parts = type_name.split('/')
+    if len(parts) != 3:
+        raise ToolError(f'type {type_name!r}: expected package/msg/Name')
+    try:
+        return getattr(importlib.import_module(f'{parts[0]}.{parts[1]}'), parts[2])
+    except (ImportError, AttributeError):
+        raise ToolError(f'type {type_name} is not installed in this environment') from None
+
+
+# ---------------------------------------------------------------------------- graph helpers
+
+class _Session:
+    """rclpy init + one node, torn down on exit."""
+
+    def __enter__(self):
+        import rclpy
+        self.rclpy = rclpy
+        rclpy.init()
+        self.node = rclpy.create_node('launchless_ros_cli', start_parameter_services=False)
+        return self
+
+    def __exit__(self, *exc):
+        self.node.destroy_node()
+        self.rclpy.try_shutdown()
+        return False
+
+    def call(self, service_type, name: str, request, timeout: float):
+        client = self.node.create_client(service_type, name)
+        try:
+            if not client.wait_for_service(timeout_sec=timeout):
+                raise ToolError(f'service {name} is not available (is the node running? '
+                                f'waited {timeout:g} s)')
+            future = client.call_async(request)
+            self.rclpy.spin_until_future_complete(self.node, future, timeout_sec=timeout)
+            if not future.done():
+                raise ToolError(f'no reply from {name} within {timeout:g} s')
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def topic_type(self, topic: str, timeout: float) -> str:
+        deadline = time.monotonic() + timeout
+        while True:
+            for name, types in self.node.get_topic_names_and_types():
+                if name == topic and types:
+                    return types[0]
+            if time.monotonic() > deadline:
+                raise ToolError(f'topic {topic} has no publisher (waited {timeout:g} s); '
+                                'see "ros topic list"')
+            self.rclpy.spin_once(self.node, timeout_sec=0.1)
+
+    def qos_for(self, topic: str):
+        """Reliable and transient-local only when every publisher offers it (as ros2 topic echo)."""
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        publishers = self.node.get_publishers_info_by_topic(topic)
+        reliable = bool(publishers) and all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+                                            for p in publishers)
+        latched = bool(publishers) and all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                                           for p in publishers)
+        return QoSProfile(depth=100,
+                          reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
+def _node_name(name: str) -> str:
+    return name if name.startswith('/') else '/' + name
+
+
+# ---------------------------------------------------------------------------- param
+
+def param_list(args) -> int:
+    from rcl_interfaces.srv import ListParameters
+    with _Session() as session:
+        reply = session.call(ListParameters, f'{_node_name(args.node)}/list_parameters',
+                             ListParameters.Request(), args.timeout)
+    for name in sorted(reply.result.names):
+        print(f'  {name}')
+    return 0
+
+
+def _get(session, node: str, names, timeout: float):
+    from rcl_interfaces.srv import GetParameters
+    request = GetParameters.Request(names=list(names))
+    return session.call(GetParameters, f'{node}/get_parameters', request, timeout).values
+
+
+def param_get(args) -> int:
+    with _Session() as session:
+        values = _get(session, _node_name(args.node), [args.name], args.timeout)
+    if not values or values[0].type == 0:
+        raise ToolError(f'{_node_name(args.node)} has no parameter {args.name!r}; see "ros param list {args.node}"')
+    value = values[0]
+    print(f'{_TYPE_NAMES[value.type].capitalize()} value is: {parameter_value_to_python(value)}')
+    return 0
+
+
+def param_set(args) -> int:
+    from rcl_interfaces.msg import Parameter
+    from rcl_interfaces.srv import SetParameters
+    node = _node_name(args.node)
+    with _Session() as session:
+        current = _get(session, node, [args.name], args.timeout)
+        kind = current[0].type if current else 0
+        value = python_to_parameter_value(args.value, kind)
+        reply = session.call(SetParameters, f'{node}/set_parameters',
+                             SetParameters.Request(parameters=[Parameter(name=args.name, value=value)]), args.timeout)
+    result = reply.results[0]
+    if not result.successful:
+        raise ToolError(f'setting {args.name} on {node} failed: {result.reason or "refused by the node"}')
+    print('Set parameter successful')
+    return 0
+
+
+# ---------------------------------------------------------------------------- topic
+
+def topic_list(args) -> int:
+    with _Session() as session:
+        deadline = time.monotonic() + min(args.timeout, 2.0)    # let discovery settle
+        while time.monotonic() < deadline:
+            session.rclpy.spin_once(session.node, timeout_sec=0.1)
+        for name, types in sorted(session.node.get_topic_names_and_types()):
+            print(f'{name} [{", ".join(types)}]')
+    return 0
+
+
+def topic_echo(args) -> int:
+    import yaml
+    received = []
+    with _Session() as session:
+        type_name = args.type or session.topic_type(args.topic, args.timeout)
+        cls = message_class(type_name)
+
+        def show(message):
+            if args.count and len(received) >= args.count:
+                return
+            received.append(1)
+            print(yaml.safe_dump(message_to_plain(message), sort_keys=False, allow_unicode=True).rstrip())
+            print('---', flush=True)
+
+        session.node.create_subscription(cls, args.topic, show, session.qos_for(args.topic))
+        deadline = time.monotonic() + args.timeout
+        try:
+            while not args.count or len(received) < args.count:
+                session.rclpy.spin_once(session.node, timeout_sec=0.1)
+                if not received and time.monotonic() > deadline:
+                    raise ToolError(f'no message on {args.topic} within {args.timeout:g} s')
+        except KeyboardInterrupt:
+            pass
+    return 0
+
+
+def topic_hz(args) -> int:
+    stamps = []
+    with _Session() as session:
+        type_name = args.type or session.topic_type(args.topic, args.timeout)
+        cls = message_class(type_name)
+        session.node.create_subscription(cls, args.topic, lambda _: stamps.append(time.monotonic()),
+                                         session.qos_for(args.topic))
+        deadline = time.monotonic() + args.timeout
+        while not stamps:
+            session.rclpy.spin_once(session.node, timeout_sec=0.1)
+            if time.monotonic() > deadline:
+                raise ToolError(f'no message on {args.topic} within {args.timeout:g} s')
+        end = time.monotonic() + args.duration
+        try:
+            while time.monotonic() < end:
+                session.rclpy.spin_once(session.node, timeout_sec=0.05)
+        except KeyboardInterrupt:
+            pass
+    if len(stamps) < 2:
+        raise ToolError(f'only {len(stamps)} message on {args.topic} in {args.duration:g} s: no rate')
+    import numpy as np
+    gaps = np.diff(np.asarray(stamps))
+    print(f'average rate: {1.0 / gaps.mean():.3f}')
+    print(f'\tmin: {gaps.min():.3f}s max: {gaps.max():.3f}s std dev: {gaps.std():.5f}s window: {len(stamps)}')
+    return 0
+
+
+# ---------------------------------------------------------------------------- service
+
+def service_list(args) -> int:
+    with _Session() as session:
+        deadline = time.monotonic() + min(args.timeout, 2.0)
+        while time.monotonic() < deadline:
+            session.rclpy.spin_once(session.node, timeout_sec=0.1)
+        for name, types in sorted(session.node.get_service_names_and_types()):
+            print(f'{name} [{", ".join(types)}]')
+    return 0
+
+
+def service_call(args) -> int:
+    if args.type not in ('std_srvs/srv/Trigger', 'std_srvs/srv/Empty'):
+        raise ToolError(f'service type {args.type}: only std_srvs/srv/Trigger and std_srvs/srv/Empty are supported')
+    from std_srvs.srv import Empty, Trigger
+    service_type = Trigger if args.type.endswith('Trigger') else Empty
+    with _Session() as session:
+        reply = session.call(service_type, args.service, service_type.Request(), args.timeout)
+    if service_type is Empty:
+        print('response: (empty)')
+        return 0
+    print(f'success: {str(reply.success).lower()}\nmessage: {reply.message}')
+    return 0 if reply.success else 1
+
+
+# ---------------------------------------------------------------------------- bag
+
+def bag_info(args) -> int:
+    print(format_bag_info(Path(args.bag)))
+    return 0
+
+
+def format_bag_info(path: Path) -> str:
+    """ros2 bag info's layout for a rosbag2 MCAP directory or a bare .mcap file (reads the MCAP summaries)."""
+    from mcap.reader import make_reader
+    if path.is_dir():
+        files = sorted(path.glob('*.mcap'))
+    elif path.suffix == '.mcap' and path.exists():
+        files = [path]
+    else:
+        raise ToolError(f'{path}: not a bag directory or .mcap file')
+    if not files:
+        raise ToolError(f'{path}: no .mcap files in it')
+    topics: dict[str, list] = {}
+    start, end, total, size, compression = None, None, 0, 0, set()
+    for file in files:
+        size += file.stat().st_size
+        with open(file, 'rb') as stream:
+            try:
+                summary = make_reader(stream).get_summary()
+            except Exception as err:       # the mcap library raises its own types for damaged files
+                raise ToolError(f'{file}: cannot read its MCAP summary ({err})') from None
+        if summary is None or summary.statistics is None:
+            raise ToolError(f'{file}: no MCAP summary (unfinished recording?)')
+        stats = summary.statistics
+        if stats.message_count:
+            start = stats.message_start_time if start is None else min(start, stats.message_start_time)
+            end = stats.message_end_time if end is None else max(end, stats.message_end_time)
+        total += stats.message_count
+        for chunk in summary.chunk_indexes:
+            compression.add(chunk.compression or 'none')
+        for channel_id, channel in summary.channels.items():
+            schema = summary.schemas.get(channel.schema_id)
+            entry = topics.setdefault(channel.topic, [schema.name if schema else '?', 0])
+            entry[1] += stats.channel_message_counts.get(channel_id, 0)
+    duration = (end - start) / 1e9 if start is not None else 0.0
+    lines = [f'Files:             {", ".join(f.name for f in files)}',
+             f'Bag size:          {size / 1e6:.1f} MB',
+             'Storage id:        mcap',
+             f'Duration:          {duration:.3f}s']
+    if start is not None:
+        lines += [f'Start:             {_stamp(start)}', f'End:               {_stamp(end)}']
+    lines += [f'Messages:          {total}',
+              f'Chunk compression: {", ".join(sorted(compression)) or "none"}',
+              'Topic information:']
+    width = max((len(t) for t in topics), default=0)
+    for topic, (type_name, count) in sorted(topics.items()):
+        lines.append(f'  Topic: {topic:{width}} | Type: {type_name} | Count: {count} | Serialization Format: cdr')
+    return '\n'.join(lines)
+
+
+def _stamp(nanoseconds: int) -> str:
+    import datetime as dt
+    moment = dt.datetime.fromtimestamp(nanoseconds / 1e9, dt.timezone.utc)
+    return f'{moment:%b %d %Y %H:%M:%S.%f}'[:-3] + f' ({nanoseconds / 1e9:.9f})'
+
+
+# ---------------------------------------------------------------------------- CLI
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='ros', description='The ros2 CLI verbs a balance_calib user needs (param, topic, service, bag info), '
+                                'over rclpy, for environments without ros2cli. Same spelling as ros2.',
+        epilog='Examples: ros param set /balance_calibrator calibration_bags "[bags/campaign_1]"; '
+               'ros service call /balance_calibrator/refit; ros topic hz /balance/raw; ros bag info bags/campaign_1')
+    verbs = parser.add_subparsers(dest='verb', required=True, metavar='VERB', title='verbs')
+
+    def with_timeout(sub, what: str):
+        sub.add_argument('--timeout', type=float, default=DEFAULT_TIMEOUT_S,
+                         help=f'seconds to wait for {what} (default {DEFAULT_TIMEOUT_S:g})')
+        return sub
+
+    param = verbs.add_parser('param', help='list, get or set a running node\'s parameters',
+                             description='List, get or set the parameters of a running node through its '
+                                         'rcl_interfaces parameter services.')
+    actions = param.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
+    sub = with_timeout(actions.add_parser('list', help='names of the node\'s parameters',
+                                          description='Print the names of a node\'s parameters.'), 'the node')
+    sub.add_argument('node', help='node name, e.g. /balance_calibrator')
+    sub.set_defaults(func=param_list)
+    sub = with_timeout(actions.add_parser('get', help='one parameter\'s type and value',
+                                          description='Print one parameter\'s type and value.'), 'the node')
+    sub.add_argument('node', help='node name, e.g. /balance_calibrator')
+    sub.add_argument('name', help='parameter name, e.g. calibration_bags')
+    sub.set_defaults(func=param_get)
+    sub = with_timeout(actions.add_parser('set', help='set one parameter (kept in its current type)',
+                                          description='Set one parameter. VALUE is YAML (2.5, true, '
+                                                      '"[a, b]"); it is converted to the parameter\'s current '
+                                                      'type, so a single path sets a one-element string list.'),
+                       'the node')
+    sub.add_argument('node', help='node name, e.g. /balance_calibrator')
+    sub.add_argument('name', help='parameter name, e.g. calibration_bags')
+    sub.add_argument('value', help='new value in YAML, e.g. "[bags/campaign_1]" or 1.2')
+    sub.set_defaults(func=param_set)
+
+    topic = verbs.add_parser('topic', help='list topics, echo one, measure its rate',
+                             description='List topics, print a topic\'s messages as YAML, or measure its rate.')
+    actions = topic.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
+    sub = with_timeout(actions.add_parser('list', help='topics and their types',
+                                          description='Print the topics seen on the graph with their types.'),
+                       'discovery (at most 2 s)')
+    sub.set_defaults(func=topic_list)
+    sub = with_timeout(actions.add_parser('echo', help='print messages as YAML documents',
+                                          description='Print each message of a topic as a YAML document '
+                                                      '(---) until Ctrl-C or --count messages.'),
+                       'the topic and its first message')
+    sub.add_argument('topic', help='topic name, e.g. /balance/wrench')
+    sub.add_argument('type', nargs='?', help='message type (default: the type its publishers offer)')
+    sub.add_argument('--count', type=int, default=0, help='stop after this many messages (default 0: never)')
+    sub.set_defaults(func=topic_echo)
+    sub = with_timeout(actions.add_parser('hz', help='average rate of a topic',
+                                          description='Measure the average rate of a topic (arrival times on '
+                                                      'this machine) over --duration seconds.'),
+                       'the topic and its first message')
+    sub.add_argument('topic', help='topic name, e.g. /balance/raw')
+    sub.add_argument('type', nargs='?', help='message type (default: the type its publishers offer)')
+    sub.add_argument('--duration', type=float, default=5.0, help='seconds to count messages (default 5)')
+    sub.set_defaults(func=topic_hz)
+
+    service = verbs.add_parser('service', help='list services, call a Trigger service',
+                               description='List services, or call a std_srvs/Trigger (or Empty) service.')
+    actions = service.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
+    sub = with_timeout(actions.add_parser('list', help='services and their types',
+                                          description='Print the services seen on the graph with their types.'),
+                       'discovery (at most 2 s)')
+    sub.set_defaults(func=service_list)
+    sub = actions.add_parser('call', help='call a std_srvs/srv/Trigger service and print its reply',
+                             description='Call a std_srvs/srv/Trigger (default) or std_srvs/srv/Empty service; '
+                                         'exit status 0 when its reply says success.')
+    sub.add_argument('service', help='e.g. /balance_calibrator/refit or /balance_calibrator/tare')
+    sub.add_argument('type', nargs='?', default='std_srvs/srv/Trigger',
+                     help='std_srvs/srv/Trigger (default) or std_srvs/srv/Empty')
+    sub.add_argument('--timeout', type=float, default=300.0,
+                     help='seconds to wait for the service and its reply (default 300: a refit takes a while)')
+    sub.set_defaults(func=service_call)
+
+    bag = verbs.add_parser('bag', help='what a recorded bag holds',
+                           description='Describe a recorded bag without DDS.')
+    actions = bag.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
+    sub = actions.add_parser('info', help='duration, message counts and topic types of a bag',
+                             description='Print a bag\'s duration, start and end, message count, compression and '
+                                         'topics with types and counts, from its MCAP summaries.')
+    sub.add_argument('bag', help='rosbag2 directory (metadata.yaml + *.mcap) or a bare .mcap file')
+    sub.set_defaults(func=bag_info)
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except ToolError as err:
+        print(f'ros {args.verb} {args.action}: {err}', file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())
