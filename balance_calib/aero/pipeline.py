@@ -1,0 +1,106 @@
+"""`balance-calib reduce`: wind-on bags -> held points -> coefficients through one or several
+calibration models (TM-663 §10.3-10.4, Figs. 12-13). The steps are those of the live node
+(`aero_coefficients`): the calibration without its constants evaluated on the full bridge outputs
+and turned into the installation's tunnel axes as `balance_calibrator` does, then run.py.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..calibration_file import Calibration, load_calibration
+from ..config import ConfigError
+from ..live.calibrator_core import activate, six_axis_loads
+from ..tunnel_axes import Installation, parse_installation
+from .bag_io import DEFAULT_MAX_INPUT_AGE_S, RunSamples, read_run
+from .held_points import HoldSettings
+from .model_file import ModelDescription, load_model
+from .run import FALLBACK_SIGMA_PCT_FS, RunResult, reduce_run, sigma_loads_tunnel
+
+
+class ReduceError(ValueError):
+    """Bad input to the reduction; one line naming the file, topic or option."""
+
+
+@dataclass(frozen=True)
+class ModelRun:
+    name: str                  # calibration model: 'cubic', 'linear', ...
+    result: RunResult
+
+
+@dataclass(frozen=True)
+class Reduction:
+    samples: RunSamples
+    calibration: Calibration
+    calibration_path: str
+    model: ModelDescription
+    installation: Installation
+    settings: HoldSettings
+    sigma_loads: np.ndarray        # (6,) tunnel axes
+    sigma_source: str
+    main: ModelRun
+    compared: tuple[ModelRun, ...]
+
+    @property
+    def runs(self) -> tuple[ModelRun, ...]:
+        return (self.main,) + tuple(r for r in self.compared)
+
+
+def calibration_sigma(calibration: Calibration, installation: Installation) -> tuple[np.ndarray, str]:
+    sigma = [calibration.sigma_pct_fs.get(c) for c in calibration.components]
+    if len(calibration.components) == 6 and all(s is not None and s > 0 for s in sigma):
+        return sigma_loads_tunnel(sigma, calibration.capacity, installation), 'the calibration\'s σ (% FS)'
+    return sigma_loads_tunnel([FALLBACK_SIGMA_PCT_FS] * 6, calibration.capacity, installation), \
+        f'none stated by the calibration: {FALLBACK_SIGMA_PCT_FS} % FS assumed'
+
+
+def readings_for(calibration: Calibration, model_name: str, installation: Installation, raw_mv) -> np.ndarray:
+    """Calibrated loads in the tunnel axes of §10.2, as balance_calibrator publishes them (no tare)."""
+    active = activate(calibration, model_name, installation)
+    if active.requires:
+        raise ReduceError(f'calibration model {active.model_name!r} needs {", ".join(active.requires)} as well as '
+                          f'the bridge outputs; choose another with --calibration-model or --compare')
+    return installation.to_tunnel(six_axis_loads(active.model, raw_mv))
+
+
+def reduce_bags(bags: Sequence[str | Path], calibration_path: str, model_path: str, *, compare: Sequence[str] = (),
+                calibration_model: str = 'adopted', installation: str = 'upright',
+                settings: HoldSettings = HoldSettings(), max_input_age_s: float = DEFAULT_MAX_INPUT_AGE_S,
+                estimate_weight: bool = False, raw_topic: str = '/balance/raw',
+                attitude_topic: str = '/model/attitude',
+                dynamic_pressure_topic: str = '/tunnel/dynamic_pressure') -> Reduction:
+    """Everything `reduce` computes. Raises ReduceError (or ConfigError/BagError) naming the input."""
+    try:
+        calibration = load_calibration(calibration_path)
+        model = load_model(model_path)
+        parsed = parse_installation(installation)
+    except ValueError as err:       # ConfigError too
+        raise ReduceError(str(err)) from None
+    if estimate_weight:
+        model = model.with_estimated_weight()
+    main_name = calibration.adopted if calibration_model in ('adopted', '') else calibration_model
+    names = [main_name] + [n for n in compare if n != main_name]
+    for name in names:
+        if name not in calibration.models:
+            raise ReduceError(f'{calibration_path}: no {name!r} model (it has {", ".join(calibration.models)})')
+    samples = read_run(bags, raw_topic=raw_topic, attitude_topic=attitude_topic,
+                       dynamic_pressure_topic=dynamic_pressure_topic, max_input_age_s=max_input_age_s)
+    if len(samples.q_pa) == 0:
+        raise ReduceError(f'{", ".join(map(str, bags))}: no raw sample has an attitude and a dynamic pressure '
+                          f'within {max_input_age_s} s before it')
+    sigma, sigma_source = calibration_sigma(calibration, parsed)
+    runs = []
+    for name in names:
+        readings = readings_for(calibration, name, parsed, samples.raw_mv)
+        runs.append(ModelRun(name, reduce_run(readings, samples.support_attitude, samples.q_pa, model, settings, sigma)))
+    if not runs[0].result.wind_on:
+        raise ReduceError(f'{", ".join(map(str, bags))}: no held wind-on attitude found '
+                          f'(q∞ ≥ {settings.wind_off_q_pa} Pa held for {settings.min_samples} samples or more)')
+    return Reduction(samples, calibration, str(calibration_path), model, parsed, settings, sigma, sigma_source,
+                     runs[0], tuple(runs[1:]))
+
+
+__all__ = ['ConfigError', 'ReduceError', 'Reduction', 'reduce_bags']
