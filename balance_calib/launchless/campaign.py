@@ -189,13 +189,21 @@ def _held_point_errors(truths, wrenches, capacity) -> np.ndarray:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog='campaign', description=__doc__.split('\n')[0])
-    parser.add_argument('out', nargs='?', default='demo_out')
-    parser.add_argument('--balance', default='lmc6522')
-    parser.add_argument('--effects', default='', help='effects the refit is not told about')
-    parser.add_argument('--installations', default='upright,inverted')
-    parser.add_argument('--rate', type=float, default=200.0)
-    parser.add_argument('--point-duration', type=float, default=0.1)
+    parser = argparse.ArgumentParser(prog='campaign', description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('out', nargs='?', default='demo_out',
+                        help='directory for the run (a new campaign_<time> inside it; default demo_out)')
+    parser.add_argument('--balance', default='lmc6522', help='balance config: lmc6522 (default), b660h or a path')
+    parser.add_argument('--effects', default='',
+                        help='effects the simulated balance has and the refit is not told about, e.g. '
+                             '"temperature:sensitivity_per_k=0.0045|0|0|0|0|0" (default none)')
+    parser.add_argument('--installations', default='upright,inverted',
+                        help='wind-on installations to run, comma-separated (TM-663 §10.2; default upright,inverted)')
+    parser.add_argument('--rate', type=float, default=200.0,
+                        help='bridge samples per second that bridge_publisher plays (default 200)')
+    parser.add_argument('--point-duration', type=float, default=0.1,
+                        help='seconds of samples per load point as played; the simulated balance still warms '
+                             'and drifts like a real campaign (default 0.1)')
     parser.add_argument('--wind-on-temperature', type=float, default=20.0,
                         help='balance temperature during the wind-on runs, °C')
     args = parser.parse_args(argv)
