@@ -28,7 +28,8 @@ def test_param_topic_and_service_verbs_on_a_running_calibrator(tmp_path):
                              {'diagnostics_period_s': 0.2, 'tare_samples': 20, 'tare_timeout_s': 1.0})
     try:
         # the new user's dead end of the issue: refit with calibration_bags empty -> set it, read it back
-        done = ros(domain, 'param', 'set', '/balance_calibrator', 'calibration_bags', '[bags/a, bags/b]', '--timeout', 60)
+        done = ros(domain, 'param', 'set', '/balance_calibrator', 'calibration_bags', '[bags/a, bags/b]',
+                   '--timeout', 60)
         assert done.returncode == 0, done.stderr + calibrator.output()
         assert done.stdout.strip() == 'Set parameter successful'
         done = ros(domain, 'param', 'get', '/balance_calibrator', 'calibration_bags', '--timeout', 60)

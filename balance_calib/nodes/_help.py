@@ -93,7 +93,8 @@ def parameter_table(module) -> list[tuple[str, str, str]]:
                 default, description = value
             else:
                 default = value
-                description = comments.get(name) or DESCRIPTIONS.get(module.__name__.rsplit('.', 1)[-1], {}).get(name, '')
+                fallback = DESCRIPTIONS.get(module.__name__.rsplit('.', 1)[-1], {})
+                description = comments.get(name) or fallback.get(name, '')
             rows.append((name, _show(default), description))
         return rows
     for node in ast.walk(ast.parse(source)) if source else ():

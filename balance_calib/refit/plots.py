@@ -114,7 +114,7 @@ def describe_variable(name: str) -> tuple[str, str]:
         return 'time since the first point', 'h'
     if name.startswith('orientation'):
         return 'calibration body orientation I_g', ''
-    words, units = [], []
+    words, powers = [], {}
     for factor in name.split('*'):
         base, _, power = factor.partition('^')
         text, unit = base, ''
@@ -124,13 +124,18 @@ def describe_variable(name: str) -> tuple[str, str]:
                 text = template.format(*(_nice(g) for g in match.groups()))
                 unit = factor_unit
                 break
-        if power:
-            text = f'({text})^{power}' if ' ' in text else f'{text}^{power}'
-            unit = f'{unit}^{power}' if unit else ''
+        exponent = int(power) if power.isdigit() else 1
+        if exponent != 1:
+            wrapped = ' ' in text and not (text.startswith('(') and text.endswith(')'))
+            text = f'({text}){_superscript(exponent)}' if wrapped else f'{text}{_superscript(exponent)}'
         words.append(text)
         if unit:
-            units.append(unit)
-    return ' × '.join(words), '·'.join(units)
+            powers[unit] = powers.get(unit, 0) + exponent
+    return ' × '.join(words), '·'.join(u + (_superscript(n) if n != 1 else '') for u, n in powers.items())
+
+
+def _superscript(number: int) -> str:
+    return str(number).translate(str.maketrans('0123456789', '⁰¹²³⁴⁵⁶⁷⁸⁹'))
 
 
 def effect_figure(balance: str, effect, residuals_after: np.ndarray, capacity, components, path: Path) -> Path:

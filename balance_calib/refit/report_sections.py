@@ -174,14 +174,16 @@ def record_markdown(report: Mapping) -> list[str]:
     campaign = record['campaign']
     span = (f'{campaign["first_point_utc"]} to {campaign["last_point_utc"]} UTC'
             if 'first_point_utc' in campaign else 'simulated clock (no wall-clock date)')
+    temperature_text = (f'{temperature["min"]:.2f} to {temperature["max"]:.2f} °C (mean {temperature["mean"]:.2f} °C, '
+                        f'{temperature["points_with_temperature"]} points)' if temperature
+                        else 'not recorded (no /balance/temperature)')
+    sources = ', '.join(f'`{s}`' for s in report.get('sources', [])) or 'simulation (no bag)'
     lines += ['',
               f'- Excitation: {volts} ({excitation["source"]}).',
-              '- Balance temperature: ' + (f'{temperature["min"]:.2f} to {temperature["max"]:.2f} °C '
-                                          f'(mean {temperature["mean"]:.2f} °C, {temperature["points_with_temperature"]} points)'
-                                          if temperature else 'not recorded (no /balance/temperature)') + '.',
+              f'- Balance temperature: {temperature_text}.',
               f'- Campaign: {span}, {campaign["duration_h"]:.2f} h from first to last point.',
               f'- Fitted: {report.get("fitted_at", "")}.',
-              '- Source files: ' + (', '.join(f'`{s}`' for s in report.get('sources', [])) or 'simulation (no bag)') + '.',
+              f'- Source files: {sources}.',
               '']
     points = record['load_points']
     lines += ['## Load points (TM-663 Table 2)', '',
@@ -195,9 +197,10 @@ def record_markdown(report: Mapping) -> list[str]:
     by_count = points['by_loaded_components']
     lines += ['Loaded points by number of components carrying an applied load (loading hardware by-products '
               'included): ' + ', '.join(f'{n}-component {k}' for n, k in by_count.items()) + '.', '']
+    body = report['calibration_body']
     lines += ['## Calibration body loads per orientation (TM-663 Tables 9, 13)', '',
-              f'Body {report["calibration_body"]["weight_N"]:.2f} N, CG x = {report["calibration_body"]["cg_x_m"]:.4f} m '
-              f'({report["calibration_body"]["source"]}); loads it puts on the balance in each orientation I_g '
+              f'Body {body["weight_N"]:.2f} N, CG x = {body["cg_x_m"]:.4f} m '
+              f'({body["source"]}); loads it puts on the balance in each orientation I_g '
               '(balance axes), added to the applied loads (§7.1):', '']
     rows = [[o['orientation'], '(' + ', '.join(f'{g:+.3f}' for g in o['gravity']) + ')', o['points']]
             + [f'{o["body_loads"][c]:.3f}' for c in components] for o in record['body_by_orientation']]
@@ -274,7 +277,8 @@ def lab_units_markdown(report: Mapping, system: str) -> list[str]:
     lines += _md_table(['model', 'component', 'unit', 'σ', '2σ', 'largest residual'], rows)
     body = report.get('calibration_body', {})
     if 'weight_N' in body:
-        lines += ['', f'Calibration body weight: {loads_to_display([body["weight_N"]], ["FZ"], system)[0]:.4g} {force}.']
+        weight = loads_to_display([body['weight_N']], ['FZ'], system)[0]
+        lines += ['', f'Calibration body weight: {weight:.4g} {force}.']
     return lines + ['']
 
 
