@@ -1,0 +1,42 @@
+"""A campaign recorded as a bag, exported as a table and fitted from it (direct method, TM-663
+cubic terms), gives the calibration that `refit` gives from the bag, within numerical noise; the
+series tare takes the place of the cubic's constant terms."""
+import numpy as np
+
+from balance_calib.cli import main
+from balance_calib.config import load_balance_config
+from balance_calib.refit.pipeline import run_refit
+from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
+from balance_calib.simulation.campaign_bag import write_campaign_bag
+from balance_calib.tables.balfit_reader import read_table
+from balance_calib.tables.calibrate import calibrate_table
+
+
+def test_bag_to_table_to_fit_equals_bag_to_refit(tmp_path, capsys):
+    config = load_balance_config('lmc6522')
+    settings = SimulationSettings(samples_per_point=10, transition_samples=3, point_duration_s=1.0,
+                                  transition_s=0.5, noise_sigma_pct_fs=table17_noise(config), seed=23)
+    bag = write_campaign_bag(simulate_campaign(config, settings=settings), tmp_path / 'campaign')
+    refit = run_refit([bag], 'lmc6522', tmp_path / 'refit', diagnose=False, plots=False)
+    cubic = refit.calibration.models['cubic']
+
+    table_path = tmp_path / 'campaign.csv'
+    assert main(['export-table', str(bag), '--balance', 'lmc6522', '--out', str(table_path)]) == 0
+    table = read_table(table_path)
+    assert table.points == refit.report['points']
+    result = calibrate_table(table, method='direct', terms='tm663-cubic', statistics=False)
+    direct = result.fits['direct']
+    # every non-constant coefficient equal to numerical noise (relative to its own size at rated output)
+    for component_index, component in enumerate(config.components):
+        for term in direct.model.terms:
+            ours = direct.model.coefficient(component, term.name)
+            theirs = cubic.coefficient(component, term.name)
+            size = np.prod([config.rated_outputs_by_name[f.variable] ** f.power for f in term.factors])
+            assert abs(ours - theirs) * size <= 1e-9 * config.capacity[component_index], (component, term.name)
+    # the one series' tare is minus the refit's constant terms
+    constant = np.array([cubic.coefficient(c, '1') for c in config.components])
+    np.testing.assert_allclose(direct.tares[0], -constant, atol=1e-9 * config.capacity.max())
+    # and the loads of every point agree
+    outputs = table.bridge_outputs
+    np.testing.assert_allclose(direct.model.loads(outputs) - direct.tares[0], cubic.loads(outputs),
+                               atol=1e-9 * config.capacity.max())
