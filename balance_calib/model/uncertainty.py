@@ -95,3 +95,21 @@ def load_standard_uncertainty(calibration_or_model, outputs_mv, extra: Mapping[s
         variance = variance + np.asarray(tare_sigma, dtype=float)[None, :] ** 2
     result[finite] = np.sqrt(variance)
     return result
+
+
+def with_fitted_covariance(model, bridge_outputs_mv, residuals, extra: Mapping[str, np.ndarray] | None = None):
+    """A least-squares-fitted BalanceModel with `metadata.uncertainty` from its own fitted points:
+    (XᵀX)⁻¹ by SVD of the unit-norm-scaled design (rank-deficient directions left out) and the
+    residual σ per component with N − rank degrees of freedom. For refit's calibration.yaml."""
+    design = model.design(bridge_outputs_mv, extra)
+    residuals = np.atleast_2d(np.asarray(residuals, dtype=float))
+    scales = np.linalg.norm(design, axis=0)
+    scales[scales == 0] = 1.0
+    _, singular, vt = np.linalg.svd(design / scales, full_matrices=False)
+    keep = singular > singular[0] * 1e-10 if singular.size else np.zeros(0, bool)
+    v_scaled = vt[keep].T / singular[keep]
+    covariance = (v_scaled @ v_scaled.T) / np.outer(scales, scales)
+    dof = max(design.shape[0] - int(keep.sum()), 1)
+    sigma = np.sqrt((residuals ** 2).sum(axis=0) / dof)
+    return model.with_coefficients(model.coefficients, uncertainty={
+        'residual_sigma': sigma.tolist(), 'covariance_unscaled': covariance.tolist(), 'dof': int(dof)})

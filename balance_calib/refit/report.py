@@ -55,7 +55,9 @@ def _body(reduction, diagnosis):
 
 
 def build_calibration(config, reduction, fits, base_model, diagnosis, sources: Sequence[str]) -> Calibration:
-    models = {order: fit.fit.model for order, fit in fits.items()}
+    from ..model.uncertainty import with_fitted_covariance      # covariance for /balance/wrench_uncertainty
+    models = {order: with_fitted_covariance(fit.fit.model, reduction.corrected.bridge_outputs_mv, fit.fit.residuals)
+              for order, fit in fits.items()}
     before, after, _, _, effects, live, reference = _diagnosis_fields(diagnosis, fits, base_model)
     adopted = base_model
     if live is not None:
