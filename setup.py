@@ -28,6 +28,7 @@ setup(
             'balance_calibrator = balance_calib.nodes.balance_calibrator:main',
             'balance_recorder = balance_calib.nodes.balance_recorder:main',
             'thrust_analyzer = balance_calib.nodes.thrust_analyzer:main',
+            'aero_coefficients = balance_calib.nodes.aero_coefficients:main',
         ],
     },
 )

@@ -8,6 +8,12 @@ Modes (parameter `mode`):
   wind_on       an angle-of-attack sweep (live/wind_on.py) or a CSV of balance-axis loads; also
                 /balance/truth: the true aerodynamic load in tunnel axes, N / N·m, stamped like
                 the raw sample it belongs to (a test and diagnostic topic, not a public interface).
+                With `aero_model` (a config/models file) the run is physical (TM-663 §10.3): a
+                wind-off α/φ sweep, the wind-on α sweep at `dynamic_pressure_pa`, wind-off again;
+                the balance feels the air loads plus the model's weight at each attitude, at the
+                attitude the sting's deflection gives; /model/attitude (support angles) and
+                /tunnel/dynamic_pressure with every raw sample, and the true coefficients on
+                /aero/truth (body) and /aero/truth_wind (wind axes), also not public interfaces.
   replay        the messages of bag(s) as `ros2 bag play` sends them (header stamps as recorded).
   thrust_stand  the lab manual's thrust stand (nodes/thrust_stand_source.py): strain channel on
                 /balance/raw force.x (mV), /thrust_stand/chamber_pressure (gauge) and
@@ -39,7 +45,8 @@ from balance_calib.bags.errors import BagError
 from balance_calib.config import ConfigError, load_balance_config
 from balance_calib.live import timeline as tl
 from balance_calib.live.replay import read_recorded_messages
-from balance_calib.live.wind_on import aoa_sweep_profile, csv_profile, wind_on_outputs
+from balance_calib.aero.model_file import load_model
+from balance_calib.live.wind_on import aero_run_profile, aoa_sweep_profile, csv_profile, wind_on_outputs
 from balance_calib.simulation.balance_sim import (SimulationSettings, noise_mv_for_load_sigma, simulate_campaign,
                                                   table17_noise)
 from balance_calib.simulation.effects import parse_effects
@@ -68,7 +75,14 @@ PARAMETERS = {                       # name: default (the type of the default is
     'alpha_start_deg': -2.0,
     'alpha_end_deg': 22.0,
     'alpha_step_deg': 2.0,
-    'model_weight_n': 0.0,
+    'model_weight_n': 0.0,           # wind_on; with aero_model: > 0 overrides the model file's weight (and CG)
+    'aero_model': '',                # wind_on: a model file (config/models) -> the physical run of §10.3
+    'dynamic_pressure_pa': 50000.0,  # wind_on with aero_model: q∞ of the wind-on holds
+    'model_cg_m': [0.0, 0.0, 0.0],   # wind_on with aero_model and model_weight_n > 0: the true CG, body axes
+    'wind_off_rolls_deg': [0.0, 90.0, 180.0, 270.0],   # wind_on with aero_model: the wind-off sweep's
+    'wind_off_alphas_deg': [-2.0, 10.0, 22.0],         # attitudes (every roll at every α)
+    'wind_off_hold_s': 0.3,          # wind_on with aero_model: time at each wind-off attitude
+    'electrical_zero_mv': 0.04,      # calibration and wind_on: bridge outputs with nothing on the balance
     'temperature_c': 20.0,           # wind_on: balance temperature
     'temperature_rate_hz': 10.0,
     'loop': False,
@@ -77,6 +91,8 @@ PARAMETERS = {                       # name: default (the type of the default is
     'start_delay_s': 0.5,            # ... and this long after, so their other topics are matched too
 }
 RAW_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+# timeline kinds of the physical wind-on run, after live/timeline.py's
+ATTITUDE, DYNAMIC_PRESSURE, AERO_TRUTH, AERO_TRUTH_WIND = 7, 8, 9, 10
 EVENT_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 
 
@@ -161,6 +177,8 @@ class BridgePublisher(Node):
         config, truth, noise = self._balance()
         installation = parse_installation(self._settings['installation'])
         rate = float(self._settings['rate_hz'])
+        if self._settings['aero_model']:
+            return self._aero_run(config, truth, noise, installation, rate)
         if self._settings['profile_csv']:
             profile = csv_profile(self._settings['profile_csv'], installation, rate)
             samples_per_condition = 1
@@ -176,7 +194,7 @@ class BridgePublisher(Node):
         # noise_sigma_pct_fs is the σ of a held point's mean, as in calibration mode
         noise_mv = noise_mv_for_load_sigma(truth.without_constant(), config.capacity, noise) \
             * np.sqrt(samples_per_condition)
-        zero_mv = SimulationSettings().electrical_zero_mv
+        zero_mv = float(self._settings['electrical_zero_mv'])
         effects = parse_effects(self._settings['effects'])     # the balance's own effects, wind-on too
         self._publisher(tl.TRUTH, WrenchStamped, '/balance/truth', RAW_QOS)
 
@@ -188,6 +206,51 @@ class BridgePublisher(Node):
             return tl.wind_on_timeline(profile.times_s, raw, profile.aero_tunnel,
                                        float(self._settings['temperature_c']),
                                        self._temperature_every())
+        return build
+
+    def _aero_run(self, config, truth, noise, installation, rate):
+        model = load_model(self._settings['aero_model'])
+        weight = float(self._settings['model_weight_n'])
+        if weight > 0:
+            cg = np.asarray(self._settings['model_cg_m'], dtype=float)
+            if cg.shape != (3,):
+                raise ValueError(f'model_cg_m must be three numbers [x, y, z] in m, not {list(cg)}')
+        elif model.weight_declared:
+            weight, cg = model.weight_n, model.centre_of_gravity_m
+        else:
+            raise ValueError(f'{model.path}: the model file says estimate; give the simulated model its true '
+                             f'weight and CG with model_weight_n and model_cg_m')
+        step = float(self._settings['alpha_step_deg'])
+        if step <= 0:
+            raise ValueError('alpha_step_deg must be positive')
+        alphas = np.arange(self._settings['alpha_start_deg'], self._settings['alpha_end_deg'] + step / 2, step)
+        wind_off = [(r, a) for r in self._settings['wind_off_rolls_deg'] for a in self._settings['wind_off_alphas_deg']]
+        profile = aero_run_profile(model, installation, rate, q_pa=float(self._settings['dynamic_pressure_pa']),
+                                   weight_n=weight, cg_m=cg, alphas_deg=alphas, hold_s=float(self._settings['hold_s']),
+                                   wind_off_attitudes_deg=wind_off,
+                                   wind_off_hold_s=float(self._settings['wind_off_hold_s']))
+        samples_per_hold = max(1, round(float(self._settings['hold_s']) * rate))
+        noise_mv = noise_mv_for_load_sigma(truth.without_constant(), config.capacity, noise) * np.sqrt(samples_per_hold)
+        effects = parse_effects(self._settings['effects'])
+        self._publisher(tl.TRUTH, WrenchStamped, '/balance/truth', RAW_QOS)
+        self._publisher(ATTITUDE, Vector3Stamped, '/model/attitude', RAW_QOS)
+        self._publisher(DYNAMIC_PRESSURE, FluidPressure, '/tunnel/dynamic_pressure', RAW_QOS)
+        self._publisher(AERO_TRUTH, WrenchStamped, '/aero/truth', RAW_QOS)
+        self._publisher(AERO_TRUTH_WIND, WrenchStamped, '/aero/truth_wind', RAW_QOS)
+        wind_on = profile.q_pa > 0
+
+        def build(cycle):
+            raw = wind_on_outputs(truth, profile.loads_balance, electrical_zero_mv=float(self._settings['electrical_zero_mv']),
+                                  noise_mv=noise_mv, seed=int(self._settings['seed']) + cycle, effects=effects,
+                                  times_s=profile.times_s, temperature_c=float(self._settings['temperature_c']),
+                                  rated_output_mv=config.rated_output_mv)
+            times = profile.times_s
+            return tl.merge(tl.wind_on_timeline(times, raw, profile.aero_tunnel, float(self._settings['temperature_c']),
+                                                self._temperature_every()),
+                            tl.events(times, ATTITUDE, profile.support_attitude),
+                            tl.events(times, DYNAMIC_PRESSURE, profile.q_pa),
+                            tl.events(times[wind_on], AERO_TRUTH, profile.body_coefficients[wind_on]),
+                            tl.events(times[wind_on], AERO_TRUTH_WIND, profile.wind_coefficients[wind_on]))
         return build
 
     def _replay(self):
@@ -272,15 +335,15 @@ class BridgePublisher(Node):
             return
         values = self._timeline.values[index]
         stamp = self._stamp(float(self._timeline.times_s[index]), now)
-        if kind in (tl.RAW, tl.APPLIED_LOAD, tl.TRUTH):
+        if kind in (tl.RAW, tl.APPLIED_LOAD, tl.TRUTH, AERO_TRUTH, AERO_TRUTH_WIND):
             msg = WrenchStamped()
-            msg.header.frame_id = self._frame_id if kind == tl.RAW else 'balance' if kind == tl.APPLIED_LOAD \
-                else 'tunnel'
+            msg.header.frame_id = {tl.RAW: self._frame_id, tl.APPLIED_LOAD: 'balance', AERO_TRUTH: 'body',
+                                   AERO_TRUTH_WIND: 'wind'}.get(kind, 'tunnel')
             (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
              msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = (float(v) for v in values)
-        elif kind == tl.GRAVITY:
+        elif kind in (tl.GRAVITY, ATTITUDE):
             msg = Vector3Stamped()
-            msg.header.frame_id = 'balance'
+            msg.header.frame_id = 'balance' if kind == tl.GRAVITY else 'tunnel'
             msg.vector.x, msg.vector.y, msg.vector.z = (float(v) for v in values[:3])
         elif kind == tl.TEMPERATURE:
             msg = Temperature(temperature=float(values[0]), variance=0.0)
