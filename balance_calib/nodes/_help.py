@@ -72,6 +72,8 @@ def _inline_comments(source: str) -> dict[str, str]:
 
 
 def _show(default) -> str:
+    if default == 'string_array':               # live/parameters.py's marker of a string list without default
+        return '[] (string list)'
     kind = getattr(default, 'name', None)      # rclpy Parameter.Type: a typed empty default
     if isinstance(kind, str) and kind.endswith('_ARRAY'):
         return f'[] ({kind[:-6].lower()} list)'
@@ -91,6 +93,8 @@ def parameter_table(module) -> list[tuple[str, str, str]]:
         for name, value in table.items():
             if isinstance(value, tuple) and len(value) == 2 and isinstance(value[1], str):
                 default, description = value
+            elif hasattr(value, 'default') and isinstance(getattr(value, 'description', None), str):
+                default, description = value.default, value.description      # a Spec(default, description, ...)
             else:
                 default = value
                 fallback = DESCRIPTIONS.get(module.__name__.rsplit('.', 1)[-1], {})
