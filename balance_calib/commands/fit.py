@@ -19,7 +19,10 @@ def register(subparsers) -> None:
     parser.add_argument('--out', required=True, help='output directory')
     parser.add_argument('--validate', nargs='+', default=[], metavar='VAL.csv',
                         help='validation table(s): same series, the calibration\'s tares applied')
-    parser.add_argument('--method', default='auto', choices=['auto', 'direct', 'iterative'])
+    parser.add_argument('--method', default='auto', choices=['auto', 'direct', 'iterative'],
+                        help='direct: loads as a polynomial of the outputs (TM-663); iterative: outputs as a '
+                             'polynomial of the loads, inverted per point (AIAA R-091); auto: the one with the lower '
+                             'by cross-validated σ (default auto)')
     parser.add_argument('--terms', default='auto', help='auto, tm663-cubic, r091-96 or a file of term names')
     parser.add_argument('--excitation-v', type=float, default=None,
                         help='bridge excitation (V): turns mV/V tables into mV calibrations')
@@ -30,7 +33,7 @@ def register(subparsers) -> None:
         'export-table', help='write a recorded campaign (bags) as a BALFIT-style table',
         description='Cut the bags into load points, apply the zero points and the calibration-body tare '
                     'as refit does, and write the corrected points as one load series.')
-    export.add_argument('bags', nargs='+')
+    export.add_argument('bags', nargs='+', help='rosbag2 directories or bare .mcap files of one campaign')
     export.add_argument('--balance', required=True, help='balance config: lmc6522, b660h or a path')
     export.add_argument('--out', required=True, help='CSV file to write')
     export.set_defaults(func=run_export)

@@ -33,9 +33,12 @@ def register(subparsers) -> None:
                         help='a support angle moving more than this between samples starts a new hold')
     parser.add_argument('--max-input-age-s', type=float, default=0.5,
                         help='attitude and q∞ older than this at a raw sample make it stale (left out)')
-    parser.add_argument('--raw-topic', default='/balance/raw')
-    parser.add_argument('--attitude-topic', default='/model/attitude')
-    parser.add_argument('--dynamic-pressure-topic', default='/tunnel/dynamic_pressure')
+    parser.add_argument('--raw-topic', default='/balance/raw',
+                        help='topic of the bridge outputs in the bags (default /balance/raw)')
+    parser.add_argument('--attitude-topic', default='/model/attitude',
+                        help='topic of the support attitude φ, α, β in the bags (default /model/attitude)')
+    parser.add_argument('--dynamic-pressure-topic', default='/tunnel/dynamic_pressure',
+                        help='topic of q∞ in the bags (default /tunnel/dynamic_pressure)')
     parser.set_defaults(func=run)
 
 
