@@ -40,3 +40,21 @@ def test_bag_to_table_to_fit_equals_bag_to_refit(tmp_path, capsys):
     outputs = table.bridge_outputs
     np.testing.assert_allclose(direct.model.loads(outputs) - direct.tares[0], cubic.loads(outputs),
                                atol=1e-9 * config.capacity.max())
+
+
+def test_refit_calibration_carries_the_covariance_the_live_uncertainty_needs(tmp_path):
+    from balance_calib.calibration_file import load_calibration
+    from balance_calib.model.uncertainty import load_standard_uncertainty
+    config = load_balance_config('lmc6522')
+    settings = SimulationSettings(samples_per_point=10, transition_samples=3, point_duration_s=1.0,
+                                  transition_s=0.5, noise_sigma_pct_fs=table17_noise(config), seed=24)
+    bag = write_campaign_bag(simulate_campaign(config, settings=settings), tmp_path / 'campaign')
+    run_refit([bag], 'lmc6522', tmp_path / 'refit', diagnose=False, plots=False)
+    calibration = load_calibration(tmp_path / 'refit' / 'calibration.yaml')
+    outputs = np.diag(config.rated_output_mv) * 0.5                # one bridge at half its rated output
+    u = load_standard_uncertainty(calibration, outputs, model='cubic')
+    sigma = np.asarray(calibration.model('cubic').metadata['uncertainty']['residual_sigma'])
+    assert np.all(np.isfinite(u)) and np.all(u >= sigma) and np.all(u < 2 * sigma)
+    # six bridges at once at 80 %: off the schedule's support, the uncertainty grows
+    assert np.all(load_standard_uncertainty(calibration, 0.8 * config.rated_output_mv[None, :], model='cubic')[0]
+                  > u.max(axis=0))
