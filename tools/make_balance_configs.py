@@ -151,6 +151,7 @@ def main():
                 'sensitivity_active_tolerance': 0.05,    # fitted / active calibration's - 1
                 'body_weight_tolerance': 0.10,       # body weight / declared - 1
                 'capacity_margin': 0.05,             # applied load / capacity - 1
+                'zero_shift_pct_fs': 2.0,            # between consecutive zero points of one block
             },
             'schedule': {
                 'columns': Flow(['point', 'Ig', 'FX_kgf', 'FY_kgf', 'FZ_kgf', 'MX_kgfm', 'MY_kgfm', 'MZ_kgfm',

@@ -10,6 +10,9 @@ calibration.yaml is written or swapped in:
                        (config Table 10/14 linear matrix, else capacity / rated output): loads
                        recorded in kgf or the wrong --balance cannot pass
     active_calibration ... and near the active calibration's, when one is given
+    zero_points        consecutive zero points of one block agree (TM-663 §5(4)): a block whose
+                       zero points differ by the body's weight turned is two orientations under
+                       one /calibration/gravity message (one lost or never sent)
     body_weight        calibration body weight positive and near its declaration
     capacity           applied loads within the rated loads
     clipping           no bridge flat-topped at one value (an amplifier or ADC at its limit)
@@ -37,6 +40,7 @@ DEFAULT_SENSITIVITY_NOMINAL_TOLERANCE = 0.15
 DEFAULT_SENSITIVITY_ACTIVE_TOLERANCE = 0.05
 DEFAULT_BODY_WEIGHT_TOLERANCE = 0.10
 DEFAULT_CAPACITY_MARGIN = 0.05
+DEFAULT_ZERO_SHIFT_PCT_FS = 2.0        # between consecutive zero points of one block
 
 
 @dataclass(frozen=True)
@@ -48,6 +52,7 @@ class AcceptanceLimits:
     sensitivity_active_tolerance: float = DEFAULT_SENSITIVITY_ACTIVE_TOLERANCE
     body_weight_tolerance: float = DEFAULT_BODY_WEIGHT_TOLERANCE
     capacity_margin: float = DEFAULT_CAPACITY_MARGIN
+    zero_shift_pct_fs: float = DEFAULT_ZERO_SHIFT_PCT_FS
 
 
 def acceptance_limits(config: BalanceConfig, base_model: str = 'cubic') -> AcceptanceLimits:
@@ -69,7 +74,8 @@ def acceptance_limits(config: BalanceConfig, base_model: str = 'cubic') -> Accep
         sigma[component] = _positive(value, f'{where}.sigma_limit_pct_fs.{component}')
     numbers = {}
     for key in ('outlier_robust_sigmas', 'outlier_floor_pct_fs', 'sensitivity_nominal_tolerance',
-                'sensitivity_active_tolerance', 'body_weight_tolerance', 'capacity_margin'):
+                'sensitivity_active_tolerance', 'body_weight_tolerance', 'capacity_margin',
+                'zero_shift_pct_fs'):
         if key in data:
             numbers[key] = _positive(data[key], f'{where}.{key}')
     unknown = set(data) - {'sigma_limit_pct_fs', *AcceptanceLimits.__dataclass_fields__}
@@ -121,41 +127,57 @@ def _plain(value):
 
 # -- the gates ------------------------------------------------------------------------------------
 
-def evaluate_gates(config: BalanceConfig, points, reduction, fits, base_model: str, cut=None,
-                   active=None, limits: AcceptanceLimits | None = None) -> list[Gate]:
-    """All gates on a refit before diagnosis. points: LoadPoints; fits: order -> ModelFit;
-    cut: load_points.CutSummary or None; active: calibration_file.Calibration or None."""
-    limits = limits or acceptance_limits(config, base_model)
-    gates = [
-        _sigma_gate(config, fits[base_model], limits),
-        _outlier_gate(config, points, reduction, fits[base_model], limits),
-        _sensitivity_gate(config, fits, limits),
-    ]
+def data_gates(config: BalanceConfig, points, reduction, fits, cut=None, active=None,
+               limits: AcceptanceLimits | None = None) -> list[Gate]:
+    """Gates on the data and the sensitivities, before the (slow) diagnosis. points: LoadPoints;
+    fits: order -> ModelFit; cut: load_points.CutSummary or None; active: Calibration or None."""
+    limits = limits or acceptance_limits(config)
+    gates = [_sensitivity_gate(config, fits, limits)]
     if active is not None:
         gates.append(_active_gate(config, fits, active, limits))
-    gates += [_body_gate(config, reduction, limits), _capacity_gate(config, points, limits)]
+    gates += [_zero_gate(config, points, reduction, limits), _body_gate(config, reduction, limits),
+              _capacity_gate(config, points, limits)]
     if cut is not None:
         gates += [_clipping_gate(cut), _marker_gate(cut)]
     return gates
 
 
-def _sigma_gate(config, base_fit, limits) -> Gate:
-    sigma = base_fit.sigma_pct_fs
+def fit_gates(config: BalanceConfig, points, sigma_pct_fs: Mapping[str, float], residuals: np.ndarray,
+              press: np.ndarray, limits: AcceptanceLimits | None = None, what: str = 'base model') -> list[Gate]:
+    """σ and outlier gates on the model to be adopted: its σ (% FS), residuals and leave-one-out
+    residuals (P, 6) N, N·m."""
+    limits = limits or acceptance_limits(config)
+    return [_sigma_gate(config, sigma_pct_fs, limits, what),
+            _outlier_gate(config, points, residuals, press, limits, what)]
+
+
+def base_fit_arrays(reduction, base_fit) -> tuple[np.ndarray, np.ndarray]:
+    """(residuals, leave-one-out residuals) of a ModelFit on the corrected data."""
+    design = base_fit.fit.model.design(reduction.corrected.bridge_outputs_mv)
+    return base_fit.fit.residuals, press_residuals(design, base_fit.fit.residuals)
+
+
+def evaluate_gates(config: BalanceConfig, points, reduction, fits, base_model: str, cut=None,
+                   active=None, limits: AcceptanceLimits | None = None) -> list[Gate]:
+    """All gates, σ and outliers on the base model (no diagnosis)."""
+    limits = limits or acceptance_limits(config, base_model)
+    residuals, press = base_fit_arrays(reduction, fits[base_model])
+    return (fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits)
+            + data_gates(config, points, reduction, fits, cut, active, limits))
+
+
+def _sigma_gate(config, sigma, limits, what) -> Gate:
     over = [c for c in config.components if not (sigma[c] <= limits.sigma_limit_pct_fs[c])]
-    details = {'sigma_pct_fs': dict(sigma), 'limit_pct_fs': dict(limits.sigma_limit_pct_fs)}
+    details = {'sigma_pct_fs': dict(sigma), 'limit_pct_fs': dict(limits.sigma_limit_pct_fs), 'model': what}
     if over:
         text = ', '.join(f'{c} {sigma[c]:.3g} % FS > {limits.sigma_limit_pct_fs[c]:.3g}' for c in over)
-        return Gate('sigma', False, f'σ beyond its limit: {text}', details)
+        return Gate('sigma', False, f'σ of the {what} beyond its limit: {text}', details)
     worst = max(config.components, key=lambda c: sigma[c] / limits.sigma_limit_pct_fs[c])
-    return Gate('sigma', True, f'σ within limits (closest: {worst} {sigma[worst]:.3g} of '
+    return Gate('sigma', True, f'σ of the {what} within limits (closest: {worst} {sigma[worst]:.3g} of '
                                f'{limits.sigma_limit_pct_fs[worst]:.3g} % FS)', details)
 
 
-def _outlier_gate(config, points, reduction, base_fit, limits) -> Gate:
-    model = base_fit.fit.model
-    design = model.design(reduction.corrected.bridge_outputs_mv)
-    residuals = base_fit.fit.residuals
-    press = press_residuals(design, residuals)           # (P, 6) N, N·m: r / (1 - h)
+def _outlier_gate(config, points, residuals, press, limits, what) -> Gate:
     press_pct = press / config.capacity * 100.0
     # r / sqrt(1 - h): the same variance for every point whatever its leverage
     with np.errstate(divide='ignore', invalid='ignore'):
@@ -179,10 +201,10 @@ def _outlier_gate(config, points, reduction, base_fit, limits) -> Gate:
     with np.errstate(divide='ignore', invalid='ignore'):
         largest = float(np.nanmax(np.abs(standardized) / np.maximum(robust, 1e-12)))
     details = {'threshold_pct_fs': dict(zip(config.components, threshold)), 'points': entries,
-               'count': int(len(rows)), 'largest_robust_sigmas': largest}
+               'count': int(len(rows)), 'largest_robust_sigmas': largest, 'model': what}
     if not len(rows):
         return Gate('outliers', True, f'no point beyond {limits.outlier_robust_sigmas:g} robust σ '
-                                      f'(largest {largest:.1f}; leave-one-out residuals)', details)
+                                      f'(largest {largest:.1f}; leave-one-out residuals of the {what})', details)
     first = entries[0]
     more = f' and {len(rows) - 1} more (points {", ".join(str(e["point"]) for e in entries[1:6])}' \
            f'{"…" if len(rows) > 6 else ""})' if len(rows) > 1 else ''
@@ -244,6 +266,37 @@ def _active_gate(config, fits, active, limits) -> Gate:
         return Gate('active_calibration', False, f'the active calibration is of balance {active.balance}, '
                                                  f'this refit of {config.name}', gate.details)
     return gate
+
+
+def _zero_gate(config, points, reduction, limits) -> Gate:
+    # consecutive zero points (in time) of one block: a maximal run of one orientation, as §5(4)
+    order = np.argsort(points.times_s, kind='stable')
+    orientation = np.asarray(points.orientation)[order]
+    block = np.concatenate([[0], np.cumsum(orientation[1:] != orientation[:-1])])
+    is_zero = points.is_zero_point[order]
+    zeros, zero_blocks = order[is_zero], block[is_zero]
+    same = zero_blocks[1:] == zero_blocks[:-1]
+    pairs = list(zip(zeros[:-1][same].tolist(), zeros[1:][same].tolist()))
+    details = {'limit_pct_fs': limits.zero_shift_pct_fs, 'pairs': len(pairs)}
+    if not pairs:
+        return Gate('zero_points', True, 'no block with two zero points to compare', details)
+    before, after = np.array(pairs).T
+    change_mv = points.outputs_mv[after] - points.outputs_mv[before]
+    if 'linear' in config.matrices:
+        change = change_mv @ linear_part(config.matrices['linear']).T
+    else:
+        change = change_mv * (config.capacity / config.rated_output_mv)
+    change_pct = np.abs(change) / config.capacity * 100.0
+    worst = np.unravel_index(int(np.argmax(np.nan_to_num(change_pct, nan=np.inf))), change_pct.shape)
+    details['largest_pct_fs'] = float(change_pct[worst])
+    if not change_pct[worst] <= limits.zero_shift_pct_fs:
+        b, a = before[worst[0]], after[worst[0]]
+        return Gate('zero_points', False, f'zero points {int(points.label[b])} and {int(points.label[a])} '
+                                          f'(I_g {int(points.orientation[b])}) differ by {change_pct[worst]:.3g} % FS '
+                                          f'in {config.components[worst[1]]}: the body was turned between them '
+                                          f'without a /calibration/gravity message?', details)
+    return Gate('zero_points', True, f'consecutive zero points of each block agree within {change_pct[worst]:.3g} % FS '
+                                     f'({config.components[worst[1]]})', details)
 
 
 def _body_gate(config, reduction, limits) -> Gate:

@@ -94,13 +94,19 @@ def _flat_tops(values: np.ndarray, point_of_sample: np.ndarray, bridges) -> tupl
 def _orientation_index(gravity: np.ndarray, config: BalanceConfig | None) -> np.ndarray:
     """I_g of each gravity vector when it matches the config's Fig. 3 directions, else 101, 102..."""
     known = dict(config.gravity_directions) if config else {}
+    gravity = np.asarray(gravity, dtype=float)
     index = np.zeros(len(gravity), dtype=int)
+    if known:
+        keys = np.array(list(known))
+        vectors = np.array([known[k] for k in keys], dtype=float)
+        close = np.all(np.abs(gravity[:, None, :] - vectors[None, :, :]) <= 1e-3 + 1e-5 * np.abs(vectors[None]), axis=2)
+        matched = np.any(close, axis=1)
+        index[matched] = keys[np.argmax(close[matched], axis=1)]
+    else:
+        matched = np.zeros(len(gravity), bool)
     extra: list[np.ndarray] = []
-    for i, g in enumerate(gravity):
-        match = [k for k, v in known.items() if np.allclose(v, g, atol=1e-3)]
-        if match:
-            index[i] = match[0]
-            continue
+    for i in np.flatnonzero(~matched):
+        g = gravity[i]
         for j, e in enumerate(extra):
             if np.allclose(e, g, atol=1e-3):
                 index[i] = 101 + j
@@ -188,6 +194,8 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
         mad = np.median(np.abs(block - median), axis=0) * 1.4826
         keep = np.all(np.abs(block - median) <= outlier_mad * np.maximum(mad, 1e-12), axis=1) \
             if len(block) >= 5 else np.ones(len(block), bool)
+        if not np.any(keep):  # no sample near the median of all bridges at once: keep them all
+            keep = np.ones(len(block), bool)
         outliers += int(np.count_nonzero(~keep))
         used += int(np.count_nonzero(keep))
         means[p] = block[keep].mean(axis=0)

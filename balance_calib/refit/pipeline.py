@@ -95,7 +95,7 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
     Raises RefitError when an acceptance gate fails (refit/gates.py), unless force; active is the
     calibration in use, whose sensitivities the new one must stay near.
     """
-    from .gates import acceptance_limits, evaluate_gates, failed, gates_report
+    from .gates import acceptance_limits, base_fit_arrays, data_gates, failed, fit_gates, gates_report
     say = progress or (lambda message: None)
     if base_model not in MODEL_ORDERS:
         raise RefitError(f'base model {base_model!r}: expected one of {", ".join(MODEL_ORDERS)}')
@@ -111,23 +111,30 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
         reduction = retare_with_model(reduction, fits[base_model].fit.model)
         fits = _fit_all(reduction, config, orders)
         limits = acceptance_limits(config, base_model)
-    except (ZeroPointError, InverseDidNotConverge, LoadPointError, ConfigError) as err:
-        raise RefitError(str(err)) from None
+    except (ZeroPointError, InverseDidNotConverge, LoadPointError, ConfigError, RefitError) as err:
+        raise RefitError(_named(str(err), sources)) from None
     except (np.linalg.LinAlgError, FloatingPointError) as err:
         raise RefitError(f'{_where(sources)}: the load points cannot be fitted ({err})') from None
-    gates = evaluate_gates(config, points, reduction, fits, base_model, cut, active, limits)
-    bad = failed(gates)
-    for gate in gates:
-        say(f'gate {gate.name}: {"ok" if gate.passed else "FAILED"}: {gate.reason}')
-    if bad and not force:
-        also = f' (also failed: {", ".join(g.name for g in bad[1:])})' if len(bad) > 1 else ''
-        raise RefitError(f'{_where(sources)}: refused by acceptance gate {bad[0].name}: {bad[0].reason}{also}; '
-                         f'nothing written (--force writes it anyway)')
+    gates = data_gates(config, points, reduction, fits, cut, active, limits)
+    if not diagnose:
+        residuals, press = base_fit_arrays(reduction, fits[base_model])
+        gates = fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits) + gates
+    _refuse_unless_forced(gates, force, sources, say)
     say('fits: ' + ', '.join(f'{o} σFX {fits[o].sigma_pct_fs[config.components[0]]:.3f} % FS' for o in orders))
 
     diagnosis = None
     if diagnose:
         diagnosis = _run_diagnosis(reduction, config, base_model, fits[base_model], say)
+        if diagnosis is not None:
+            # σ and outliers of the model that will be adopted (effects found included)
+            extra = fit_gates(config, points, diagnosis.sigma_pct_fs['after'], diagnosis.residuals_after,
+                              diagnosis.press_residuals_after, limits,
+                              'adopted model' if diagnosis.effects else 'base model')
+        else:
+            residuals, press = base_fit_arrays(reduction, fits[base_model])
+            extra = fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits)
+        _refuse_unless_forced(extra, force, sources, say)
+        gates = extra + gates
 
     from .report import build_calibration, build_report
     calibration = build_calibration(config, reduction, fits, base_model, diagnosis, sources)
@@ -135,10 +142,29 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
     report['acceptance'] = gates_report(gates, forced=force)
     if cut is not None:
         report['sessions'] = {'count': len(cut.pauses_s) + 1, 'pauses_s': [round(p, 1) for p in cut.pauses_s]}
+    bad = failed(gates)
     if bad:
         calibration.extra['acceptance'] = {'forced': True, 'failed': [g.name for g in bad]}
     return CalibrationResult(config, points, reduction, fits, base_model, diagnosis, calibration, report, cut,
                              tuple(gates))
+
+
+def _refuse_unless_forced(gates, force: bool, sources: Sequence[str], say: Progress) -> None:
+    from .gates import failed
+    for gate in gates:
+        say(f'gate {gate.name}: {"ok" if gate.passed else "FAILED"}: {gate.reason}')
+    bad = failed(gates)
+    if bad and not force:
+        also = f' (also failed: {", ".join(g.name for g in bad[1:])})' if len(bad) > 1 else ''
+        raise RefitError(f'{_where(sources)}: refused by acceptance gate {bad[0].name}: {bad[0].reason}{also}; '
+                         f'nothing written (--force writes it anyway)')
+
+
+def _named(text: str, sources: Sequence[str]) -> str:
+    """The message with the campaign's files in front, unless it names them already."""
+    if not sources or any(str(s) in text for s in sources):
+        return text
+    return f'{_where(sources)}: {text}'
 
 
 def _where(sources: Sequence[str]) -> str:

@@ -123,6 +123,7 @@ def report_markdown(report: Mapping, result=None, units: str = 'si') -> str:
              f'Calibration body: {report["calibration_body"]["weight_N"]:.2f} N, CG {report["calibration_body"]["cg_x_m"]:.4f} m '
              f'forward ({report["calibration_body"]["source"]}; declared '
              f'{report["calibration_body_detail"]["declared_weight_N"]:.2f} N).', '']
+    lines += acceptance_markdown(report)
     lines += record_markdown(report)
     lines += ['## σ in % of full scale (Table 17 style, eqs. (44)-(49))', '', '```']
     rows = {}
@@ -157,3 +158,26 @@ def report_markdown(report: Mapping, result=None, units: str = 'si') -> str:
             lines += [f'### {adopted.name} (adopted)', '', '```', format_coefficient_tables(adopted), '```', '']
     lines += ['', f'Fitted {report.get("fitted_at", "")} from: {", ".join(report.get("sources", [])) or "simulation"}.']
     return '\n'.join(lines) + '\n'
+
+
+def acceptance_markdown(report: Mapping) -> list[str]:
+    """The acceptance gates (refit/gates.py) as a table; a forced refit says so first."""
+    acceptance = report.get('acceptance')
+    if not acceptance:
+        return []
+    lines = ['## Acceptance gates', '']
+    if acceptance.get('forced'):
+        failed = [g['name'] for g in acceptance['gates'] if not g['passed']]
+        lines += [f'**WRITTEN WITH --force: gate(s) {", ".join(failed)} FAILED. Do not use this calibration '
+                  f'before the failures below are understood.**', '']
+    lines += ['| gate | result | why |', '|---|---|---|']
+    lines += [f'| {g["name"]} | {"pass" if g["passed"] else "**FAIL**"} | {g["reason"].replace("|", "/")} |'
+              for g in acceptance['gates']]
+    lost = (report.get('bag_integrity') or {}).get('lost') or []
+    if lost:
+        lines += ['', 'Salvaged from damaged bags (--salvage); lost:', ''] + [f'- {line}' for line in lost]
+    pauses = (report.get('sessions') or {}).get('pauses_s') or []
+    if pauses:
+        lines += ['', f'{len(pauses) + 1} sessions; pauses of {", ".join(f"{p:.0f}" for p in pauses)} s '
+                      f'between them shortened on the time axis of the points.']
+    return lines + ['']
