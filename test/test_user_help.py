@@ -47,7 +47,7 @@ def _options_without_help(text: str) -> list[str]:
     lines = text.splitlines()
     missing = []
     for i, line in enumerate(lines):
-        if re.match(r'^  (-\S+|[a-z_]+)( [A-Z_.\[\]]+)?(, -\S+( [A-Z_]+)?)?$', line):
+        if re.match(r'^  (-\S+|[a-z_]+)( [A-Z_.\[\] ]+)?(, -\S+( [A-Z_]+)?)?$', line):
             following = lines[i + 1] if i + 1 < len(lines) else ''
             if not following.startswith(' ' * 8) or re.match(r'^  \S', following):
                 missing.append(line.strip())
