@@ -4,11 +4,19 @@ Every family is a list of term *groups* (a group is added or left out as a whole
 cosine of one frequency, otherwise single terms) over named variables, so the adopted fit is an
 ordinary `BalanceModel` whose extra variables carry these names:
 
-    temperature    dT, dT^2, dT*FXV ... dT*MZV      dT = T - T_ref, T_ref the campaign mean (K)
+    temperature    dT, dT^2, dT*FXV, dT^2*FXV ...  dT = T - T_ref, T_ref the campaign mean (K):
+                                                    zero, sensitivity and their dT² shapes
     zero_drift     drift_sin_m, drift_cos_m         Fourier basis in time (nuisance, not live)
-    hysteresis     dir_FX ... dir_MZ, dir_FX*FXV ... dir_X = +1 rising / -1 falling load on X
-    bidirectional  |FXV| ..., FXV*|FXV| ...          AIAA R-091 sign-dependent terms
+    hysteresis     dir_X, dir_X*XV, dir_X*|XV|      dir_X = +1 rising / -1 falling load on X: a
+                                                    constant loop, a slope loop, an offset loop
+                                                    even in the output (the parities of a loop)
+    bidirectional  |FXV|, FXV*|FXV|, absload_X      sign-dependent terms keyed to the output
+                                                    (AIAA R-091) and to the load: |L_X| / capacity
     cross_terms    FXV^2*FZV, FXV*FYV*FZV, ...       monomials up to degree 3 the base model lacks
+    creep          creep_XV_m                       Σ ΔV exp(-age/τ_m) over the bridge's load steps,
+                                                    τ_m on a grid: the time constant is estimated
+    excitation     exc_m_X                          a common gain g(t) x the total load on X; g a
+                                                    line in time or steps (one fit for all six)
     tare           (no terms: body weight and CG refitted, see tare_refit.py)
 
 Variables that offset the outputs (dir_X, the drift basis) are *referred to the zero points*
@@ -27,9 +35,11 @@ import numpy as np
 from ..model.terms import Term
 from ..zero_points import subtract_zero_points
 
-EFFECT_NAMES = ('temperature', 'zero_drift', 'hysteresis', 'bidirectional', 'cross_terms', 'tare')
-# Families whose terms are fitted at calibration but not applied live.
-NUISANCE_EFFECTS = ('zero_drift',)
+EFFECT_NAMES = ('temperature', 'zero_drift', 'hysteresis', 'bidirectional', 'cross_terms', 'tare',
+                'creep', 'excitation')
+# Families whose terms are fitted at calibration but not applied live (they follow the campaign's
+# time line or load history, which the live calibrator does not have).
+NUISANCE_EFFECTS = ('zero_drift', 'creep', 'excitation')
 
 
 @dataclass(frozen=True)
@@ -63,16 +73,36 @@ def _single(name: str, terms: Sequence[str], max_groups: int) -> CandidateFamily
 
 
 def temperature_family(outputs: Sequence[str]) -> CandidateFamily:
-    return _single('temperature', ['dT', 'dT^2'] + [f'dT*{v}' for v in outputs], 3)
+    return _single('temperature', ['dT', 'dT^2'] + [f'dT*{v}' for v in outputs] + [f'dT^2*{v}' for v in outputs], 3)
 
 
 def hysteresis_family(components: Sequence[str], outputs: Sequence[str]) -> CandidateFamily:
     return _single('hysteresis', [f'dir_{c}' for c in components]
-                   + [f'dir_{c}*{v}' for c, v in zip(components, outputs)], 3)
+                   + [f'dir_{c}*{v}' for c, v in zip(components, outputs)]
+                   + [f'dir_{c}*|{v}|' for c, v in zip(components, outputs)], 3)
 
 
-def bidirectional_family(outputs: Sequence[str]) -> CandidateFamily:
-    return _single('bidirectional', [f'|{v}|' for v in outputs] + [f'{v}*|{v}|' for v in outputs], 3)
+def bidirectional_family(outputs: Sequence[str], components: Sequence[str] = ()) -> CandidateFamily:
+    return _single('bidirectional', [f'|{v}|' for v in outputs] + [f'{v}*|{v}|' for v in outputs]
+                   + [f'absload_{c}' for c in components], 3)
+
+
+def creep_family(outputs: Sequence[str], time_constants_s: Sequence[float], max_groups: int = 2) -> CandidateFamily:
+    groups, labels = [], {}
+    for v in outputs:
+        for m, tau in enumerate(time_constants_s, start=1):
+            group = (f'creep_{v}_{m}',)
+            groups.append(group)
+            labels[group] = f'creep of {v} (τ ≈ {tau:.0f} s)'
+    return CandidateFamily('creep', tuple(groups), max_groups, labels)
+
+
+def excitation_family(components: Sequence[str], basis_labels: Sequence[str], max_groups: int = 4) -> CandidateFamily:
+    """Groups are basis functions of g(t); a group's terms are that function x each component's load
+    (one column per component; the joint test in diagnose.py shares the coefficient)."""
+    groups = tuple(tuple(f'exc_{m}_{c}' for c in components) for m in range(1, len(basis_labels) + 1))
+    labels = {g: basis_labels[m] for m, g in enumerate(groups)}
+    return CandidateFamily('excitation', groups, max_groups, labels)
 
 
 def cross_terms_family(outputs: Sequence[str], base_terms: Sequence[str], max_groups: int = 4) -> CandidateFamily:
@@ -163,3 +193,68 @@ def direction_variables(loads, times_s, capacity, components, is_zero_point, ori
     referred = refer_to_zero_points(raw, times_s, is_zero_point, orientation)
     return {f'dir_{c}': referred[:, k] for k, c in enumerate(components)}, raw
 
+
+
+def absolute_load_variables(loads, capacity, components) -> dict[str, np.ndarray]:
+    """absload_X = |L_X| / capacity_X: keyed to the sign of the load, not of the bridge output."""
+    loads = np.asarray(loads, dtype=float)
+    return {f'absload_{c}': np.abs(loads[:, k]) / capacity[k] for k, c in enumerate(components)}
+
+
+def creep_time_constants(times_s) -> np.ndarray:
+    """The grid of time constants (s) creep is tried with: 1/4 to 2 point spacings.
+
+    Longer ones are not tried: a relaxation lasting many points looks, in point means, like the
+    load history (hysteresis) or a drift, and the schedule cannot tell them apart."""
+    times = np.sort(np.asarray(times_s, dtype=float))
+    spacing = float(np.median(np.diff(times))) if len(times) > 1 else 1.0
+    return spacing * np.array([0.25, 0.5, 1.0, 2.0])
+
+
+def creep_variables(outputs_mv, times_s, time_constants_s, outputs_names, is_zero_point, orientation):
+    """creep_XV_m: the unrelaxed part Σ_i ΔV_i exp(-(t - t_i)/τ_m) of each bridge's load steps,
+    t_i halfway between the two points, referred to the zero points."""
+    outputs = np.asarray(outputs_mv, dtype=float)
+    times = np.asarray(times_s, dtype=float)
+    order = np.argsort(times, kind='stable')
+    v, t = outputs[order], times[order]
+    steps = np.vstack([np.zeros((1, v.shape[1])), np.diff(v, axis=0)])            # (N, 6)
+    step_times = np.concatenate([[t[0]], 0.5 * (t[1:] + t[:-1])])
+    age = t[:, None] - step_times[None, :]                                        # (N, N)
+    columns, names = [], []
+    for m, tau in enumerate(time_constants_s, start=1):
+        kernel = np.where(age >= 0, np.exp(-np.clip(age, 0.0, None) / tau), 0.0)
+        values = kernel @ steps
+        for j, name in enumerate(outputs_names):
+            column = np.empty(len(t))
+            column[order] = values[:, j]
+            columns.append(column)
+            names.append(f'creep_{name}_{m}')
+    referred = refer_to_zero_points(np.column_stack(columns), times, is_zero_point, orientation)
+    return {name: referred[:, i] for i, name in enumerate(names)}
+
+
+def excitation_basis(times_s, n_steps: int = 16) -> tuple[np.ndarray, list[str]]:
+    """Candidate shapes of a common gain g(t): a line in time and steps at n_steps even times."""
+    times = np.asarray(times_s, dtype=float)
+    t0, span = float(times.min()), float(np.ptp(times)) or 1.0
+    columns = [(times - t0) / span - 0.5]
+    labels = ['a gain drifting linearly in time']
+    for j in range(1, n_steps + 1):
+        when = t0 + span * j / (n_steps + 1)
+        columns.append((times >= when).astype(float) - 0.5)
+        labels.append(f'a gain step at t ≈ {when - t0:.0f} s')
+    return np.column_stack(columns), labels
+
+
+def excitation_variables(basis, total_loads, components, is_zero_point, times_s, orientation):
+    """exc_m_X = g_m(t) x total load on X (body weight included), referred to the zero points
+    as the outputs it scales are."""
+    total = np.asarray(total_loads, dtype=float)
+    columns, names = [], []
+    for m in range(basis.shape[1]):
+        for k, c in enumerate(components):
+            columns.append(basis[:, m] * total[:, k])
+            names.append(f'exc_{m + 1}_{c}')
+    referred = refer_to_zero_points(np.column_stack(columns), times_s, is_zero_point, orientation)
+    return {name: referred[:, i] for i, name in enumerate(names)}

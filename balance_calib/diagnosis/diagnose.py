@@ -32,19 +32,28 @@ from ..model.terms import as_variables, design_matrix, parse_terms
 from ..model.tm663 import tm663_terms
 from ..reduction import Reduction
 from ..tare.calibration_body import CorrectedData
-from .candidates import (EFFECT_NAMES, NUISANCE_EFFECTS, CandidateFamily, bidirectional_family,
+from ..tare.calibration_body import tare_loads
+from .candidates import (EFFECT_NAMES, NUISANCE_EFFECTS, CandidateFamily, absolute_load_variables,
+                         bidirectional_family, creep_family, creep_time_constants, creep_variables,
                          cross_terms_family, direction_variables, drift_family, drift_frequencies,
-                         drift_variables, without_base_terms, hysteresis_family, temperature_family)
+                         drift_variables, excitation_basis, excitation_family, excitation_variables,
+                         without_base_terms, hysteresis_family, temperature_family)
+from .leftovers import Leftovers, examine_leftovers
 from .statistics import ComponentFit, ZeroPointWhitening, fit_columns, forward_select, partial_f, sigma_pct_fs
 from .tare_refit import refit_body
 
 
 @dataclass(frozen=True)
 class DiagnosisSettings:
-    alpha: float = 0.01                  # family-wise level of one search round (Bonferroni)
+    alpha: float = 0.002                 # level of one family's test in a round (Bonferroni within it)
     min_effect_pct_fs: float = 0.01      # an effect must remove at least this RMS in a component
     max_rounds: int = 6
     max_terms: Mapping[str, int] = field(default_factory=lambda: {'cross_terms': 4, 'zero_drift': 8})
+    alpha_lack_of_fit: float = 0.001     # per component: residual beyond the repeatability
+    min_explained: float = 0.6           # effects on a component with structure left over must
+                                         # explain this fraction of its excess variance, or none is adopted
+    equal_score: float = 0.8             # a runner-up within this fraction of the winner's score that the
+                                         # winner absorbs: "cannot be separated" (a warning)
     drift_oversampling: float = 2.0      # Fourier grid spacing = 1 / (oversampling x campaign span)
     tare_parameters: tuple[str, ...] = ('weight_n', 'cg_x_m')
     effects: tuple[str, ...] = EFFECT_NAMES
@@ -113,6 +122,10 @@ class Diagnosis:
     press_residuals_before: np.ndarray
     press_residuals_after: np.ndarray
     skipped: Mapping[str, str]                             # effects not examined, and why
+    unexplained: tuple = ()                                # leftovers.Unexplained entries
+    repeatability_pct_fs: Mapping[str, float] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+    leftovers: Leftovers | None = None                     # the lack-of-fit numbers behind them
 
     @property
     def points(self) -> int:
@@ -140,7 +153,10 @@ class Diagnosis:
         def rounded(table):
             return {k: {c: round(float(v), 4) for c, v in row.items()} for k, row in table.items()}
         return {'sigma_pct_fs': rounded(self.sigma_pct_fs), 'sigma_pct_fs_crossval': rounded(self.sigma_pct_fs_crossval),
-                'effects': [e.to_report() for e in self.effects]}
+                'effects': [e.to_report() for e in self.effects],
+                'unexplained': [u.to_report() for u in self.unexplained],
+                'repeatability_pct_fs': {c: round(float(v), 4) for c, v in self.repeatability_pct_fs.items()},
+                'warnings': list(self.warnings)}
 
 
 # --- the search -------------------------------------------------------------------------------
@@ -169,8 +185,15 @@ class _Problem:
     def columns(self, names: Sequence[str]) -> np.ndarray:
         missing = [n for n in dict.fromkeys(names) if n not in self.cache]
         if missing:
-            variables = as_variables(self.outputs_names, self.outputs, self.variables)
-            matrix = design_matrix(parse_terms(missing), variables, len(self.outputs))
+            # term by term (a product of a few factors): the general design_matrix raises every
+            # variable to every term's power, which costs N x terms x variables with the hundreds
+            # of time-basis variables here
+            outputs = {name: self.outputs[:, i] for i, name in enumerate(self.outputs_names)}
+            matrix = np.ones((len(self.outputs), len(missing)))
+            for j, term in enumerate(parse_terms(missing)):
+                for factor in term.factors:
+                    value = outputs[factor.variable] if factor.variable in outputs else self.variables[factor.variable]
+                    matrix[:, j] *= factor.evaluate(np.asarray(value, dtype=float))
             white = self.whiten(matrix)
             for j, name in enumerate(missing):
                 self.cache[name], self.cache_white[name] = matrix[:, j], white[:, j]
@@ -225,8 +248,13 @@ def _fmt_p(p: float) -> str:
 
 
 def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = 'cubic',
-             temperature_c=None, times_s=None, settings: DiagnosisSettings = DiagnosisSettings()) -> Diagnosis:
+             temperature_c=None, times_s=None, settings: DiagnosisSettings = DiagnosisSettings(),
+             point_variance_mv2=None, point_samples=None) -> Diagnosis:
     """Examine the residuals of the base fit and add the effects they show.
+
+    point_variance_mv2 (P, 6), point_samples (P,): the variance of each point's mean output from its
+    own samples and their number, when the samples are at hand (repeatability, leftovers.py); without
+    them the repeatability comes from consecutive zero points alone.
 
     reduction: the corrected data (zero points and tare done); temperature_c, times_s: per point
     (default: those of reduction.points; temperature all-NaN -> the temperature effect is skipped).
@@ -265,7 +293,19 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
         variables.update(directions)
         families.append(hysteresis_family(components, outputs_names))
     if 'bidirectional' in wanted:
-        families.append(bidirectional_family(outputs_names))
+        variables.update(absolute_load_variables(corrected.loads, capacity, components))
+        families.append(bidirectional_family(outputs_names, components))
+    if 'creep' in wanted:
+        taus = creep_time_constants(times)
+        variables.update(creep_variables(points.outputs_mv, times, taus, outputs_names, points.is_zero_point,
+                                         points.orientation))
+        families.append(creep_family(outputs_names, taus, settings.max_terms.get('creep', 2)))
+    if 'excitation' in wanted:
+        basis, basis_labels = excitation_basis(times)
+        total = np.asarray(corrected.loads, float) + tare_loads(reduction.body, points.gravity)
+        variables.update(excitation_variables(basis, total, components, points.is_zero_point, times,
+                                              points.orientation))
+        families.append(excitation_family(components, basis_labels, settings.max_terms.get('excitation', 4)))
     if 'cross_terms' in wanted:
         families.append(cross_terms_family(outputs_names, base_terms, settings.max_terms.get('cross_terms', 4)))
     families = [without_base_terms(f, base_terms) for f in families]
@@ -284,22 +324,34 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
 
     effects: list[dict] = []
     adopted_families: set[str] = set()
+    warnings: list[str] = []
+    close_runners: list = []           # (winner, runner-up) of the last round, scores about equal
     for _round in range(settings.max_rounds):
         candidates: list[_Candidate] = []
         for family in families:
             if family.name in adopted_families:
                 continue
-            candidate = _examine_family(family, fits, comp_terms, problem, capacity, settings, n_searches)
+            if family.name == 'excitation':
+                candidate = _examine_excitation(family, fits, comp_terms, problem, capacity, settings)
+            else:
+                candidate = _examine_family(family, fits, comp_terms, problem, capacity, settings, 1)
             if candidate:
                 candidates.append(candidate)
         if tare_available and 'tare' not in adopted_families:
-            candidate = _examine_tare(fits, comp_terms, problem, points.gravity, body, settings, n_searches,
+            candidate = _examine_tare(fits, comp_terms, problem, points.gravity, body, settings, 1,
                                       capacity, components, outputs_names)
             if candidate:
                 candidates.append(candidate)
+        present = {c.family for c in candidates}
+        for won, runner in close_runners:
+            if runner.family not in present:
+                warnings.append(_inseparable_warning(won, runner, components))
         if not candidates:
             break
         winner = max(candidates, key=lambda c: c.score)
+        close_runners = [(winner, c) for c in candidates if c is not winner and c.family != 'tare'
+                         and winner.family != 'tare' and c.score >= settings.equal_score * winner.score
+                         and set(c.components) & set(winner.components)]
         adopted_families.add(winner.family)
         before = {k: fits[k] for k in winner.components}
         if winner.family == 'tare':
@@ -312,6 +364,18 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
                 comp_terms[k] = comp_terms[k] + list(stats['added'])
                 fits[k] = stats['fit']
         effects.append({'candidate': winner, 'before': before})
+
+    # --- what is left: lack of fit against the repeatability, unexplained structure ------------
+    leftovers = examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, effects, settings,
+                                  components, outputs_names, capacity, variables, raw_direction, times, temps,
+                                  point_variance_mv2, point_samples)
+    for k, dropped in leftovers.dropped.items():
+        comp_terms[k] = [t for t in comp_terms[k] if t not in dropped]
+        fits[k] = problem.fit(k, comp_terms[k])
+        for entry in effects:
+            entry['candidate'].components.pop(k, None)
+    effects = [e for e in effects if e['candidate'].components]
+    warnings += leftovers.warnings
 
     # --- assemble -----------------------------------------------------------------------------
     all_terms = list(base_terms)
@@ -349,7 +413,8 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
         residuals_after=np.column_stack([f.ols.residuals for f in fits]),
         press_residuals_before=np.column_stack([f.ols.press_residuals for f in base_fits]),
         press_residuals_after=np.column_stack([f.ols.press_residuals for f in fits]),
-        skipped=skipped)
+        skipped=skipped, unexplained=leftovers.unexplained, repeatability_pct_fs=leftovers.repeatability_pct_fs,
+        warnings=tuple(dict.fromkeys(warnings)), leftovers=leftovers)
 
 
 def _component_statistics(before: _Fit, after: _Fit, capacity: float, n_tests: int) -> dict:
@@ -384,7 +449,7 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
             continue
         names = [t for g in groups for t in g]
         index = {t: i for i, t in enumerate(names)}
-        n_tests = n_searches * len(groups) * n_components
+        n_tests = n_searches * len(groups) * n_components      # Bonferroni within this family
         selection = forward_select(fit.gls, problem.white_columns(names), [tuple(index[t] for t in g) for g in groups],
                                    alpha_per_test=settings.alpha / n_tests, max_groups=family.max_groups)
         if not selection.steps:
@@ -401,6 +466,63 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
     if not accepted:
         return None
     return _Candidate(family.name, accepted, sum(s['bic_gain'] for s in accepted.values()))
+
+
+def _examine_excitation(family, fits, comp_terms, problem, capacity, settings):
+    """One gain g(t) common to every bridge: a joint forward selection over the six components
+    (whitened residuals scaled by their σ, stacked), each basis function one shared parameter."""
+    n_components = len(fits)
+    groups = [g for g in family.groups if not any(set(g) & set(terms) for terms in comp_terms)]
+    if not groups:
+        return None
+    sigmas = np.sqrt([f.gls.variance for f in fits])
+    n_white = fits[0].gls.points
+    residual = np.concatenate([f.gls.residuals / s for f, s in zip(fits, sigmas)])
+    blocks = [f.gls.basis for f in fits]
+    basis = np.zeros((n_white * n_components, sum(b.shape[1] for b in blocks)))
+    column = 0
+    for k, b in enumerate(blocks):
+        basis[k * n_white:(k + 1) * n_white, column:column + b.shape[1]] = b
+        column += b.shape[1]
+    stacked = ComponentFit(np.zeros(0), residual, np.zeros(len(residual)), basis, basis.shape[1])
+    columns = np.column_stack([np.concatenate([problem.white_columns([g[k]])[:, 0] / sigmas[k]
+                                               for k in range(n_components)]) for g in groups])
+    selection = forward_select(stacked, columns, [(i,) for i in range(len(groups))],
+                               alpha_per_test=settings.alpha / len(groups), max_groups=family.max_groups)
+    if not selection.steps:
+        return None
+    chosen = [groups[i] for i in selection.groups]
+    q = len(chosen)
+    f_joint, p_joint = partial_f(selection.rss_before, selection.steps[-1].rss_after, q,
+                                 selection.dof_before - q)
+    # the score with the gain shared, as the effect is: Σ_k n ln(RSS_k before / after) - q ln n
+    picked = columns[:, list(selection.groups)]
+    picked = picked - basis @ (basis.T @ picked)
+    coefficients, *_ = np.linalg.lstsq(picked, residual, rcond=None)
+    shared = (residual - picked @ coefficients).reshape(n_components, n_white)
+    before = residual.reshape(n_components, n_white)
+    score = float(sum(n_white * np.log(np.sum(b ** 2) / np.sum(a ** 2)) for b, a in zip(before, shared))
+                  - q * np.log(n_white))
+    accepted = {}
+    for k, fit in enumerate(fits):
+        added = [g[k] for g in chosen]
+        stats = _component_statistics(fit, problem.fit(k, comp_terms[k] + added), capacity[k], 1)
+        stats.update(added=tuple(added), groups=tuple((t,) for t in added), f=f_joint,
+                     p=min(1.0, p_joint * len(groups)),
+                     label='a gain common to all bridges (' + family.label(chosen) + ')')
+        if _passes(stats, settings):
+            accepted[k] = stats
+    # a gain common to all bridges shows in more than one component; one alone is that bridge's own effect
+    if len(accepted) < 2:
+        return None
+    return _Candidate(family.name, accepted, score)
+
+
+def _inseparable_warning(winner, runner, components) -> str:
+    shared = [components[k] for k in sorted(set(winner.components) & set(runner.components))]
+    return (f'{winner.family} and {runner.family} explain the same residual in {", ".join(shared)} about '
+            f'equally (BIC gain {winner.score:.0f} vs {runner.score:.0f}): this load schedule cannot separate '
+            f'them; only {winner.family} was adopted')
 
 
 def _examine_tare(fits, comp_terms, problem, gravity, body, settings, n_searches, capacity,

@@ -34,7 +34,66 @@ BALANCES = ('lmc6522', 'b660h')
 TARGET_COMPONENT = 'FX'
 # A first guess of each effect's parameter (calibrated below), on the F_X bridge.
 FIRST_GUESS = {'temperature': 1e-3, 'zero_drift': 0.003, 'hysteresis': 1e-3, 'bidirectional': 1e-2,
-               'cross_terms': 5.0, 'tare': 1.0}
+               'cross_terms': 5.0, 'tare': 1.0, 'creep': 1e-3, 'excitation': 1e-4}
+COMPONENTS = ('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ')
+GROUPS = {'forces': ('FX', 'FY', 'FZ'), 'moments': ('MX', 'MY', 'MZ')}
+# Shapes written from the physics in simulation/effects.py, not from the candidate terms: per
+# family, the alternative forms the detection runs draw from (a seed picks one), and the two
+# effects no family describes, which must come out as "unexplained".
+ALTERNATIVE_SHAPES = {
+    'temperature': ('temperature_dt2', 'temperature_lagged'),
+    'hysteresis': ('hysteresis_play', 'hysteresis_turning'),
+    'bidirectional': ('bidirectional_load_sign',),
+    'creep': ('creep_two_constants',),
+    'excitation': ('excitation_steps',),
+    'zero_drift': ('zero_drift',),
+    'cross_terms': ('cross_terms_other',),
+    'tare': ('tare',),
+}
+OUTSIDE_SHAPES = ('outside_dead_band', 'outside_gravity_time')
+FIRST_GUESS.update({'temperature_dt2': 2e-4, 'temperature_lagged': 1e-3, 'hysteresis_play': 1e-3,
+                    'hysteresis_turning': 1e-3, 'bidirectional_load_sign': 1e-3, 'creep_two_constants': 1e-3,
+                    'excitation_steps': 1e-4, 'cross_terms_other': 5.0, 'outside_dead_band': 1e-3,
+                    'outside_gravity_time': 1e-3})
+
+
+def shape_family(shape: str) -> str | None:
+    """The family a shape belongs to (None: outside every family)."""
+    for family, shapes in ALTERNATIVE_SHAPES.items():
+        if shape in shapes or shape == family:
+            return family
+    return None
+
+
+def shape_effects(shape: str, parameter: float, component: str = TARGET_COMPONENT):
+    """(effects, estimate_body_weight) for one alternative shape of the given parameter on one component."""
+    k = COMPONENTS.index(component)
+    bridge = np.zeros(6)
+    bridge[k] = 1.0
+    if shape in EFFECT_NAMES and shape not in ('creep', 'excitation'):
+        return injected_effects(shape, parameter, component)
+    if shape == 'temperature_dt2':
+        return [sim_effects.TemperatureShapes(sensitivity_per_k2=parameter * bridge)], True
+    if shape == 'temperature_lagged':
+        return [sim_effects.TemperatureShapes(sensitivity_per_k=parameter * bridge, lag_s=2400.0)], True
+    if shape == 'hysteresis_play':
+        return [sim_effects.PlayHysteresis(fraction_of_rated=parameter * bridge, width_fraction=0.3)], True
+    if shape == 'hysteresis_turning':
+        return [sim_effects.TurningPointHysteresis(fraction_of_rated=parameter * bridge)], True
+    if shape == 'bidirectional_load_sign':
+        return [sim_effects.LoadSignBidirectional(asymmetry=parameter * bridge)], True
+    if shape in ('creep_two_constants', 'creep'):
+        return [sim_effects.Creep(fraction=parameter * bridge, time_constants_s=(40.0, 400.0))], True
+    if shape in ('excitation_steps', 'excitation'):
+        return [sim_effects.SupplyDrift(gain_per_hour=parameter, steps=((0.55 * 328 * 90.0, 3 * parameter),))], True
+    if shape == 'cross_terms_other':
+        other = COMPONENTS[(k + 2) % 6]
+        return [sim_effects.CrossTerms(coefficients={component: {f'{component}V*{other}V^2': parameter}})], True
+    if shape == 'outside_dead_band':
+        return [sim_effects.NeighbourDeadBand(fraction_of_rated=parameter, source=(k + 1) % 6, target=k)], True
+    if shape == 'outside_gravity_time':
+        return [sim_effects.GravityTimeNonlinearity(fraction_of_rated=parameter * bridge)], True
+    raise ValueError(f'unknown shape {shape!r}')
 
 
 def injected_effects(name: str, parameter: float, component: str = TARGET_COMPONENT):
@@ -59,17 +118,22 @@ def injected_effects(name: str, parameter: float, component: str = TARGET_COMPON
         return [sim_effects.CrossTerms(coefficients={component: {f'{component}V^2*FZV': parameter}})], True
     if name == 'tare':
         return [sim_effects.HeavierBody(weight_factor=1.0 + parameter)], False
+    if name in ('creep', 'excitation'):
+        return shape_effects(name, parameter, component)
     raise ValueError(f'unknown effect {name!r}; known: {", ".join(EFFECT_NAMES)}')
 
 
 def simulate_reduction(config: BalanceConfig, effects=(), *, seed: int = 0, noise_scale: float = 1.0,
-                       estimate_body_weight: bool = True, retare: bool = True) -> Reduction:
+                       estimate_body_weight: bool = True, retare: bool = True, samples_per_point: int = 1,
+                       with_scatter: bool = False):
     """A simulated campaign (Table 17 cubic noise x noise_scale), cut into points and reduced.
 
     With retare (as the refit pipeline does) the tare outputs come from the inverse of a first
-    cubic fit instead of the linear eqs. (32)-(37).
+    cubic fit instead of the linear eqs. (32)-(37). with_scatter: return (reduction, dict of
+    diagnose()'s point_variance_mv2 and point_samples from the points' own samples).
     """
-    settings = SimulationSettings(noise_sigma_pct_fs=table17_noise(config) * noise_scale, seed=seed)
+    settings = SimulationSettings(noise_sigma_pct_fs=table17_noise(config) * noise_scale, seed=seed,
+                                  samples_per_point=samples_per_point)
     campaign = simulate_campaign(config, settings=settings, effects=list(effects))
     means, times, temperatures = campaign.point_means()
     points = LoadPoints(campaign.point, means, times, temperatures, campaign.orientation, campaign.gravity,
@@ -82,6 +146,9 @@ def simulate_reduction(config: BalanceConfig, effects=(), *, seed: int = 0, nois
                           rated_outputs=config.rated_outputs_by_name, components=config.components,
                           inputs=config.bridge_outputs, on_unexcited='drop')
         reduction = retare_with_model(reduction, first.model)
+    if with_scatter:
+        variance, counts = campaign.point_scatter()
+        return reduction, {'point_variance_mv2': variance, 'point_samples': counts}
     return reduction
 
 
@@ -104,7 +171,7 @@ def effect_size_pct_fs(config: BalanceConfig, name: str, parameter: float,
                        component: str = TARGET_COMPONENT) -> float:
     """RMS (% FS) the effect adds to the component's cubic-fit residual, noise-free."""
     k = config.components.index(component)
-    effects, estimate = injected_effects(name, parameter, component)
+    effects, estimate = shape_effects(name, parameter, component)
     clean = _cubic_residuals(config, simulate_reduction(config, noise_scale=0.0, estimate_body_weight=estimate))
     # (both retared the same way, so the difference is the effect's alone)
     dirty = _cubic_residuals(config, simulate_reduction(config, effects, noise_scale=0.0,

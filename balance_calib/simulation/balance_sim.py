@@ -55,6 +55,20 @@ class Campaign:
         temps = np.bincount(index, self.temperature_c[inside], len(self.point)) / counts
         return means, times, temps
 
+    def point_scatter(self) -> tuple[np.ndarray, np.ndarray]:
+        """(P, 6) variance of each point's mean output (sample variance / n), (P,) samples per point."""
+        inside = self.sample_point >= 0
+        index = self.sample_point[inside]
+        counts = np.bincount(index, minlength=len(self.point)).astype(float)
+        means, _, _ = self.point_means()
+        deviations = self.raw_mv[inside] - means[index]
+        squares = np.column_stack([np.bincount(index, deviations[:, k] ** 2, len(self.point))
+                                   for k in range(self.raw_mv.shape[1])])
+        with np.errstate(invalid='ignore', divide='ignore'):
+            variance = squares / (counts - 1)[:, None] / counts[:, None]
+        variance[counts < 2] = np.nan
+        return variance, counts
+
 
 @dataclass(frozen=True)
 class SimulationSettings:

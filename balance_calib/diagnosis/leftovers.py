@@ -1,0 +1,265 @@
+"""What the adopted model leaves: repeatability, lack of fit, "unexplained" structure, warnings.
+
+The yardstick is the repeatability of the points themselves: consecutive zero points in the same
+orientation (TM-663 §5(4) brackets every block with them, and the end of one block is usually the
+start of the next) differ only by the noise of two points and the drift of one point spacing, so
+var(ΔL) = 2 s², ΔL the output difference through the linear part of the fit. A component whose
+whitened residual variance is beyond s² (F-test with the residual's and the ν pairs' degrees of
+freedom, level alpha_lack_of_fit / 6) has structure left over.
+
+Such structure is reported as `unexplained`, with what it follows most strongly (`tracks`). When
+the effects found on that component explain less than `min_explained` of its excess variance
+(base-model variance minus s²), none of them is adopted there: they fit part of something else,
+and adopting them would put the wrong physics into the live model.
+
+Caveat: the zero points do not see scatter of the loading hardware (weights, pans, alignment), so
+on real data the loaded points can be less repeatable than s says; the zero-point scatter is a
+lower bound of the repeatability, and `unexplained` then also flags that.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+import scipy.stats
+
+from .statistics import sigma_pct_fs
+
+# A component whose repeatability is this many times the median of the others is warned about.
+REPEATABILITY_WARNING_RATIO = 4.0   # LMC6522's own F_X (Table 17) is ~3x its other components
+# A calibration body rolled by more than this (degrees) from the declared gravity direction.
+ROLL_WARNING_DEG = 0.4      # the fit-based estimate scatters ±0.2° on clean simulated campaigns
+
+
+@dataclass(frozen=True)
+class Unexplained:
+    components: tuple[str, ...]
+    evidence: str
+    tracks: str
+    sigma_pct_fs: Mapping[str, float]
+    ratio: float                                   # residual variance / repeatability²
+    p_value: float
+    correlation: float
+    partly_fitted_by: tuple[str, ...] = ()         # families that fitted part of it (not adopted there)
+    tracks_values: np.ndarray | None = None        # (N,) the variable it follows (plot)
+    residual: np.ndarray | None = None             # (N,) leftover residual, N or N·m
+
+    def to_report(self) -> dict:
+        return {'components': list(self.components), 'evidence': self.evidence, 'tracks': self.tracks,
+                'sigma_pct_fs': {c: round(float(v), 4) for c, v in self.sigma_pct_fs.items()}}
+
+
+@dataclass(frozen=True)
+class Leftovers:
+    repeatability_pct_fs: Mapping[str, float]
+    pairs: int                                     # ν: pairs of consecutive zero points
+    lack_of_fit_ratio: Mapping[str, float]
+    lack_of_fit_p: Mapping[str, float]
+    unexplained: tuple[Unexplained, ...]
+    warnings: list[str] = field(default_factory=list)
+    dropped: Mapping[int, set] = field(default_factory=dict)    # component index -> terms not adopted
+    roll_deg: float | None = None
+
+
+def linear_part(fits, comp_terms, outputs_names) -> np.ndarray:
+    """(6, 6) dL_k/dV_i from the linear terms of each component's fit."""
+    return np.array([[fit.ols.coefficients[terms.index(v)] if v in terms else 0.0 for v in outputs_names]
+                      for fit, terms in zip(fits, comp_terms)])
+
+
+def zero_point_pairs(points) -> np.ndarray:
+    """(ν, 6) output differences of time-consecutive zero points in the same orientation."""
+    order = np.argsort(np.asarray(points.times_s, float), kind='stable')
+    zero = np.asarray(points.is_zero_point)[order]
+    orientation = np.asarray(points.orientation)[order]
+    outputs = np.asarray(points.outputs_mv, float)[order]
+    both = zero[1:] & zero[:-1] & (orientation[1:] == orientation[:-1])
+    return (outputs[1:] - outputs[:-1])[both]
+
+
+def _output_model_loads(fits, comp_terms, outputs_names, outputs) -> np.ndarray:
+    """(M, 6) loads of the fitted model's output-only terms (no constant) at outputs (M, 6)."""
+    from ..model.terms import as_variables, design_matrix, parse_terms
+    outputs = np.atleast_2d(outputs)
+    loads = np.zeros((len(outputs), len(fits)))
+    for k, (fit, terms) in enumerate(zip(fits, comp_terms)):
+        keep = [i for i, t in enumerate(parse_terms(terms)) if t.variables and set(t.variables) <= set(outputs_names)]
+        design = design_matrix(parse_terms([terms[i] for i in keep]), as_variables(outputs_names, outputs), len(outputs))
+        loads[:, k] = design @ fit.ols.coefficients[keep]
+    return loads
+
+
+def body_roll_deg(points, fits, comp_terms, outputs_names) -> float | None:
+    """Mean roll (about X, degrees) of the body-weight force from opposite zero points relative to the
+    declared gravity direction; None without opposite pairs in the Y-Z plane.
+
+    V(±g) = e + V_body(±g); the electrical zero e is taken as the mean of (V(g) + V(-g)) / 2 over
+    the pairs, and the fitted model (its nonlinear terms included: the linear part alone is off by
+    0.2-0.4° at the body's weight) gives the force at each."""
+    zero = np.asarray(points.is_zero_point)
+    means = {}
+    for g, v in zip(np.asarray(points.gravity)[zero], np.asarray(points.outputs_mv)[zero]):
+        means.setdefault(tuple(np.round(g, 6)), []).append(v)
+    means = {key: np.mean(v, axis=0) for key, v in means.items()}
+    pairs = [(np.array(key), means[key], means[tuple(np.round(-np.array(key), 6) + 0.0)]) for key in means
+             if tuple(np.round(-np.array(key), 6) + 0.0) in means and key > tuple(np.round(-np.array(key), 6) + 0.0)]
+    if not pairs:
+        return None
+    electrical = np.mean([(a + b) / 2.0 for _, a, b in pairs], axis=0)
+    angles = []
+    for g, plus, minus in pairs:
+        loads = _output_model_loads(fits, comp_terms, outputs_names, np.vstack([plus, minus]) - electrical)
+        force = (loads[0] - loads[1])[:3] / 2.0
+        if np.hypot(g[1], g[2]) < 0.5 or np.hypot(force[1], force[2]) <= 0:
+            continue
+        angles.append(np.degrees(np.arctan2(g[1] * force[2] - g[2] * force[1], g[1] * force[1] + g[2] * force[2])))
+    return float(np.mean(angles)) if angles else None
+
+
+def _trackers(points, variables, direction, times, temps, loads, components):
+    loaded = ~np.asarray(points.is_zero_point)
+    t = (times - times.mean()) / max(np.ptp(times), 1e-9)
+    trackers = {'time': np.column_stack([t, t ** 2])}
+    if 'dT' in variables:
+        trackers['temperature'] = np.column_stack([variables['dT'], variables['dT'] ** 2])
+    for k, c in enumerate(components):
+        x = loads[:, k] / max(np.max(np.abs(loads[:, k])), 1e-12)
+        trackers[f'load {c}'] = np.column_stack([x, x ** 2, np.abs(x)])
+    d = np.asarray(direction, float)
+    scaled = loads / np.maximum(np.max(np.abs(loads), axis=0), 1e-12)
+    trackers['load history'] = np.hstack([d, d * np.abs(scaled)])
+    trackers['gravity direction'] = np.asarray(points.gravity, float)
+    trackers['point order'] = np.column_stack([np.cos(np.pi * np.arange(len(t)))])
+    return {name: values[loaded] for name, values in trackers.items()}, loaded
+
+
+def _best_tracker(residual, trackers, alpha=0.01):
+    """(name, multiple r, p) of the tracker explaining most of the residual; 'nothing found' if none passes."""
+    n = len(residual)
+    best = ('nothing found', 0.0, 1.0)
+    total = float(np.sum((residual - residual.mean()) ** 2))
+    if total <= 0:
+        return best
+    for name, columns in trackers.items():
+        design = np.column_stack([np.ones(n), columns])
+        coefficients, *_ = np.linalg.lstsq(design, residual, rcond=None)
+        rss = float(np.sum((residual - design @ coefficients) ** 2))
+        q = np.linalg.matrix_rank(design) - 1
+        if q <= 0 or n - q - 1 <= 0:
+            continue
+        r2 = max(1.0 - rss / total, 0.0)
+        f = (total - rss) / q / max(rss / (n - q - 1), 1e-300)
+        p = float(scipy.stats.f.sf(f, q, n - q - 1)) * len(trackers)
+        if p < alpha and np.sqrt(r2) > best[1]:
+            best = (name, float(np.sqrt(r2)), p)
+    return best
+
+
+def within_point_variance(linear, point_variance_mv2, point_samples, loaded):
+    """(6,) variance of a point mean in load units from the points' own sample scatter, and its dof.
+
+    point_variance_mv2 (P, 6): variance of each point's mean output (sample variance / n);
+    bridges independent: var L_k = Σ_i C_ki² var V_i."""
+    variance = np.asarray(point_variance_mv2, float)[loaded]
+    samples = np.asarray(point_samples, float)[loaded]
+    ok = np.all(np.isfinite(variance), axis=1) & (samples >= 2)
+    if ok.sum() < 3:
+        return None, 0
+    return np.mean(variance[ok] @ (linear ** 2).T, axis=0), int(np.sum(samples[ok] - 1))
+
+
+def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, effects, settings, components,
+                      outputs_names, capacity, variables, direction, times, temps, point_variance_mv2=None,
+                      point_samples=None) -> Leftovers:
+    n_components = len(components)
+    linear = linear_part(fits, comp_terms, outputs_names)
+    pairs = zero_point_pairs(points)
+    warnings: list[str] = []
+    roll = body_roll_deg(points, fits, comp_terms, outputs_names)
+    if roll is not None and abs(roll) > ROLL_WARNING_DEG:
+        warnings.append(f'the calibration body sits rolled by {roll:.2f}° about X from the declared gravity '
+                        f'direction (body-weight force from opposite zero points): check the body\'s mounting and '
+                        f'the declared orientations')
+    nan = {c: float('nan') for c in components}
+    if len(pairs) < 3:
+        warnings.append(f'only {len(pairs)} pair(s) of consecutive zero points in one orientation: the '
+                        'repeatability is unknown and the residuals were not tested for lack of fit')
+        return Leftovers(nan, len(pairs), nan, nan, (), warnings, {}, roll)
+    delta_loads = pairs @ linear.T
+    s2 = np.mean(delta_loads ** 2, axis=0) / 2.0
+    nu = np.full(n_components, len(pairs), dtype=float)
+    source = {c: f'{len(pairs)} pairs of consecutive zero points' for c in components}
+    if point_variance_mv2 is not None and point_samples is not None:
+        # the points' own samples: many more degrees of freedom, but blind to noise slower than a
+        # point; kept unless the zero points repeat significantly worse (then they are the yardstick)
+        s2_within, nu_within = within_point_variance(linear, point_variance_mv2, point_samples,
+                                                     ~np.asarray(points.is_zero_point))
+        if s2_within is not None:
+            for k, c in enumerate(components):
+                p_worse = scipy.stats.f.sf(s2[k] / s2_within[k], len(pairs), nu_within)
+                if p_worse >= 0.01:
+                    s2[k], nu[k] = s2_within[k], nu_within
+                    source[c] = f'the scatter of the points\' own samples ({nu_within} dof)'
+                elif p_worse < 0.001 / n_components:
+                    warnings.append(f'{c}: consecutive zero points repeat worse than the points\' own samples '
+                                    f'({np.sqrt(s2[k] / s2_within[k]):.1f}x): noise slower than a point, or the '
+                                    'zero returns differently; the zero points are the yardstick')
+    values = np.sqrt(s2) / capacity * 100.0
+    for k, c in enumerate(components):
+        others = np.median(np.delete(values, k))
+        if others > 0 and values[k] > REPEATABILITY_WARNING_RATIO * others:
+            warnings.append(f'{c} repeats far worse than the other components ({values[k]:.3f} vs a median of '
+                            f'{others:.3f} % FS): check that bridge, its wiring '
+                            'and amplifier channel')
+
+    repeatability = {c: float(np.sqrt(s2[k]) / capacity[k] * 100.0) for k, c in enumerate(components)}
+    loads = np.asarray(problem.corrected.loads, float)
+    trackers, loaded = _trackers(points, variables, direction, times, temps, loads, components)
+    per_component = {k: [e for e in effects if k in e['candidate'].components and e['candidate'].family != 'tare']
+                     for k in range(n_components)}
+    ratios, p_values, dropped, unexplained = {}, {}, {}, []
+    alpha = settings.alpha_lack_of_fit / n_components
+    for k, c in enumerate(components):
+        fit = fits[k]
+        variance = fit.gls.rss / fit.gls.dof
+        ratio = variance / s2[k] if s2[k] > 0 else float('inf')
+        p = float(scipy.stats.f.sf(ratio, fit.gls.dof, nu[k]))
+        excess = np.sqrt(max(variance - s2[k], 0.0)) / capacity[k] * 100.0
+        ratios[c], p_values[c] = float(ratio), p
+        if not (p < alpha and excess >= settings.min_effect_pct_fs):
+            continue
+        partly, explained_note = (), ''
+        found = per_component[k]
+        if found:
+            base_excess = max(base_fits[k].gls.rss / base_fits[k].gls.dof - s2[k], 0.0)
+            explained = 1.0 - max(variance - s2[k], 0.0) / base_excess if base_excess > 0 else 0.0
+            if explained < settings.min_explained:
+                partly = tuple(e['candidate'].family for e in found)
+                terms = set()
+                for e in found:
+                    terms |= set(e['candidate'].components[k]['added'])
+                dropped[k] = terms
+                fit = problem.fit(k, [t for t in comp_terms[k] if t not in terms])
+                variance = fit.gls.rss / fit.gls.dof
+                ratio = variance / s2[k]
+                p = float(scipy.stats.f.sf(ratio, fit.gls.dof, nu[k]))
+                explained_note = (f'; {", ".join(partly)} fitted only {explained:.0%} of the excess: '
+                                  'not adopted on ' + c)
+            else:
+                explained_note = (f'; left after {", ".join(e["candidate"].family for e in found)} '
+                                  f'(which explained {explained:.0%} of the excess)')
+        residual = fit.ols.residuals
+        name, r, _ = _best_tracker(residual[loaded], trackers)
+        track_values = None
+        if name != 'nothing found':
+            track_values = np.full(len(residual), np.nan)
+            track_values[loaded] = trackers[name][:, 0]
+        sigma = sigma_pct_fs(residual, capacity[k])
+        evidence = (f'{c}: residual σ {np.sqrt(ratio):.1f}× the repeatability ({repeatability[c]:.3f} % FS from '
+                    f'{source[c]}; lack of fit p = {p:.1g})'
+                    + (f'; follows {name} (r = {r:.2f})' if name != 'nothing found' else '; follows nothing examined')
+                    + explained_note)
+        unexplained.append(Unexplained((c,), evidence, name, {c: sigma}, float(ratio), p, r, partly,
+                                       track_values, residual))
+    return Leftovers(repeatability, int(nu.min()), ratios, p_values, tuple(unexplained), warnings, dropped, roll)
