@@ -76,6 +76,8 @@ class InputMonitor:
         self._add('duplicate stamps', int(np.count_nonzero(differences == 0)))
         self.last_stamp_ns = int(max(prior, stamps.max()))
         positive = differences[differences > 0]
+        if self.interval_ns is None and len(positive) >= 3:     # a first batch: its own median
+            self.interval_ns = float(np.median(positive))
         if self.interval_ns is not None and len(positive):
             gaps = positive[positive > 1.5 * self.interval_ns]
             if len(gaps):

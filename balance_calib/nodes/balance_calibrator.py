@@ -294,7 +294,9 @@ class BalanceCalibrator(Node):
         response.success, response.message = result.ok, result.message
         if result.ok:
             response.message += '; ' + self._persist_tare()
-        (self.get_logger().info if result.ok else self.get_logger().warning)(response.message)
+            self.get_logger().info(response.message)
+        else:
+            self.get_logger().warning(response.message)
         return response
 
     def _on_clear_tare(self, request, response):

@@ -1,0 +1,275 @@
+"""balance_calibrator over real DDS: tare in load space with a model weight on the memo's cubic balance,
+steadiness, restore after restart, overload, bad input counted, parameters refused, namespaces, the
+refit in its own process."""
+import os
+import re
+import threading
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import WrenchStamped
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Bool
+from std_srvs.srv import Trigger
+
+from balance_calib.calibration_file import ConfigError, save_calibration
+from balance_calib.live.calibrator_core import activate, compute_wrench
+from balance_calib.model.inverse import outputs_for_loads
+from balance_calib.live.refit_process import RefitFailed, run_refit_in_process
+from balance_calib.nodes.balance_calibrator import BalanceCalibrator
+from balance_calib.tunnel_axes import INVERTED, UPRIGHT
+from ros_harness import RELIABLE, NodeProcess, Probe, new_domain_id, wait_for
+from test_live_stream import CAPACITY, MEMO, model_weight_tunnel, show_run
+from test_ros_calibrator import RawSource, connected, start_calibrator, wrench_values
+
+pytestmark = pytest.mark.ros
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+@pytest.fixture
+def probe():
+    probe = Probe(new_domain_id())
+    yield probe
+    probe.close()
+
+
+@pytest.fixture
+def calibration_file(tmp_path):
+    path = tmp_path / 'calibration.yaml'
+    save_calibration(path, MEMO)
+    return path
+
+
+class Stamped(RawSource):
+    """RawSource with sample stamps of our choosing (1 kHz by default) and a frame id."""
+
+    def __init__(self, probe, topic='/balance/raw'):
+        self.probe = probe
+        self.publisher = probe.node.create_publisher(WrenchStamped, topic, RELIABLE)
+        self.sent = 0
+
+    def send(self, outputs=(0.1, 0.0, 0.1, 0.0, 0.0, 0.0), stamp_ns=None, frame_id='LMC6522'):
+        stamp_ns = (10**9 + self.sent * 10**6) if stamp_ns is None else stamp_ns
+        msg = WrenchStamped()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 10**9)
+        msg.header.frame_id = frame_id
+        (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
+         msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = (float(v) for v in outputs)
+        self.publisher.publish(msg)
+        self.sent += 1
+
+
+def window(probe, node, source, service, outputs):
+    """Call ~/tare or ~/zero, wait for its window to open, feed it, return the reply."""
+    reply = probe.call_async(Trigger, f'/balance_calibrator/{service}')
+    wait_for(lambda: node._live.window is not None, 10.0, f'the {service} window to open')
+    for row in outputs:
+        source.send(row)
+    wait_for(reply.done, 20.0, f'the {service} reply')
+    return reply.result()
+
+
+@pytest.mark.parametrize('installation', [UPRIGHT, INVERTED])
+def test_model_weight_tared_wind_off_then_wind_on_reads_the_aerodynamic_load_within_0_1_pct_fs(
+        probe, tmp_path, calibration_file, installation):
+    zero, wind_off, wind_on, aero = show_run(installation, samples_per_condition=40, seed=1)
+    node = start_calibrator(probe, tmp_path, calibration_file, installation=installation.name, model='cubic')
+    wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
+    source = Stamped(probe)
+    connected(node, source)
+    assert window(probe, node, source, 'zero', zero).success
+    tare = window(probe, node, source, 'tare', wind_off)
+    assert tare.success, tare.message
+    stated = float(re.search(r'FZ=([-+0-9.]+) N', tare.message).group(1))
+    assert abs(stated - model_weight_tunnel()[2]) < 0.001 * CAPACITY[2]      # 0.3 FS, in N, tunnel axes
+    wait_for(lambda: len(wrenches) == source.sent, 10.0, 'the wrenches of the two windows')
+    before = len(wrenches)
+    for condition in wind_on:
+        for row in condition:
+            source.send(row)
+    wait_for(lambda: len(wrenches) == before + wind_on.shape[0] * wind_on.shape[1], 20.0, 'the wind-on wrenches')
+    read = wrench_values(wrenches[before:]).reshape(wind_on.shape).mean(axis=1)
+    error_pct = np.abs(read - aero) / np.abs(installation.to_tunnel(CAPACITY)) * 100
+    # noise 0.03 % FS per sample, 40 per condition, 100 in each window: σ of a mean error ≈ 0.006 % FS
+    assert error_pct.max() < 0.1, error_pct.max(axis=0)
+
+
+def test_tare_refused_on_a_ramp_accepted_when_steady_restored_after_a_restart_and_cleared(
+        probe, tmp_path, calibration_file):
+    zero, wind_off, _, _ = show_run(UPRIGHT)
+    node = start_calibrator(probe, tmp_path, calibration_file)
+    wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
+    source = Stamped(probe)
+    connected(node, source)
+    ramp = wind_off + np.linspace(0.0, 0.3, len(wind_off))[:, None] * np.array([0, 0, 1.0, 0, 0, 0])
+    refused = window(probe, node, source, 'tare', ramp)
+    assert not refused.success and 'not steady' in refused.message and 'FZ moved by' in refused.message
+    assert node._live.tare.tare_load is None
+    accepted = window(probe, node, source, 'tare', wind_off)
+    assert accepted.success and 'saved to' in accepted.message
+    tare_load = node._live.tare.tare_load.copy()
+    probe.executor.remove_node(node)
+    node.destroy_node()
+
+    restarted = start_calibrator(probe, tmp_path, calibration_file)
+    np.testing.assert_array_equal(restarted._live.tare.tare_load, tare_load)
+    before = len(wrenches)
+
+    def a_wrench_after_the_restart():      # the wind-off load again (until the new node is matched)
+        source.send(wind_off.mean(axis=0))
+        return len(wrenches) > before
+    wait_for(a_wrench_after_the_restart, 20.0, 'a wrench from the restarted node', poll_s=0.05)
+    # reads zero after the restored tare (to the second-order effect of the noise: mean f(V) vs f(mean V))
+    np.testing.assert_allclose(wrench_values(wrenches[-1:])[0] / np.abs(UPRIGHT.to_tunnel(CAPACITY)), 0.0, atol=1e-6)
+    cleared = probe.call(Trigger, '/balance_calibrator/clear_tare')
+    assert cleared.success and 'tare load removed' in cleared.message
+    assert f'FZ={UPRIGHT.to_tunnel(tare_load)[2]:+.3f}' in cleared.message
+    assert restarted._live.tare.tare_load is None
+
+
+def test_overload_is_raised_latched_and_cleared_and_diagnostics_name_the_component(
+        probe, tmp_path, calibration_file):
+    node = start_calibrator(probe, tmp_path, calibration_file, overload_fraction=0.8, overload_clear_s=0.3)
+    probe.subscribe(WrenchStamped, '/balance/wrench')
+    diagnostics = probe.subscribe(DiagnosticArray, '/diagnostics')
+    source = Stamped(probe)
+    connected(node, source)
+    truth = MEMO.model('cubic').without_constant()
+    loads = np.zeros((2, 6))
+    loads[1, 2] = 0.85 * CAPACITY[2]               # F_Z at 0.85 of rated, limit 0.8
+    safe, over = outputs_for_loads(truth, loads)
+    source.send(safe)
+    source.send(over)
+    late = []          # a subscriber that joins after the event still gets the latched state
+    wait_for(lambda: node._live.overload.active, 10.0, 'the overload')
+    probe.node.create_subscription(Bool, '/balance/overload', late.append, LATCHED)
+    wait_for(lambda: late and late[-1].data, 10.0, 'the latched overload=true')
+
+    def overload_status():
+        for array in reversed(diagnostics):
+            status = array.status[2]
+            if status.level == b'\x02' and 'FZ' in status.message:
+                return status
+    wait_for(overload_status, 10.0, 'an ERROR naming FZ')
+    source.stream(200.0)                              # now inside, for more than overload_clear_s
+    wait_for(lambda: late and not late[-1].data, 10.0, 'overload=false after 0.3 s inside')
+    source.stop()
+
+
+def test_bad_live_input_is_counted_and_reported_and_never_published_as_a_number(probe, tmp_path, calibration_file):
+    node = start_calibrator(probe, tmp_path, calibration_file)
+    wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
+    diagnostics = probe.subscribe(DiagnosticArray, '/diagnostics')
+    source = Stamped(probe)
+    connected(node, source)
+    good = (0.1, 0.2, 0.3, 0.1, 0.2, 0.1)
+    stamps = 10**9 + np.arange(300) * 10**6                       # 1 kHz
+    for k in range(100):
+        source.send(good, stamps[k])
+    for k in range(200, 220):                                     # 100 samples lost
+        source.send(good, stamps[k])
+    source.send(good, stamps[210])                                # out of order
+    source.send(good, stamps[219])                                # duplicate
+    source.send(good, 0)                                          # zero stamp
+    source.send(good, stamps[220], frame_id='B660H')              # another balance
+    for k, outputs in enumerate(((1e103, 0, 0, 0, 0, 0), (0, 0, 1e90, 0, 0, 0), (0, 9.0, 0, 0, 0, 0))):   # saturated
+        source.send(outputs, stamps[221 + k])
+    sent = source.sent
+
+    def counted():
+        for array in reversed(diagnostics):
+            values = {kv.key: kv.value for kv in array.status[0].values}
+            if values.get('samples_received') == str(sent):
+                return array.status[0], values
+    status, values = wait_for(counted, 10.0, 'diagnostics counting every sample')
+    assert values['samples_lost_(gaps_in_the_stamps)'] == '100', str(values)
+    assert values['stamps_out_of_order'] == '1' and values['duplicate_stamps'] == '1' and values['zero_stamps'] == '1'
+    assert values['samples_from_another_balance'] == '1' and 'B660H' in values['frame_ids_seen_from_other_balances']
+    assert values['saturated'] == '3' and values['wrenches_published'] == str(sent - 3)
+    assert np.all(np.abs(wrench_values(wrenches)) < 10 * CAPACITY.max())
+    assert any(a.status[0].level == b'\x02' and 'saturated' in a.status[0].message for a in diagnostics)
+
+
+@pytest.mark.parametrize('name,value', [('tare_timeout_s', float('inf')), ('diagnostics_period_s', float('inf')),
+                                        ('diagnostics_period_s', 0.0), ('diagnostics_period_s', -1.0),
+                                        ('tare_samples', 0), ('tare_samples', -5), ('envelope_margin', 1e-9),
+                                        ('overload_fraction', float('nan')), ('calibration_file', '/dev/zero'),
+                                        ('calibration_file', 'FIFO')])
+def test_bad_parameters_at_start_up_are_refused_with_a_reason(probe, tmp_path, name, value):
+    if value == 'FIFO':
+        value = str(tmp_path / 'calibration.fifo')
+        os.mkfifo(value)
+    with pytest.raises(ConfigError, match=name if name != 'calibration_file' else 'not a calibration file|is a'):
+        BalanceCalibrator(context=probe.context, parameter_overrides=[Parameter(name, value=value)])
+
+
+def test_bad_parameters_at_runtime_are_refused_and_the_node_keeps_streaming(probe, tmp_path, calibration_file):
+    node = start_calibrator(probe, tmp_path, calibration_file)
+    for name, value in (('tare_timeout_s', float('inf')), ('diagnostics_period_s', 0.0), ('tare_samples', -5),
+                        ('envelope_margin', 1e-9), ('lowpass_hz', float('nan')), ('calibration_file', '/dev/zero')):
+        result = node.set_parameters([Parameter(name, value=value)])[0]
+        assert not result.successful and result.reason, (name, value)
+    wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
+    source = Stamped(probe)
+    connected(node, source)
+    source.send((0.1,) * 6)
+    wait_for(lambda: len(wrenches) == 1, 10.0, 'a wrench after the refused parameters')
+
+
+def test_two_namespaced_calibrators_keep_their_streams_apart(probe, tmp_path, calibration_file):
+    nodes = {side: NodeProcess('balance_calibrator', probe.domain_id, tmp_path / side, {
+        'calibration_file': str(calibration_file), 'installation': installation},
+        extra_args=['-r', f'__ns:=/{side}']) for side, installation in (('left', 'upright'), ('right', 'inverted'))}
+    try:
+        received = {side: probe.subscribe(WrenchStamped, f'/{side}/balance/wrench') for side in nodes}
+        root = probe.subscribe(WrenchStamped, '/balance/wrench')
+        sources = {side: Stamped(probe, f'/{side}/balance/raw') for side in nodes}
+        for side in nodes:
+            wait_for(lambda: sources[side].publisher.get_subscription_count() >= 1, 30.0, f'/{side} calibrator')
+            sub = [s for s in probe.node.subscriptions if s.topic_name == f'/{side}/balance/wrench'][0]
+            wait_for(lambda: sub.get_publisher_count() >= 1, 30.0, f'/{side}/balance/wrench')
+        outputs = {'left': np.array([0.2, 0.1, 0.4, 0.0, -0.2, 0.1]), 'right': np.array([-0.3, 0.2, 0.1, 0.1, 0.3, 0.0])}
+
+        def twenty_each():        # keep sending until each side has 20 (the first may go before matching)
+            for side in nodes:
+                k = sources[side].sent
+                sources[side].send(outputs[side] * (1 + k / 100), stamp_ns=10**9 + k * 10**6)
+            return all(len(received[s]) >= 20 for s in nodes)
+        wait_for(twenty_each, 30.0, 'both streams', poll_s=0.01)
+        for side, installation in (('left', 'upright'), ('right', 'inverted')):
+            messages = list(received[side])
+            k = np.array([(m.header.stamp.nanosec // 10**6) for m in messages])
+            expected = compute_wrench(activate(MEMO, 'adopted', installation),
+                                      outputs[side] * (1 + k[:, None] / 100)).wrench_tunnel
+            np.testing.assert_allclose(wrench_values(messages), expected, rtol=1e-12, atol=1e-12)
+        assert root == []
+        reply = probe.call(Trigger, '/left/balance_calibrator/clear_tare')
+        assert reply.success
+    finally:
+        for node in nodes.values():
+            node.stop()
+
+
+def test_refit_in_its_own_process_replies_the_pipelines_reason_and_keeps_the_calibration(
+        probe, tmp_path, calibration_file):
+    node = start_calibrator(probe, tmp_path, calibration_file)        # no injected refit: the real pipeline
+    empty_bag = tmp_path / 'campaign'
+    before = calibration_file.read_bytes()
+    reply = probe.call(Trigger, '/balance_calibrator/refit', timeout_s=120.0)
+    assert not reply.success and 'stays in force' in reply.message
+    assert str(empty_bag) in reply.message or 'campaign' in reply.message      # the pipeline names the bag
+    assert calibration_file.read_bytes() == before and node._live.active.source == str(calibration_file)
+
+
+def test_a_refit_process_killed_mid_way_is_a_failure_with_the_reason(tmp_path):
+    killed = threading.Event()
+
+    def kill(pid):
+        os.kill(pid, 9)
+        killed.set()
+    with pytest.raises(RefitFailed, match='killed by signal SIGKILL'):
+        run_refit_in_process([tmp_path], 'lmc6522', tmp_path / 'out', 'cubic', progress=lambda line: None,
+                             timeout_s=60.0, started=kill)
+    assert killed.is_set()
