@@ -113,7 +113,6 @@ def test_replay_republishes_a_bag_with_its_stamps(probe, tmp_path):
 
 
 def test_thrust_stand_mode_publishes_strain_and_pressures(probe, tmp_path):
-    pytest.importorskip('balance_calib.nodes.thrust_stand_source')
     raw = probe.subscribe(WrenchStamped, '/balance/raw')
     chamber = probe.subscribe(FluidPressure, '/thrust_stand/chamber_pressure')
     ambient = probe.subscribe(FluidPressure, '/thrust_stand/ambient_pressure')

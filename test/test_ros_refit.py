@@ -11,11 +11,10 @@ from std_srvs.srv import Trigger
 from balance_calib.calibration_file import load_calibration, save_calibration
 from balance_calib.config import CONFIG_DIR, load_balance_config
 from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
+from balance_calib.simulation import campaign_bag
 from ros_harness import RELIABLE, NodeProcess, Probe, new_domain_id, wait_for
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
-campaign_bag = pytest.importorskip('balance_calib.simulation.campaign_bag')
-pytest.importorskip('balance_calib.refit.pipeline')
 SAMPLE_MV = np.array([0.3, -0.2, 0.5, 0.1, -0.4, 0.2])
 
 

@@ -9,14 +9,14 @@ import time
 
 import pytest
 
-rclpy = pytest.importorskip('rclpy')
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
-from geometry_msgs.msg import WrenchStamped  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from sensor_msgs.msg import FluidPressure  # noqa: E402
-from std_srvs.srv import Trigger  # noqa: E402
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import WrenchStamped
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import FluidPressure
+from std_srvs.srv import Trigger
 
-from balance_calib.thrust_stand.nozzle import Nozzle  # noqa: E402
+from balance_calib.thrust_stand.nozzle import Nozzle
 
 STATUS_NAME = 'thrust_analyzer: thrust coefficient'
 THRUST_N = 2.5
