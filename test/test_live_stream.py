@@ -195,8 +195,11 @@ def test_diagnostics_say_stale_and_show_the_zero_and_the_tare(tmp_path):
 
 def test_zero_and_tare_survive_a_save_and_load_and_belong_to_one_balance(tmp_path):
     state = TareState('LMC6522', ELECTRICAL_ZERO_MV, 21.5, np.ones(6), 't0', model_weight_tunnel(), 't1')
-    path = tare_file_for(str(tmp_path / 'calibration.yaml'), 'LMC6522', '/left/balance_calibrator', False)
+    path = tare_file_for(str(tmp_path / 'calibration.yaml'), '/left/balance_calibrator', False)
     assert path == tmp_path / 'calibration.left.balance_calibrator.tare.yaml'
+    assert tare_file_for(str(tmp_path / 'calibration.yaml'), '/balance_calibrator', False) == \
+        tmp_path / 'calibration.tare.yaml'
+    assert tare_file_for(str(CONFIG_DIR / 'lmc6522.yaml'), '/balance_calibrator', True) is None
     save_tare(path, state)
     back = load_tare(path, 'lmc6522')
     np.testing.assert_array_equal(back.zero_mv, state.zero_mv)

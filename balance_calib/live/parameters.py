@@ -34,8 +34,8 @@ PARAMETERS: dict[str, Spec] = {
                            0.01, 3600.0),
     'tare_max_scatter': Spec(4.0, '~/tare and ~/zero refuse a window whose scatter, or the difference of its '
                                   'halves, exceeds this many times its sample-to-sample noise', 1.5, 1000.0),
-    'tare_file': Spec('', 'where the zero and tare persist ("" = beside calibration_file, '
-                          '<name>.tare.yaml; ~/.balance_calib/tares/ for a shipped balance config)'),
+    'tare_file': Spec('', 'where the zero and tare persist ("" = beside calibration_file as <name>.tare.yaml; '
+                          'not persisted when calibration_file is a shipped balance config)'),
     'calibration_bags': Spec(STRING_ARRAY, 'bags (directories or .mcap) that ~/refit fits'),
     'balance': Spec('lmc6522', 'balance config for the refit (schedule, body, capacity)'),
     'report_dir': Spec('~/.balance_calib/reports', '~/refit writes each run into a new directory here'),

@@ -45,13 +45,14 @@ def now_iso() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')
 
 
-def tare_file_for(calibration_source: str, balance: str, node_name: str, calibration_is_config: bool) -> Path:
+def tare_file_for(calibration_source: str, node_name: str, calibration_is_config: bool) -> Path | None:
     """Beside the calibration: calibration.yaml -> calibration.tare.yaml (another node name or namespace
-    gets its own file). A shipped balance config is not ours to write beside: ~/.balance_calib/tares/."""
+    gets its own file). None for a shipped balance config: nothing is written into the package, and
+    no hidden state in a home directory changes what a fresh node reads (set `tare_file` instead)."""
+    if calibration_is_config:
+        return None
     suffix = '' if node_name in ('', '/balance_calibrator') else '.' + node_name.strip('/').replace('/', '.')
     source = Path(calibration_source)
-    if calibration_is_config:
-        return Path('~/.balance_calib/tares').expanduser() / f'{balance.lower()}{suffix}.tare.yaml'
     return source.with_name(f'{source.stem}{suffix}.tare.yaml')
 
 

@@ -173,13 +173,14 @@ class BalanceCalibrator(Node):
         return future
 
     # --- zero and tare persistence -----------------------------------------------------------
-    def _tare_path(self, active: ActiveCalibration) -> Path:
+    def _tare_path(self, active: ActiveCalibration) -> Path | None:
         if self._param('tare_file'):
             return Path(self._param('tare_file')).expanduser()
-        return tare_file_for(active.source, active.calibration.balance, self.get_fully_qualified_name(),
-                             is_balance_config(active.source))
+        return tare_file_for(active.source, self.get_fully_qualified_name(), is_balance_config(active.source))
 
     def _restore_tare(self) -> None:
+        if self._tare_file is None:
+            return
         try:
             state = load_tare(self._tare_file, self._live.active.calibration.balance)
         except ValueError as err:
@@ -196,6 +197,9 @@ class BalanceCalibrator(Node):
                                 f'N, N·m (tunnel axes) taken {state.tare_taken_at or "at an unknown time"}'))
 
     def _persist_tare(self) -> str:
+        if self._tare_file is None:
+            return ('not persisted: the calibration is a shipped balance config (set parameter tare_file to keep '
+                    'zero and tare across restarts)')
         try:
             save_tare(self._tare_file, self._live.tare)
             return f'saved to {self._tare_file}'
@@ -443,7 +447,8 @@ class BalanceCalibrator(Node):
             period_s=now_s - self._period_start_s,
             last_sample_age_s=None if self._last_sample_s is None else now_s - self._last_sample_s,
             temperature_age_s=None if self._temperature_s is None else now_s - self._temperature_s,
-            refit_running=self._refit_running, tare_source=str(self._tare_file),
+            refit_running=self._refit_running,
+            tare_source='not persisted' if self._tare_file is None else str(self._tare_file),
             node_name=self.get_fully_qualified_name().lstrip('/'))
         self._period_start_s = now_s
         array = DiagnosticArray()
