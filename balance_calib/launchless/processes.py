@@ -29,9 +29,16 @@ class NodeProcess:
         self.name = executable
         env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
         log_dir.mkdir(parents=True, exist_ok=True)
-        self.stdout_path = log_dir / f'{executable}.{id(self)}.out'
-        self.stderr_path = log_dir / f'{executable}.{id(self)}.err'
-        self._stdout = open(self.stdout_path, 'w')
+        # bridge_publisher.1.out, bridge_publisher.2.out, ... in the order the runs started
+        run = 1
+        while True:
+            try:     # exclusive creation: two processes started at once never share a log
+                self._stdout = open(log_dir / f'{executable}.{run}.out', 'x')
+                break
+            except FileExistsError:
+                run += 1
+        self.stdout_path = log_dir / f'{executable}.{run}.out'
+        self.stderr_path = log_dir / f'{executable}.{run}.err'
         self._stderr = open(self.stderr_path, 'w')
         self.process = subprocess.Popen([executable] + ros_args(parameters or {}) + (extra_args or []),
                                         env=env, stdout=self._stdout, stderr=self._stderr,
