@@ -111,7 +111,8 @@ def parameter_table(module) -> list[tuple[str, str, str]]:
 
 def help_text(module_name: str) -> str:
     module = sys.modules[module_name]
-    name = module_name.rsplit('.', 1)[-1]
+    spec = getattr(module, '__spec__', None)        # python -m balance_calib.nodes.NAME: __name__ is __main__
+    name = (spec.name if spec is not None and module_name == '__main__' else module_name).rsplit('.', 1)[-1]
     doc = inspect.getdoc(module) or name
     lines = [f'usage: {name} [--ros-args ...]', '', doc, '']
     rows = parameter_table(module)

@@ -173,6 +173,8 @@ class AeroCoefficients(Node):
 
 
 def main(args=None):
+    from ._help import exit_if_help
+    exit_if_help(__name__, args)     # --help: print the parameters and exit before rclpy starts
     rclpy.init(args=args)
     node = None
     status = 0
