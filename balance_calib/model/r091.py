@@ -287,7 +287,7 @@ class IterativeModel:
             bad = np.flatnonzero(~converged)
             raise InverseDidNotConverge(
                 f'model {self.name}: Newton iteration for the loads did not converge in {self.max_iterations} steps '
-                f'for {bad.size} of {len(outputs)} sample(s), first {bad[0]} (outputs '
+                f'for {bad.size} of {len(outputs)} sample(s), first at sample {bad[0]} (outputs '
                 f'{np.round(outputs[bad[0]], 6).tolist()}); outside the calibrated range?')
         loads[~finite] = np.nan
         return loads[0] if single else loads

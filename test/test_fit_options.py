@@ -1,0 +1,73 @@
+"""balance-calib fit options: explicit methods, a term file, mV/V tables with an excitation, and a
+validation file whose series the calibration never saw (refused: its tare is unknown)."""
+import json
+
+import numpy as np
+import yaml
+
+from balance_calib.calibration_file import load_calibration
+from balance_calib.cli import main
+from balance_calib.tables import synthetic as sy
+from balance_calib.tables.balfit_writer import write_table
+
+
+def _table(rng, path, pair_points=25, noise_mv=0.0006, first_series=1):
+    truth = sy.direct_truth(np.random.default_rng(1))
+    schedule = sy.support_schedule(rng, 15, pair_points, first_series=first_series)
+    tares = sy.tares_for(np.random.default_rng(2), range(1, 100))
+    applied, outputs = sy.direct_campaign(rng, truth, schedule, tares, 0.0002 * sy.capacity_si())
+    write_table(path, sy.make_table(applied, outputs, schedule.series))
+    return truth, tares
+
+
+def test_term_file_and_explicit_method(tmp_path, capsys):
+    rng = np.random.default_rng(3)
+    _table(rng, tmp_path / 'cal.csv')
+    terms = tmp_path / 'terms.txt'
+    # written in the load symbols; the direct method maps them onto the outputs by column
+    terms.write_text('# linear and squares\nFX, FY, FZ, MX, MY, MZ\nFX^2\nFZ*MY\n1\n')
+    assert main(['fit', str(tmp_path / 'cal.csv'), '--out', str(tmp_path / 'out'), '--method', 'direct',
+                 '--terms', str(terms), '--no-plots']) == 0
+    report = json.loads((tmp_path / 'out' / 'report.json').read_text())
+    assert report['method'] == 'direct' and 'iterative' not in report['methods_compared']
+    assert report['terms'] == ['FXV', 'FYV', 'FZV', 'MXV', 'MYV', 'MZV', 'FXV^2', 'FZV*MYV']   # constant dropped
+    assert set(report['term_statistics']['direct'][0]) >= {'term', 'vif', 'p_value', 'press_ratio'}
+    calibration = load_calibration(tmp_path / 'out' / 'calibration.yaml')
+    assert calibration.model().term_names == tuple(report['terms'])
+
+
+def test_unknown_term_and_unknown_validation_series_are_refused(tmp_path, capsys):
+    rng = np.random.default_rng(4)
+    _table(rng, tmp_path / 'cal.csv')
+    _table(rng, tmp_path / 'val.csv', pair_points=5, first_series=40)
+    bad_terms = tmp_path / 'terms.txt'
+    bad_terms.write_text('FX, QQ\n')
+    assert main(['fit', str(tmp_path / 'cal.csv'), '--out', str(tmp_path / 'a'), '--terms', str(bad_terms)]) != 0
+    assert 'QQ' in capsys.readouterr().err
+    assert main(['fit', str(tmp_path / 'cal.csv'), '--out', str(tmp_path / 'b'), '--method', 'direct',
+                 '--validate', str(tmp_path / 'val.csv')]) != 0
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and 'val.csv' in err and 'load series 40' in err
+    assert not (tmp_path / 'a').exists() and not (tmp_path / 'b').exists()
+
+
+def test_millivolt_per_volt_tables_with_an_excitation_give_millivolt_calibrations(tmp_path, capsys):
+    rng = np.random.default_rng(5)
+    _table(rng, tmp_path / 'mv.csv')
+    # the same table with outputs as mV/V at 5 V excitation
+    text = (tmp_path / 'mv.csv').read_text().splitlines()
+    from balance_calib.tables.balfit_reader import read_table
+    table = read_table(tmp_path / 'mv.csv')
+    from dataclasses import replace
+    ratio = replace(table, output_units=('microV/V',) * 6, outputs=table.outputs / 5.0 * 1000.0,
+                    zero_outputs=table.zero_outputs / 5.0 * 1000.0, output_capacity=table.output_capacity / 5 * 1000)
+    write_table(tmp_path / 'ratio.csv', ratio)
+    assert text
+    for name, extra in (('mv', []), ('ratio', ['--excitation-v', '5'])):
+        assert main(['fit', str(tmp_path / f'{name}.csv'), '--out', str(tmp_path / name), '--method', 'direct',
+                     '--no-plots'] + extra) == 0
+    a = load_calibration(tmp_path / 'mv' / 'calibration.yaml').model()
+    b = load_calibration(tmp_path / 'ratio' / 'calibration.yaml').model()
+    np.testing.assert_allclose(a.loads(table.bridge_outputs), b.loads(table.bridge_outputs),
+                               atol=1e-9 * sy.capacity_si().max())
+    assert yaml.safe_load((tmp_path / 'ratio' / 'calibration.yaml').read_text())['extra']['output_unit'] == 'mV'
