@@ -59,4 +59,7 @@ def main(argv=None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    # `python -m balance_calib.cli`: run the imported module's main, whose CommandError is the one
+    # the sub-commands raise (this file runs as __main__, a second copy of the class)
+    from balance_calib.cli import main as _main
+    sys.exit(_main())

@@ -191,6 +191,8 @@ def _outlier_gate(config, points, residuals, press, limits, what) -> Gate:
     finite = np.all(np.isfinite(standardized), axis=1)
     flagged = (np.abs(standardized) > threshold) | ~finite[:, None]
     rows = np.flatnonzero(np.any(flagged, axis=1))
+    severity = np.max(np.where(flagged, np.nan_to_num(np.abs(standardized) / threshold, nan=np.inf), 0.0), axis=1)
+    rows = rows[np.argsort(-severity[rows], kind='stable')]   # the worst point first
     entries = []
     for i in rows[:20]:
         k = int(np.nanargmax(np.where(flagged[i], np.abs(standardized[i]) / threshold, -np.inf)))
@@ -287,9 +289,15 @@ def _zero_gate(config, points, reduction, limits) -> Gate:
     else:
         change = change_mv * (config.capacity / config.rated_output_mv)
     change_pct = np.abs(change) / config.capacity * 100.0
-    worst = np.unravel_index(int(np.argmax(np.nan_to_num(change_pct, nan=np.inf))), change_pct.shape)
+    # noisy zero points differ more: the limit grows with their robust scatter (a turned body is
+    # one pair far beyond the others, which leaves the median alone)
+    scatter = np.median(change_pct, axis=0) / 0.6745 if len(change_pct) >= 5 else np.zeros(change_pct.shape[1])
+    limit = np.maximum(limits.zero_shift_pct_fs, limits.outlier_robust_sigmas * scatter)
+    ratio = np.nan_to_num(change_pct / limit, nan=np.inf)
+    worst = np.unravel_index(int(np.argmax(ratio)), change_pct.shape)
     details['largest_pct_fs'] = float(change_pct[worst])
-    if not change_pct[worst] <= limits.zero_shift_pct_fs:
+    details['limit_pct_fs'] = dict(zip(config.components, limit))
+    if not change_pct[worst] <= limit[worst[1]]:
         b, a = before[worst[0]], after[worst[0]]
         return Gate('zero_points', False, f'zero points {int(points.label[b])} and {int(points.label[a])} '
                                           f'(I_g {int(points.orientation[b])}) differ by {change_pct[worst]:.3g} % FS '

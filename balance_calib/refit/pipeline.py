@@ -118,7 +118,7 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
     gates = data_gates(config, points, reduction, fits, cut, active, limits)
     if not diagnose:
         residuals, press = base_fit_arrays(reduction, fits[base_model])
-        gates = fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits) + gates
+        gates += fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits)
     _refuse_unless_forced(gates, force, sources, say)
     say('fits: ' + ', '.join(f'{o} σFX {fits[o].sigma_pct_fs[config.components[0]]:.3f} % FS' for o in orders))
 
@@ -134,7 +134,7 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
             residuals, press = base_fit_arrays(reduction, fits[base_model])
             extra = fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits)
         _refuse_unless_forced(extra, force, sources, say)
-        gates = extra + gates
+        gates += extra
 
     from .report import build_calibration, build_report
     calibration = build_calibration(config, reduction, fits, base_model, diagnosis, sources)
@@ -153,7 +153,10 @@ def _refuse_unless_forced(gates, force: bool, sources: Sequence[str], say: Progr
     from .gates import failed
     for gate in gates:
         say(f'gate {gate.name}: {"ok" if gate.passed else "FAILED"}: {gate.reason}')
-    bad = failed(gates)
+    # the most specific cause first: a unit error also spoils σ, not the other way round
+    priority = ('marker_order', 'clipping', 'sensitivity', 'active_calibration', 'capacity', 'body_weight',
+                'zero_points', 'outliers', 'sigma')
+    bad = sorted(failed(gates), key=lambda g: priority.index(g.name) if g.name in priority else len(priority))
     if bad and not force:
         also = f' (also failed: {", ".join(g.name for g in bad[1:])})' if len(bad) > 1 else ''
         raise RefitError(f'{_where(sources)}: refused by acceptance gate {bad[0].name}: {bad[0].reason}{also}; '
@@ -204,12 +207,14 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
         raise RefitError('no bags given (parameter calibration_bags is empty)')
     out_dir = Path(out_dir)
     check_out_dir(out_dir)
+    _require_regular_file(balance, 'balance config')
     try:
         config = load_balance_config(balance)
     except ConfigError as err:
         raise RefitError(str(err)) from None
     active = active_calibration
     if isinstance(active, (str, Path)):
+        _require_regular_file(active, 'active calibration')
         try:
             active = load_calibration(active)
         except (ConfigError, OSError) as err:
@@ -264,12 +269,28 @@ def check_out_dir(out_dir: Path) -> None:
         raise RefitError(f'{out_dir}: cannot create the output directory ({parent} is not a directory)')
     if not os.access(parent, os.W_OK | os.X_OK):
         raise RefitError(f'{out_dir}: output directory not writable ({parent} is not writable)')
-    staging_parent = out_dir.parent if out_dir.parent.exists() else None
-    if staging_parent is not None and not os.access(staging_parent, os.W_OK | os.X_OK):
-        raise RefitError(f'{out_dir}: its parent {staging_parent} is not writable (the refit stages there)')
+    try:  # os.access says yes to root everywhere: try it
+        with tempfile.TemporaryFile(dir=parent, prefix='.refit-probe-'):
+            pass
+    except OSError as err:
+        raise RefitError(f'{out_dir}: output directory not writable ({parent}: {err.strerror})') from None
 
 
 _STAGING_PREFIX = '.refit-staging-'
+_MAX_CONFIG_BYTES = 64 * 1024 * 1024
+
+
+def _require_regular_file(path: str | Path, what: str) -> None:
+    """A FIFO or device would block the read or never end: refuse it before opening."""
+    import stat
+    path = Path(path)
+    if not path.exists():
+        return  # a shipped name such as 'lmc6522'; the loader says if it is unknown
+    mode = path.stat().st_mode
+    if stat.S_ISDIR(mode) or not stat.S_ISREG(mode):
+        raise RefitError(f'{path}: {what} is not a regular file')
+    if path.stat().st_size > _MAX_CONFIG_BYTES:
+        raise RefitError(f'{path}: {what} of {path.stat().st_size} bytes is too large')
 
 
 def _clean_stale_staging(parent: Path, name: str) -> None:
