@@ -71,3 +71,27 @@ def test_millivolt_per_volt_tables_with_an_excitation_give_millivolt_calibration
     np.testing.assert_allclose(a.loads(table.bridge_outputs), b.loads(table.bridge_outputs),
                                atol=1e-9 * sy.capacity_si().max())
     assert yaml.safe_load((tmp_path / 'ratio' / 'calibration.yaml').read_text())['extra']['output_unit'] == 'mV'
+
+
+def test_axes_option_names_balfit_symbols_for_the_live_node(tmp_path, capsys):
+    from dataclasses import replace
+
+    from balance_calib.tables.balfit_reader import read_table
+    rng = np.random.default_rng(6)
+    _table(rng, tmp_path / 'tm.csv')
+    table = read_table(tmp_path / 'tm.csv')
+    write_table(tmp_path / 'balfit.csv', replace(table, load_symbols=('AF', 'S1', 'N1', 'RM', 'N2', 'S2'),
+                                                 output_symbols=('rAF', 'rS1', 'rN1', 'rRM', 'rN2', 'rS2')))
+    assert main(['fit', str(tmp_path / 'balfit.csv'), '--out', str(tmp_path / 'plain'), '--method', 'direct',
+                 '--no-plots']) == 0
+    report = json.loads((tmp_path / 'plain' / 'report.json').read_text())
+    assert any('balance_calibrator cannot run' in w for w in report['warnings'])
+    assert main(['fit', str(tmp_path / 'balfit.csv'), '--out', str(tmp_path / 'named'), '--method', 'direct',
+                 '--no-plots', '--axes', 'FX,FY,FZ,MX,MY,MZ']) == 0
+    calibration = load_calibration(tmp_path / 'named' / 'calibration.yaml')
+    assert calibration.components == sy.LOADS and calibration.bridge_outputs == sy.OUTPUTS
+    np.testing.assert_allclose(calibration.model().loads(table.bridge_outputs),
+                               load_calibration(tmp_path / 'plain' / 'calibration.yaml').model().loads(table.bridge_outputs),
+                               rtol=1e-12, atol=1e-9)
+    assert main(['fit', str(tmp_path / 'balfit.csv'), '--out', str(tmp_path / 'bad'), '--axes', 'FX,FY']) != 0
+    assert '--axes' in capsys.readouterr().err and not (tmp_path / 'bad').exists()

@@ -26,6 +26,10 @@ def register(subparsers) -> None:
     parser.add_argument('--terms', default='auto', help='auto, tm663-cubic, r091-96 or a file of term names')
     parser.add_argument('--excitation-v', type=float, default=None,
                         help='bridge excitation (V): turns mV/V tables into mV calibrations')
+    parser.add_argument('--axes', default=None, metavar='FX,FY,FZ,MX,MY,MZ',
+                        help='name the loads (in column order) as these TM-663 components, and the bridge '
+                             'outputs FXV..MZV likewise, so balance_calibrator can run the calibration '
+                             '(e.g. a table whose loads are FX..MZ under other symbols)')
     parser.add_argument('--no-plots', action='store_true', help='skip the residual figures')
     parser.set_defaults(func=run)
 
@@ -48,6 +52,10 @@ def run(args) -> int:
     try:
         table = read_tables(args.tables)
         validation = read_tables(args.validate) if args.validate else None
+        if args.axes:
+            from ..tables.calibrate import rename_axes
+            table = rename_axes(table, args.axes)
+            validation = rename_axes(validation, args.axes) if validation is not None else None
         result = calibrate_table(table, method=args.method, terms=args.terms, validation=validation,
                                  excitation_v=args.excitation_v)
     except (TableError, TableCalibrationError) as err:

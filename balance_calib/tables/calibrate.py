@@ -45,6 +45,25 @@ def _sigma_pct(residuals, capacity, symbols) -> dict[str, float]:
     return {s: round(float(v), 5) for s, v in zip(symbols, sigma)}
 
 
+def rename_axes(table: CalibrationTable, axes: str) -> CalibrationTable:
+    """The table with its loads named as TM-663 components (comma-separated, column order) and its
+    bridge outputs as the matching bridges (FX -> FXV); other channels keep their symbols."""
+    from dataclasses import replace
+    from ..units import BRIDGE_OUTPUTS, COMPONENTS
+    names = tuple(a.strip() for a in axes.split(','))
+    if len(names) != table.n_loads or len(set(names)) != len(names) or not set(names) <= set(COMPONENTS):
+        raise TableCalibrationError(f'--axes {axes!r}: give {table.n_loads} distinct names from '
+                                    f'{", ".join(COMPONENTS)}, one per load of {table.source} '
+                                    f'({", ".join(table.load_symbols)})')
+    if len(table.bridge_columns) != len(names):
+        raise TableCalibrationError(f'--axes: {table.source} has {len(table.bridge_columns)} bridge outputs '
+                                    f'for {len(names)} loads')
+    outputs = list(table.output_symbols)
+    for column, name in zip(table.bridge_columns, names):
+        outputs[column] = BRIDGE_OUTPUTS[COMPONENTS.index(name)]
+    return replace(table, load_symbols=names, output_symbols=tuple(outputs))
+
+
 def _check_names(table: CalibrationTable) -> None:
     for symbol in table.load_symbols + table.bridge_symbols:
         if not _NAME_RE.match(symbol):
@@ -265,6 +284,11 @@ def _report(table, validation, fits, chosen, why, term_sets, validation_sigma, v
     extra = [table.output_symbols[i] for i in range(len(table.output_symbols)) if i not in table.bridge_columns]
     if extra:
         report['warnings'].append(f'channels {", ".join(extra)} are not bridge outputs: not used by the fit')
+    from ..units import BRIDGE_OUTPUTS, COMPONENTS
+    if not (set(loads) <= set(COMPONENTS) and set(table.bridge_symbols) <= set(BRIDGE_OUTPUTS)):
+        report['warnings'].append(f'loads {", ".join(loads)} / outputs {", ".join(table.bridge_symbols)} are not '
+                                  f'TM-663 names: balance_calibrator cannot run this calibration; refit with '
+                                  f'--axes FX,FY,FZ,MX,MY,MZ (in the table\'s column order) if that is what they are')
     report['warnings'].append('diagnosis of effects (temperature, drift, hysteresis, body tare) not run: '
                               'a table has no sample times, temperatures or gravity directions')
     return report
