@@ -227,3 +227,111 @@ def test_damaged_chunk_names_the_file(tmp_path):
     mcap_path.write_bytes(bytes(content))
     with pytest.raises(BagError, match=f'{mcap_path}: damaged data at byte offset \\d+: '):
         read_bags(bag)
+
+
+# -- integrity: counted against the file's own summary and index ---------------------------------
+
+def _campaign_mcap(path, *, crcs, compression='zstd'):
+    from balance_calib.benchmarks.refit_reliability import campaign_events, small_campaign, write_mcap
+    return write_mcap(campaign_events(small_campaign('lmc6522', seed=1)), path, crcs=crcs,
+                      compression=compression)
+
+
+def _chunks_and_counts(path):
+    """Chunk offsets and per-topic message counts, as the mcap package reads the summary."""
+    from mcap.reader import make_reader
+    with open(path, 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    topics = {c.id: c.topic for c in summary.channels.values()}
+    counts = {}
+    for channel_id, count in summary.statistics.channel_message_counts.items():
+        counts[topics[channel_id]] = counts.get(topics[channel_id], 0) + count
+    return sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset), counts
+
+
+@pytest.mark.parametrize('crcs', [True, False], ids=['chunk CRCs', 'no CRCs'])
+def test_a_damaged_chunk_is_an_error_at_its_offset_and_salvage_says_what_was_lost(tmp_path, crcs):
+    path = _campaign_mcap(tmp_path / 'campaign.mcap', crcs=crcs)
+    chunks, counts = _chunks_and_counts(path)
+    victim = chunks[len(chunks) // 2]
+    data = bytearray(path.read_bytes())
+    # flip bytes in the compressed records, well inside the chunk (its header is ~60 bytes)
+    middle = victim.chunk_start_offset + victim.chunk_length // 2
+    data[middle:middle + 8] = bytes(b ^ 0xA5 for b in data[middle:middle + 8])
+    path.write_bytes(bytes(data))
+    with pytest.raises(BagError, match=f'{path}: damaged data at byte offset {victim.chunk_start_offset}: '):
+        read_bags(path)
+    salvaged = read_bags(path, salvage=True, required=('raw', 'applied_load', 'gravity'))
+    assert f'byte offset {victim.chunk_start_offset}' in salvaged.losses[0]
+    shortfall = {t: n - salvaged.message_counts.get(t, 0) for t, n in counts.items()}
+    assert any('do not match the summary' in line for line in salvaged.losses)
+    # the per-topic sequence gaps account for exactly the messages the summary says are missing
+    import re
+    gaps = {m.group(1): int(m.group(2)) for line in salvaged.losses
+            for m in [re.search(r': (/\S+): (\d+) message\(s\) missing', line)] if m}
+    assert gaps == {t: n for t, n in shortfall.items() if n}
+    assert sum(gaps.values()) > 0
+    assert all(len(line.splitlines()) == 1 for line in salvaged.losses)
+
+
+def test_a_chunk_skipped_by_a_lenient_reader_is_counted_missing(tmp_path):
+    """A chunk whose opcode is damaged looks like a record a reader may skip; the counts catch it."""
+    path = _campaign_mcap(tmp_path / 'campaign.mcap', crcs=False)
+    chunks, counts = _chunks_and_counts(path)
+    data = bytearray(path.read_bytes())
+    data[chunks[1].chunk_start_offset] = 0x07           # now a "message index" record
+    path.write_bytes(bytes(data))
+    with pytest.raises(BagError, match=f'{path}: .*chunk at byte offset {chunks[1].chunk_start_offset}'):
+        read_bags(path)
+    salvaged = read_bags(path, salvage=True)
+    assert any(f'/balance/raw {salvaged.message_counts["/balance/raw"]} of {counts["/balance/raw"]}' in line
+               for line in salvaged.losses)
+
+
+def test_messages_missing_from_a_topic_sequence_are_an_error(tmp_path):
+    from mcap.writer import Writer
+    path = tmp_path / 'gap.mcap'
+    with open(path, 'wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema(name=WRENCH, encoding='ros2msg',
+                                        data=TYPESTORE.generate_msgdef(WRENCH, ros_version=2)[0].encode())
+        channel = writer.register_channel(topic='/balance/raw', message_encoding='cdr', schema_id=schema)
+        for sequence in [*range(0, 50), *range(53, 100)]:      # 3 lost by the recorder
+            writer.add_message(channel_id=channel, log_time=sequence * 1000, publish_time=sequence * 1000,
+                               sequence=sequence, data=cdr(wrench(sequence * 1000, [1.0] * 6)))
+        writer.finish()
+    with pytest.raises(BagError, match=r'gap.mcap: /balance/raw: 3 message\(s\) missing \(sequence jumps '
+                                       r'from 49 to 53 at log time 53000 ns'):
+        read_bags(path)
+    assert len(read_bags(path, salvage=True).raw) == 97
+
+
+def test_a_truncated_file_salvages_its_complete_chunks(tmp_path):
+    path = _campaign_mcap(tmp_path / 'campaign.mcap', crcs=True)
+    chunks, counts = _chunks_and_counts(path)
+    cut = chunks[3].chunk_start_offset + 20                   # inside the fourth chunk
+    path.write_bytes(path.read_bytes()[:cut])
+    with pytest.raises(BagError, match=f'{path}: truncated or damaged: no valid footer'):
+        read_bags(path)
+    salvaged = read_bags(path, salvage=True)
+    assert any(f'byte offset {chunks[3].chunk_start_offset}' in line for line in salvaged.losses)
+    assert 0 < sum(salvaged.message_counts.values()) < sum(counts.values())
+
+
+@pytest.mark.parametrize('content', [b'', b'\x89MCAP0\r\n', b'\x89MCAP0\r\n' * 3 + b'\x00' * 5],
+                         ids=['empty', 'magic only', 'magic and zeros'])
+def test_tiny_files_name_the_file(tmp_path, content):
+    path = tmp_path / 'tiny.mcap'
+    path.write_bytes(content)
+    with pytest.raises(BagError, match=f'{path}: '):
+        read_bags(path)
+
+
+def test_a_fifo_is_refused_without_opening_it(tmp_path):
+    import os
+    fifo = tmp_path / 'campaign.mcap'
+    os.mkfifo(fifo)
+    # opening a FIFO for reading blocks until a writer comes: the check must come first
+    with pytest.raises(BagError, match=f'{fifo}: is a FIFO, not an MCAP file'):
+        read_bags(fifo)
