@@ -124,6 +124,10 @@ def test_saturated_and_overflowing_outputs_are_never_published_as_numbers():
                         [0, 5.0, 0, 0, 0, 0], [np.nan] * 6])   # 5 mV on F_YV: 2.2x its rated 2.258 mV
     published = live.process(outputs, np.arange(1, 7) * 10**6, now_s=0.0)
     assert published.indices.tolist() == [0, 3] and np.all(np.isfinite(published.wrench))
+    for k, row in enumerate(outputs):          # one sample at a time (the live path at low rates): the same
+        alone = compute_wrench(live.active, row[None, :])
+        assert (alone.accepted[0], alone.saturated[0]) == (published.batch.accepted[k], published.batch.saturated[k])
+        np.testing.assert_allclose(alone.wrench_tunnel[0], published.batch.wrench_tunnel[k], rtol=1e-12)
     assert live.counters.saturated == 3 and live.counters.rejected_nonfinite == 1
     assert live.overload.active and 'saturated bridge' in live.overload.components
     reports = live.report(period_s=1.0, last_sample_age_s=0.0, temperature_age_s=None, refit_running=False,
@@ -262,12 +266,17 @@ def test_fast_path_bytes_carry_exactly_the_pure_cores_wrench():
         messages.append(serialize_message(msg))
     stamps, values, frames = decode_wrenches(messages)
     np.testing.assert_array_equal(values, outputs)
+    singles = [decode_wrenches([m]) for m in messages]             # the one-message path
+    np.testing.assert_array_equal(np.vstack([v for _, v, _ in singles]), values)
+    assert [int(t[0]) for t, _, _ in singles] == stamps.tolist() and [f[0] for _, _, f in singles] == frames
     assert frames[7] == 'B660H-other' and frames[8] == 'LMC6522'
     assert stamps[3] == (1700000003 * 10**9 + 999_999_000 - 3)
     active = activate(MEMO, 'cubic', INVERTED)
     live = LiveCalibrator(active)
     published = live.process(values, stamps, frames, now_s=0.0)
-    encoded = WrenchEncoder('tunnel').encode(stamps[published.indices], published.wrench)
+    encoder = WrenchEncoder('tunnel')
+    encoded = encoder.encode(stamps[published.indices], published.wrench)
+    assert [encoder.encode(stamps[k:k + 1], published.wrench[k:k + 1])[0] for k in range(3)] == encoded[:3]
     back = [deserialize_message(b, WrenchStamped) for b in encoded]
     wrench = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
                         m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z] for m in back])

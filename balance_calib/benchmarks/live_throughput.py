@@ -1,13 +1,24 @@
-"""The live calibrator beside a bare rclpy relay, measured the same way in the same run.
+"""The live calibrator beside rclpy relays, measured the same way in the same run.
 
-    python -m balance_calib.benchmarks.live_throughput [--rates 250,500,1000,2000,4000] [--seconds 3]
+    python -m balance_calib.benchmarks.live_throughput [--rates 1000,2000,4000,...] [--seconds 2]
+    python -m balance_calib.benchmarks.live_throughput --refit BAG [--seconds 5]
 
-For each node under test (the bare relay of relay_node.py: subscribe, copy, publish; then
-balance_calibrator with the memo's cubic matrix) a subprocess is started, and this process
-publishes /balance/raw at each rate for a few seconds and counts what comes back on
-/balance/wrench (reliable QoS, depth 1000 both ways). Printed per rate: messages out/in (zero loss
-or not) and the added latency p50/p99 (receive time minus the raw sample's stamp, which both
-nodes copy). The highest rate with zero loss and the latencies at 1 kHz are compared as ratios.
+The harness measures the node, not itself: the source publishes pre-serialized samples (a byte
+template with the stamp patched in) and the sink takes bytes (`raw=True`) and reads only the stamp,
+so the harness's own ceiling -- source straight to sink, no node between -- is printed first. Then,
+each as a subprocess between the same source and sink (reliable, depth 1000 both ways):
+
+- bare relay: Python messages, the default executor, what users write (relay_node.py);
+- raw relay: bytes in, bytes out, the calibrator's executor (`--node raw-relay` of this module):
+  rclpy's own ceiling for a node;
+- balance_calibrator: the memo's cubic matrix, diagnostics at 1 Hz.
+
+Per rate: messages back / sent and latency p50/p99 (receive time minus the sample's stamp). Per node:
+the highest rate with zero loss, and at 1 kHz the process CPU time per sample (/proc/PID/stat
+utime + stime over the samples of that step) and p50/p99 latency.
+
+`--refit BAG` measures what issue 12 asks of ~/refit: the calibrator's latency at 1 kHz while quiet
+and while ~/refit fits BAG (in its own process), p50/p99/max, and that no sample is lost.
 """
 from __future__ import annotations
 
@@ -23,149 +34,274 @@ import time
 import numpy as np
 
 QOS_DEPTH = 1000
+CDR_LE = b'\x00\x01\x00\x00'
 
 
-def _node_commands(domain: int):
-    relay = [sys.executable, '-m', 'balance_calib.benchmarks.relay_node']
-    calibrator = ['balance_calibrator', '--ros-args', '-p', 'calibration_file:=lmc6522',
-                  '-p', 'diagnostics_period_s:=1.0', '-p', f'input_depth:={QOS_DEPTH}']
-    return [('bare relay', relay), ('balance_calibrator', calibrator)]
+def _raw_template(frame_id: str = 'LMC6522') -> bytearray:
+    from balance_calib.live.raw_codec import WrenchEncoder
+    encoder = WrenchEncoder(frame_id)
+    values = np.zeros((1, 6))
+    values[0, :3] = 0.1, 0.0, 0.2           # inside the calibrated envelope
+    return bytearray(encoder.encode(np.zeros(1, np.int64), values)[0])
 
 
-def _measure(node, publisher, rates, seconds, msg_type, log):
-    from rclpy.executors import SingleThreadedExecutor
+def _clock_ticks() -> float:
+    return float(os.sysconf('SC_CLK_TCK'))
 
-    received = []
-    lock = threading.Lock()
 
-    def on_wrench(msg):
+def _cpu_seconds(pid: int) -> float:
+    """utime + stime of a process, s (Linux /proc)."""
+    with open(f'/proc/{pid}/stat') as handle:
+        fields = handle.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / _clock_ticks()
+
+
+class Harness:
+    """Source (pre-serialized) and sink (bytes, stamp only) in this process, on their own executor thread."""
+
+    def __init__(self, node, sink_topic: str):
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from geometry_msgs.msg import WrenchStamped
+        qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+        self.node = node
+        self.publisher = node.create_publisher(WrenchStamped, '/balance/raw', qos)
+        self.latencies_ns: list[int] = []
+        self.lock = threading.Lock()
+        self.subscription = node.create_subscription(WrenchStamped, sink_topic, self._on_bytes, qos, raw=True)
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(node)
+        self.spinning = True
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+        self.template = _raw_template()
+
+    def _spin(self):
+        while self.spinning:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def _on_bytes(self, data: bytes):
         now = time.time_ns()
-        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-        with lock:
-            received.append(now - stamp)
+        stamp = int.from_bytes(data[4:8], 'little', signed=True) * 1_000_000_000 + int.from_bytes(data[8:12], 'little')
+        with self.lock:
+            self.latencies_ns.append(now - stamp)
 
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
-    subscription = node.create_subscription(msg_type, '/balance/wrench', on_wrench, qos)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    spinning = threading.Event()
-    spinning.set()
-
-    def spin():
-        while spinning.is_set():
-            executor.spin_once(timeout_sec=0.05)
-
-    thread = threading.Thread(target=spin, daemon=True)
-    thread.start()
-    # wait until the node under test is connected both ways
-    deadline = time.monotonic() + 30
-    while (publisher.get_subscription_count() == 0 or node.count_publishers('/balance/wrench') == 0) \
-            and time.monotonic() < deadline:
-        time.sleep(0.05)
-    results = []
-    try:
-        message = msg_type()
-        message.wrench.force.x, message.wrench.force.z = 0.1, 0.2
-        for _ in range(100):      # warm-up: discovery and first allocations, not measured
-            publisher.publish(message)
+    def wait_connected(self, timeout_s: float = 30.0) -> None:
+        deadline = time.monotonic() + timeout_s
+        while (self.publisher.get_subscription_count() == 0 or self.subscription.get_publisher_count() == 0) \
+                and time.monotonic() < deadline:
+            time.sleep(0.05)
+        for _ in range(100):      # warm-up: discovery on the writer side and first allocations, not measured
+            self.send()
             time.sleep(0.005)
         time.sleep(0.5)
-        for rate in rates:
-            with lock:
-                received.clear()
-            total = int(rate * seconds)
-            start = time.monotonic()
-            for i in range(total):
-                target = start + i / rate
-                delay = target - time.monotonic()
-                if delay > 0.0005:
-                    time.sleep(delay)
-                now = time.time_ns()
-                message.header.stamp.sec, message.header.stamp.nanosec = divmod(now, 1_000_000_000)
-                message.wrench.torque.x = 0.001 * (i % 100)     # inside the calibrated envelope
-                publisher.publish(message)
-            achieved = total / (time.monotonic() - start)
-            settle = time.monotonic() + 3.0
-            while time.monotonic() < settle:
-                with lock:
-                    if len(received) >= total:
-                        break
-                time.sleep(0.02)
-            with lock:
-                latencies = np.array(received, dtype=float) / 1e6
-            results.append({'rate': rate, 'achieved': achieved, 'sent': total, 'received': len(latencies),
-                             'p50_ms': float(np.percentile(latencies, 50)) if len(latencies) else float('nan'),
-                             'p99_ms': float(np.percentile(latencies, 99)) if len(latencies) else float('nan')})
-            log(f'  {rate:6.0f} Hz (sent at {achieved:6.0f}): {len(latencies)}/{total} back, '
-                f'p50 {results[-1]["p50_ms"]:.3f} ms, p99 {results[-1]["p99_ms"]:.3f} ms')
+
+    def send(self) -> None:
+        sec, nsec = divmod(time.time_ns(), 1_000_000_000)
+        message = self.template
+        message[4:8] = sec.to_bytes(4, 'little', signed=True)
+        message[8:12] = nsec.to_bytes(4, 'little')
+        self.publisher.publish(bytes(message))
+
+    def run(self, rate: float, seconds: float, pid: int | None) -> dict:
+        with self.lock:
+            self.latencies_ns.clear()
+        total = int(rate * seconds)
+        cpu_before = _cpu_seconds(pid) if pid else 0.0
+        start = time.monotonic()
+        for i in range(total):
+            delay = start + i / rate - time.monotonic()
+            if delay > 0.0005:
+                time.sleep(delay)
+            self.send()
+        achieved = total / (time.monotonic() - start)
+        settle = time.monotonic() + 3.0
+        while time.monotonic() < settle:
+            with self.lock:
+                if len(self.latencies_ns) >= total:
+                    break
+            time.sleep(0.02)
+        cpu = (_cpu_seconds(pid) - cpu_before) if pid else float('nan')
+        with self.lock:
+            latencies = np.array(self.latencies_ns, dtype=float) / 1e6
+        return {'rate': rate, 'achieved': achieved, 'sent': total, 'received': len(latencies),
+                'p50_ms': float(np.percentile(latencies, 50)) if len(latencies) else float('nan'),
+                'p99_ms': float(np.percentile(latencies, 99)) if len(latencies) else float('nan'),
+                'cpu_us_per_sample': cpu / total * 1e6}
+
+    def close(self):
+        self.spinning = False
+        self.thread.join(timeout=2)
+        self.executor.remove_node(self.node)
+        self.node.destroy_node()
+
+
+def _node_commands():
+    relay = [sys.executable, '-m', 'balance_calib.benchmarks.relay_node']
+    raw_relay = [sys.executable, '-m', 'balance_calib.benchmarks.live_throughput', '--node', 'raw-relay']
+    calibrator = ['balance_calibrator', '--ros-args', '-p', 'calibration_file:=lmc6522',
+                  '-p', 'diagnostics_period_s:=1.0', '-p', f'input_depth:={QOS_DEPTH}']
+    return [('harness ceiling', None), ('bare relay', relay), ('raw relay', raw_relay),
+            ('balance_calibrator', calibrator)]
+
+
+def raw_relay_main() -> None:
+    """bytes in, bytes out, the calibrator's executor (rclpy.spin: SingleThreadedExecutor)."""
+    import rclpy
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    rclpy.init()
+    node = rclpy.create_node('raw_relay')
+    qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+    publisher = node.create_publisher(WrenchStamped, '/balance/wrench', qos)
+    node.create_subscription(WrenchStamped, '/balance/raw', publisher.publish, qos, raw=True)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
     finally:
-        spinning.clear()
-        thread.join(timeout=2)
-        executor.remove_node(node)
-        node.destroy_subscription(subscription)
-    return results
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def _start(command, env):
+    return subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+
+
+def _stop(process):
+    os.killpg(process.pid, signal.SIGINT)
+    try:
+        process.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGKILL)
+
+
+def _machine_line() -> str:
+    load = os.getloadavg()
+    return (f'machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, '
+            f'{os.environ.get("RMW_IMPLEMENTATION", "default rmw")}; load average {load[0]:.1f} '
+            f'(shared machine: other work was running)')
+
+
+def throughput(rates, seconds) -> None:
+    import rclpy
+    env = dict(os.environ)
+    summary = {}
+    rclpy.init()
+    try:
+        for label, command in _node_commands():
+            print(f'{label}:', flush=True)
+            process = None if command is None else _start(command, env)
+            harness = Harness(rclpy.create_node(f'benchmark_{label.replace(" ", "_")}'),
+                              '/balance/raw' if command is None else '/balance/wrench')
+            try:
+                harness.wait_connected()
+                summary[label] = []
+                for rate in rates:
+                    result = harness.run(rate, seconds, None if process is None else process.pid)
+                    summary[label].append(result)
+                    print(f'  {rate:6.0f} Hz (sent at {result["achieved"]:6.0f}): {result["received"]}/'
+                          f'{result["sent"]} back, p50 {result["p50_ms"]:.3f} ms, p99 {result["p99_ms"]:.3f} ms, '
+                          f'CPU {result["cpu_us_per_sample"]:.1f} µs/sample', flush=True)
+                    if result['received'] < 0.5 * result['sent']:
+                        break                  # far beyond this node's rate: the next steps say nothing new
+            finally:
+                harness.close()
+                if process is not None:
+                    _stop(process)
+    finally:
+        rclpy.try_shutdown()
+
+    def best(results):
+        lossless = [r['rate'] for r in results if r['received'] == r['sent'] and r['achieved'] >= 0.95 * r['rate']]
+        return max(lossless) if lossless else 0.0
+
+    def at_1k(results):
+        return next((r for r in results if r['rate'] == 1000.0), None)
+
+    print('\n' + _machine_line())
+    print(f'{"":20s} {"zero-loss Hz":>12s} {"CPU µs/sample @1k":>18s} {"p50 ms @1k":>11s} {"p99 ms @1k":>11s}')
+    for label, results in summary.items():
+        one = at_1k(results) or {}
+        print(f'{label:20s} {best(results):12.0f} {one.get("cpu_us_per_sample", float("nan")):18.1f} '
+              f'{one.get("p50_ms", float("nan")):11.3f} {one.get("p99_ms", float("nan")):11.3f}')
+    bare, raw, cal = (summary.get(k) for k in ('bare relay', 'raw relay', 'balance_calibrator'))
+    if bare and raw and cal:
+        ceiling = best(summary['harness ceiling'])
+        print(f'harness ceiling / bare relay rate: {ceiling / max(best(bare), 1):.1f} (should be >= 3)')
+        print(f'calibrator zero-loss rate: {best(cal) / max(best(bare), 1):.2f} x bare relay (target >= 2.0), '
+              f'{best(cal) / max(best(raw), 1):.2f} x raw relay (target >= 0.8)')
+        if at_1k(cal) and at_1k(bare) and at_1k(raw):
+            print(f'calibrator CPU per sample: {at_1k(cal)["cpu_us_per_sample"] / at_1k(bare)["cpu_us_per_sample"]:.2f}'
+                  f' x bare relay (target <= 0.5); added p99 over the raw relay: '
+                  f'{at_1k(cal)["p99_ms"] - at_1k(raw)["p99_ms"]:+.3f} ms (target <= 0.2)')
+
+
+def refit_latency(bag: str, seconds: float) -> None:
+    """Latency of the calibrator at 1 kHz, quiet and during ~/refit of `bag`."""
+    import tempfile
+
+    import rclpy
+    from std_srvs.srv import Trigger
+    rclpy.init()
+    workdir = tempfile.mkdtemp(prefix='refit_latency_')
+    from balance_calib.calibration_file import load_calibration, save_calibration
+    calibration_file = os.path.join(workdir, 'calibration.yaml')
+    save_calibration(calibration_file, load_calibration('lmc6522'))
+    command = ['balance_calibrator', '--ros-args', '-p', f'calibration_file:={calibration_file}',
+               '-p', f"calibration_bags:=['{bag}']", '-p', f'report_dir:={workdir}/reports']
+    process = _start(command, dict(os.environ))
+    harness = Harness(rclpy.create_node('benchmark_refit'), '/balance/wrench')
+    client = harness.node.create_client(Trigger, '/balance_calibrator/refit')
+    try:
+        harness.wait_connected()
+        quiet = harness.run(1000.0, seconds, process.pid)
+        with harness.lock:
+            harness.latencies_ns.clear()
+        future = client.call_async(Trigger.Request())
+        sent, start = 0, time.monotonic()
+        while not future.done() or sent < 1000:
+            delay = start + sent / 1000.0 - time.monotonic()
+            if delay > 0.0005:
+                time.sleep(delay)
+            harness.send()
+            sent += 1
+        refit_s = time.monotonic() - start
+        settle = time.monotonic() + 3.0
+        while time.monotonic() < settle and len(harness.latencies_ns) < sent:
+            time.sleep(0.02)
+        with harness.lock:
+            during = np.array(harness.latencies_ns, dtype=float) / 1e6
+    finally:
+        harness.close()
+        _stop(process)
+        rclpy.try_shutdown()
+    print(_machine_line())
+    print(f'quiet, 1 kHz {seconds:g} s: {quiet["received"]}/{quiet["sent"]} back, p50 {quiet["p50_ms"]:.3f} ms, '
+          f'p99 {quiet["p99_ms"]:.3f} ms')
+    print(f'during ~/refit ({refit_s:.1f} s, reply: {future.result().message[:100]}...): {len(during)}/{sent} back, '
+          f'p50 {np.percentile(during, 50):.3f} ms, p99 {np.percentile(during, 99):.3f} ms, max {during.max():.1f} ms')
+    print(f'p99 during / quiet: {np.percentile(during, 99) / quiet["p99_ms"]:.2f} (target <= 2)')
 
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--rates', default='500,1000,2000,3000,4000,5000,6000,7000,8000,10000')
-    parser.add_argument('--seconds', type=float, default=3.0)
+    parser.add_argument('--rates', default='1000,2000,4000,6000,8000,10000,12000,16000,20000')
+    parser.add_argument('--seconds', type=float, default=2.0)
     parser.add_argument('--domain', type=int, default=int(os.environ.get('ROS_DOMAIN_ID', '77')))
+    parser.add_argument('--refit', metavar='BAG', help='measure latency quiet and during ~/refit of BAG')
+    parser.add_argument('--node', choices=['raw-relay'], help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    rates = [float(r) for r in args.rates.split(',')]
-    env = dict(os.environ, ROS_DOMAIN_ID=str(args.domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    if args.node == 'raw-relay':
+        raw_relay_main()
+        return
     os.environ.update(ROS_DOMAIN_ID=str(args.domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-
-    import rclpy
-    from geometry_msgs.msg import WrenchStamped
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-
-    rclpy.init()
-    summary = {}
-    try:
-        for label, command in _node_commands(args.domain):
-            print(f'{label}:', flush=True)
-            process = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                                       start_new_session=True)
-            node = rclpy.create_node(f'benchmark_source_{label.replace(" ", "_")}')
-            publisher = node.create_publisher(WrenchStamped, '/balance/raw',
-                                              QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE))
-            try:
-                summary[label] = _measure(node, publisher, rates, args.seconds, WrenchStamped,
-                                          lambda s: print(s, flush=True))
-            finally:
-                node.destroy_node()
-                os.killpg(process.pid, signal.SIGINT)
-                try:
-                    process.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    os.killpg(process.pid, signal.SIGKILL)
-    finally:
-        rclpy.try_shutdown()
-
-    def best_rate(results, max_p50_ms=float('inf')):
-        lossless = [r['rate'] for r in results if r['received'] == r['sent'] and r['p50_ms'] <= max_p50_ms]
-        return max(lossless) if lossless else 0.0
-
-    def at(results, rate):
-        return next((r for r in results if r['rate'] == rate), None)
-
-    relay, calibrator = summary['bare relay'], summary['balance_calibrator']
-    print(f'\nmachine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, '
-          f'{os.environ.get("RMW_IMPLEMENTATION", "default rmw")}')
-    r_best, c_best = best_rate(relay), best_rate(calibrator)
-    print(f'highest rate with zero loss: relay {r_best:.0f} Hz, calibrator {c_best:.0f} Hz '
-          f'-> {c_best / r_best if r_best else float("nan"):.2f} x relay (target >= 0.9)')
-    # zero loss can hide a backlog that only drained after the run; also require it to keep up
-    r_kept, c_kept = best_rate(relay, 10.0), best_rate(calibrator, 10.0)
-    print(f'highest rate with zero loss and p50 latency under 10 ms (no growing backlog): relay {r_kept:.0f} Hz, '
-          f'calibrator {c_kept:.0f} Hz -> {c_kept / r_kept if r_kept else float("nan"):.2f} x relay')
-    r1k, c1k = at(relay, 1000.0), at(calibrator, 1000.0)
-    if r1k and c1k:
-        print(f'latency at 1 kHz: relay p50 {r1k["p50_ms"]:.3f} ms, p99 {r1k["p99_ms"]:.3f} ms; calibrator p50 '
-              f'{c1k["p50_ms"]:.3f} ms, p99 {c1k["p99_ms"]:.3f} ms (added by calibration: p50 '
-              f'{c1k["p50_ms"] - r1k["p50_ms"]:+.3f} ms, p99 {c1k["p99_ms"] - r1k["p99_ms"]:+.3f} ms)')
+    if args.refit:
+        refit_latency(args.refit, args.seconds)
+    else:
+        throughput([float(r) for r in args.rates.split(',')], args.seconds)
 
 
 if __name__ == '__main__':

@@ -27,6 +27,7 @@ model runs instead, and the result says why (`WrenchBatch.fallback_reason`).
 from __future__ import annotations
 
 import datetime as _dt
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -94,6 +95,20 @@ class ActiveCalibration:
         positions = np.array([COMPONENTS.index(c) for c in self.model.components])
         return columns[order], positions, plain, absolute if has_absolute else None, \
             np.array(self.model.coefficients)
+
+    @cached_property
+    def one_sample_terms(self) -> tuple[tuple[int, ...], ...] | None:
+        """Per term, the raw-output columns to multiply (with repetition), for one sample in plain
+        Python; None when a term has an absolute value or a power beyond 3 (then numpy's path)."""
+        columns, _, plain, absolute, _ = self.plan
+        if absolute is not None or plain.size == 0 or plain.max() > 3 or plain.min() < 0:
+            return None
+        return tuple(tuple(int(columns[v]) for v in range(plain.shape[1]) for _ in range(int(plain[t, v])))
+                     for t in range(plain.shape[0]))
+
+    @cached_property
+    def output_range_list(self) -> list[float]:
+        return self.output_range_mv.tolist()
 
     @property
     def capacity(self) -> np.ndarray:
@@ -248,6 +263,8 @@ def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tare_
     conditions when the zero was taken (for models with temperature or load-direction terms).
     """
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
+    if outputs.shape[0] == 1 and not active.model.extra_variables:
+        return _one_plain_sample(active, outputs, zero_mv, tare_load)
     with np.errstate(invalid='ignore', over='ignore'):
         finite = np.isfinite(outputs).all(axis=1)
         saturated = finite & (np.abs(outputs) > active.output_range_mv).any(axis=1)
@@ -274,6 +291,36 @@ def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tare_
     loads = totals if tare_load is None else totals - np.asarray(tare_load, dtype=float)
     wrench = active.installation.to_tunnel(loads)          # TM-663 §10.2
     return WrenchBatch(accepted, loads, wrench, outside, name, reason, totals, saturated)
+
+
+def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv, tare_load) -> WrenchBatch:
+    """compute_wrench for one sample of a model of the bridge outputs only: the live path at low rates,
+    where every sample comes alone (the same steps as the batch, with fewer numpy calls)."""
+    row = outputs[0]
+    values = row.tolist()
+    rejected = not all(map(math.isfinite, values))
+    saturated = not rejected and any(abs(v) > r for v, r in zip(values, active.output_range_list))
+    loads = np.full((1, 6), np.nan)
+    if not (rejected or saturated):
+        columns, positions, plain, absolute, coefficients = active.plan
+        terms = active.one_sample_terms
+        with np.errstate(invalid='ignore', over='ignore'):
+            loads[0] = 0.0
+            if terms is not None:        # TM-663 eqs. (1)-(18): products of at most three outputs
+                v = values if zero_mv is None else [a - b for a, b in zip(values, zero_mv.tolist())]
+                design = [math.prod([v[k] for k in term]) for term in terms]
+                loads[0, positions] = coefficients @ design
+            else:
+                zeroed = row if zero_mv is None else row - zero_mv
+                loads[0, positions] = coefficients @ power_products(zeroed[columns][None, :], plain, absolute)[0]
+            saturated = not all(map(math.isfinite, loads[0].tolist()))     # beyond float range
+        if saturated:
+            loads[:] = np.nan
+    accepted = not (rejected or saturated)
+    outside = accepted and bool((np.abs(loads[0]) > active.envelope).any())
+    tared = loads if tare_load is None or not accepted else loads - tare_load
+    return WrenchBatch(np.array([accepted]), tared, active.installation.to_tunnel(tared), np.array([outside]),
+                       active.model_name, '', loads, np.array([saturated]))
 
 
 def _loads_with_zero(active, zeroed, temperature_c, load_direction, zero_mv, zero_temperature_c, zero_direction):

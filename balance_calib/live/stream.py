@@ -54,6 +54,9 @@ class InputMonitor:
             self.period[kind] += count
 
     def update(self, stamps_ns: np.ndarray, frame_ids=None) -> None:
+        if len(stamps_ns) == 1:
+            self._update_one(int(stamps_ns[0]), frame_ids[0] if frame_ids else '')
+            return
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         if frame_ids is not None:
             foreign = [f for f in frame_ids if f and f.lower() != self.balance]
@@ -92,6 +95,32 @@ class InputMonitor:
             self.interval_ns = float(np.median(self._differences[:min(self._filled, 256)]))
             self._since_estimate = 0
 
+    def _update_one(self, stamp: int, frame_id: str) -> None:
+        """update() for one sample, in plain Python (the live path at low rates)."""
+        if frame_id and frame_id.lower() != self.balance:
+            self._add('samples from another balance', 1)
+            if len(self.foreign_frames) < 8:
+                self.foreign_frames.add(frame_id)
+        if stamp == 0:
+            self._add('zero stamps', 1)
+            return
+        if self.last_stamp_ns is None:
+            self.last_stamp_ns = stamp
+            return
+        difference = stamp - self.last_stamp_ns
+        if difference <= 0:
+            self._add('stamps out of order' if difference < 0 else 'duplicate stamps', 1)
+            return
+        if self.interval_ns is not None and difference > 1.5 * self.interval_ns:
+            self._add('samples lost (gaps in the stamps)', int(round(difference / self.interval_ns)) - 1)
+        self.last_stamp_ns = stamp
+        self._differences[self._filled % 256] = difference
+        self._filled += 1
+        self._since_estimate += 1
+        if self.interval_ns is None or self._since_estimate >= 64:
+            self.interval_ns = float(np.median(self._differences[:min(self._filled, 256)]))
+            self._since_estimate = 0
+
     def problems(self) -> tuple[tuple[str, int, int], ...]:
         return tuple((kind, self.total[kind], self.period[kind]) for kind in self.KINDS)
 
@@ -104,7 +133,7 @@ class OverloadMonitor:
     again once the samples have stayed inside for clear_s."""
 
     def __init__(self, capacity: np.ndarray, fraction: float, clear_s: float):
-        self.limit = np.asarray(capacity, dtype=float) * fraction
+        self.capacity = np.asarray(capacity, dtype=float)
         self.fraction = fraction
         self.clear_s = clear_s
         self.active = False
@@ -115,12 +144,13 @@ class OverloadMonitor:
 
     def update(self, loads_total: np.ndarray, saturated: np.ndarray, now_s: float) -> bool:
         """Feed a batch (loads of the accepted samples (N, 6), saturated flags); True if the state changed."""
-        over = np.abs(loads_total) > self.limit
-        exceeded = over.any(axis=0)
         if len(loads_total):
-            np.maximum(self.peak_fraction, np.max(np.abs(loads_total), axis=0) / (self.limit / self.fraction),
-                       out=self.peak_fraction)
-        if exceeded.any() or np.any(saturated):
+            ratio = np.abs(loads_total).max(axis=0) / self.capacity
+            np.maximum(self.peak_fraction, ratio, out=self.peak_fraction)
+            exceeded = ratio > self.fraction
+        else:
+            exceeded = np.zeros(6, bool)
+        if exceeded.any() or saturated.any():
             names = tuple(COMPONENTS[k] for k in np.flatnonzero(exceeded)) + (('saturated bridge',)
                                                                                if np.any(saturated) else ())
             changed = not self.active
@@ -204,14 +234,13 @@ class LiveCalibrator:
         """A new calibration (refit, parameters), between two samples; zero and tare stay."""
         self.active = active
         self.history = LoadHistory(active.capacity)
-        self.overload.limit = active.capacity * self.settings.overload_fraction
+        self.overload.capacity = active.capacity
         self.inputs.balance = active.calibration.balance.lower()
 
     def set_settings(self, settings: LiveSettings) -> None:
         if settings.lowpass_hz != self.settings.lowpass_hz:
             self.lowpass = LowPass(settings.lowpass_hz)
         self.overload.fraction, self.overload.clear_s = settings.overload_fraction, settings.overload_clear_s
-        self.overload.limit = self.active.capacity * settings.overload_fraction
         self.settings = settings
 
     # --- the stream -----------------------------------------------------------------------------
