@@ -10,6 +10,9 @@ ordinary `BalanceModel` whose extra variables carry these names:
     hysteresis     dir_X, dir_X*XV, dir_X*|XV|      dir_X = +1 rising / -1 falling load on X: a
                                                     constant loop, a slope loop, an offset loop
                                                     even in the output (the parities of a loop)
+                   turn_X, turn_X*|turn_X|          distance travelled since the last turning point
+                   play_XV_m                        (V - play_w(V)) / w, a bridge's own output
+                                                    through a backlash of width w (a grid)
     bidirectional  |FXV|, FXV*|FXV|, absload_X      sign-dependent terms keyed to the output
                                                     (AIAA R-091) and to the load: |L_X| / capacity
     cross_terms    FXV^2*FZV, FXV*FYV*FZV, ...       monomials up to degree 3 the base model lacks
@@ -77,14 +80,37 @@ def temperature_family(outputs: Sequence[str]) -> CandidateFamily:
 
 
 def hysteresis_family(components: Sequence[str], outputs: Sequence[str]) -> CandidateFamily:
+    """Loops keyed to a component's own load history (dir_X: constant, slope and even loops; turn_X:
+    growing away from the turning point, linearly or by Rayleigh's square) and to each bridge's own
+    output history (play_XV_m: the play operator of a Prandtl-Ishlinskii model, width PLAY_WIDTHS[m]
+    of rated output; a gauge's loop follows its strain, which on a coupled balance moves with other
+    components' loads too, and a small reversal makes a small loop). diagnose.py offers a component its own load-keyed terms
+    and every bridge's output-keyed ones."""
     return _single('hysteresis', [f'dir_{c}' for c in components]
                    + [f'dir_{c}*{v}' for c, v in zip(components, outputs)]
-                   + [f'dir_{c}*|{v}|' for c, v in zip(components, outputs)], 3)
+                   + [f'dir_{c}*|{v}|' for c, v in zip(components, outputs)]
+                   + [f'turn_{c}' for c in components] + [f'turn_{c}*|turn_{c}|' for c in components]
+                   + [f'play_{v}_{m}' for v in outputs for m in range(1, len(PLAY_WIDTHS) + 1)], 3)
 
 
 def bidirectional_family(outputs: Sequence[str], components: Sequence[str] = ()) -> CandidateFamily:
+    """Sign-dependent terms keyed to the bridge output (AIAA R-091) and to the load (absload_X)."""
     return _single('bidirectional', [f'|{v}|' for v in outputs] + [f'{v}*|{v}|' for v in outputs]
                    + [f'absload_{c}' for c in components], 3)
+
+
+def own_terms_only(family: CandidateFamily, component: str, output: str, components: Sequence[str]) -> tuple:
+    """The groups a component is offered: bidirectional only its own bridge's and load's (a
+    sensitivity that differs with the sign of that component's load); hysteresis its own load
+    history's and every bridge's output history's; other families all."""
+    if family.name == 'bidirectional':
+        own = {f'|{output}|', canonical(f'{output}*|{output}|'), f'absload_{component}'}
+        return tuple(g for g in family.groups if set(g) <= own)
+    if family.name == 'hysteresis':
+        others = {c for c in components if c != component}
+        return tuple(g for g in family.groups
+                     if not any(t.startswith((f'dir_{c}', f'turn_{c}')) for t in g for c in others))
+    return family.groups
 
 
 def creep_family(outputs: Sequence[str], time_constants_s: Sequence[float], max_groups: int = 2) -> CandidateFamily:
@@ -187,12 +213,58 @@ def without_base_terms(family: CandidateFamily, base_terms: Sequence[str]) -> Ca
     return CandidateFamily(family.name, groups, family.max_groups, family.labels)
 
 
-def direction_variables(loads, times_s, capacity, components, is_zero_point, orientation):
-    """dir_X variables referred to the zero points, and the raw ±1 directions (N, n)."""
-    raw = load_directions(loads, times_s, capacity)
-    referred = refer_to_zero_points(raw, times_s, is_zero_point, orientation)
-    return {f'dir_{c}': referred[:, k] for k, c in enumerate(components)}, raw
+def turning_distances(loads, times_s, direction, capacity) -> np.ndarray:
+    """(N, n) signed distance (fraction of capacity) the load travelled since its last turning point:
+    dir x |L - L at the last reversal|, in time order. A loop whose offset grows away from the turning
+    point (Preisach / Madelung) follows it; turn·|turn| is Rayleigh's law."""
+    loads = np.atleast_2d(np.asarray(loads, dtype=float))
+    order = np.argsort(np.asarray(times_s, dtype=float), kind='stable')
+    l, d = loads[order], np.asarray(direction, float)[order]
+    turn = np.empty_like(l)
+    at_turn = l[0].copy()
+    for i in range(len(l)):
+        if i > 0:
+            at_turn = np.where(d[i] != d[i - 1], l[i - 1], at_turn)
+        turn[i] = l[i] - at_turn
+    out = np.empty_like(turn)
+    out[order] = turn
+    return out / np.asarray(capacity, float)
 
+
+# Half-widths (fraction of rated output) of the play operators tried for output-keyed loops.
+PLAY_WIDTHS = (0.02, 0.1, 0.3)
+
+
+def play_lag(outputs, times_s, half_width) -> np.ndarray:
+    """(N, n) (V - play(V)) / w in time order: ±1 once the output moved 2w past its last turning
+    point, linear in between (one hysteron of a Prandtl-Ishlinskii model)."""
+    outputs = np.atleast_2d(np.asarray(outputs, dtype=float))
+    order = np.argsort(np.asarray(times_s, dtype=float), kind='stable')
+    v = outputs[order]
+    half = np.asarray(half_width, float)
+    lag = np.empty_like(v)
+    state = v[0].copy()
+    for i, value in enumerate(v):
+        state = np.minimum(np.maximum(state, value - half), value + half)
+        lag[i] = (value - state) / half
+    out = np.empty_like(lag)
+    out[order] = lag
+    return out
+
+
+def direction_variables(loads, times_s, capacity, components, is_zero_point, orientation, outputs=None,
+                        outputs_names=(), rated_outputs=None):
+    """dir_X, turn_X (and with outputs: play_XV_m) referred to the zero points, and the raw ±1 load
+    directions (N, n)."""
+    raw = load_directions(loads, times_s, capacity)
+    columns = [raw, turning_distances(loads, times_s, raw, capacity)]
+    names = [f'dir_{c}' for c in components] + [f'turn_{c}' for c in components]
+    if outputs is not None:
+        for m, width in enumerate(PLAY_WIDTHS, start=1):
+            columns.append(play_lag(outputs, times_s, width * np.asarray(rated_outputs, float)))
+            names += [f'play_{v}_{m}' for v in outputs_names]
+    referred = refer_to_zero_points(np.hstack(columns), times_s, is_zero_point, orientation)
+    return {name: referred[:, i] for i, name in enumerate(names)}, raw
 
 
 def absolute_load_variables(loads, capacity, components) -> dict[str, np.ndarray]:

@@ -37,7 +37,7 @@ from .candidates import (EFFECT_NAMES, NUISANCE_EFFECTS, CandidateFamily, absolu
                          bidirectional_family, creep_family, creep_time_constants, creep_variables,
                          cross_terms_family, direction_variables, drift_family, drift_frequencies,
                          drift_variables, excitation_basis, excitation_family, excitation_variables,
-                         without_base_terms, hysteresis_family, temperature_family)
+                         own_terms_only, without_base_terms, hysteresis_family, temperature_family)
 from .leftovers import Leftovers, examine_leftovers
 from .statistics import ComponentFit, ZeroPointWhitening, fit_columns, forward_select, partial_f, sigma_pct_fs
 from .tare_refit import refit_body
@@ -50,7 +50,7 @@ class DiagnosisSettings:
     max_rounds: int = 6
     max_terms: Mapping[str, int] = field(default_factory=lambda: {'cross_terms': 4, 'zero_drift': 8})
     alpha_lack_of_fit: float = 0.001     # per component: residual beyond the repeatability
-    min_explained: float = 0.6           # effects on a component with structure left over must
+    min_explained: float = 0.75          # effects on a component with structure left over must
                                          # explain this fraction of its excess variance, or none is adopted
     equal_score: float = 0.8             # a runner-up within this fraction of the winner's score that the
                                          # winner absorbs: "cannot be separated" (a warning)
@@ -167,8 +167,10 @@ class _Problem:
     the same fit whitened against the zero-point noise (statistics.ZeroPointWhitening).
     """
 
-    def __init__(self, outputs_names, corrected: CorrectedData, variables, whitening: ZeroPointWhitening):
+    def __init__(self, outputs_names, corrected: CorrectedData, variables, whitening: ZeroPointWhitening,
+                 components=()):
         self.outputs_names = tuple(outputs_names)
+        self.components = tuple(components)
         self.variables = variables
         self.whiten = whitening
         self.n_white = int(whitening.loaded.sum())
@@ -288,7 +290,9 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
         else:
             skipped['zero_drift'] = 'point times do not span a campaign'
     directions, raw_direction = direction_variables(corrected.loads, times, capacity, components,
-                                                    points.is_zero_point, points.orientation)
+                                                    points.is_zero_point, points.orientation,
+                                                    corrected.bridge_outputs_mv, outputs_names,
+                                                    config.rated_output_mv)
     if 'hysteresis' in wanted:
         variables.update(directions)
         families.append(hysteresis_family(components, outputs_names))
@@ -315,7 +319,7 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
     n_searches = len(families) + int(tare_available)
 
     whitening = ZeroPointWhitening.for_points(points.times_s, points.is_zero_point, points.orientation)
-    problem = _Problem(outputs_names, corrected, variables, whitening)
+    problem = _Problem(outputs_names, corrected, variables, whitening, components)
     comp_terms = [list(base_terms) for _ in components]
     fits = [problem.fit(k, comp_terms[k]) for k in range(len(components))]
     base_fits = list(fits)
@@ -444,7 +448,8 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
     n_components = len(fits)
     for k, fit in enumerate(fits):
         present = set(comp_terms[k])
-        groups = [g for g in family.groups if not set(g) & present]
+        offered = own_terms_only(family, problem.components[k], problem.outputs_names[k], problem.components)
+        groups = [g for g in offered if not set(g) & present]
         if not groups:
             continue
         names = [t for g in groups for t in g]

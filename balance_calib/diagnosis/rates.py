@@ -1,13 +1,18 @@
-"""Detection and false-discovery rates of the residual diagnosis on simulated campaigns.
+"""Detection and false-discovery rates of the residual diagnosis on simulated campaigns (issues 4, 11).
 
-    launchless_scripts/diagnosis_rates [--clean-seeds 20] [--seeds 10] [--sizes 0.5 1 2] [--jobs 2]
+    launchless_scripts/diagnosis_rates [--clean-seeds 50] [--seeds 10] [--sizes 1] [--jobs 2]
+                                       [--families ...] [--outside ...] [--zero-points-only]
 
 Every campaign is the Appendix A/B schedule of a balance on its cubic matrix (Table 12/16) with the
-cubic row of Table 17 as point noise, reduced as the refit pipeline does (zero points, tare, tare
-outputs from a first cubic fit). Clean campaigns have no effect: any effect found is a false
-discovery. Effect campaigns inject one effect on the F_X bridge, undeclared, with a size given in
-noise floors: the RMS (% FS) that the effect adds to the F_X residual of the cubic fit, noise-free,
-divided by Table 17's cubic σ_FX. Prints markdown tables (for the README) and the runtime.
+cubic row of Table 17 as point noise (8 samples a point), reduced as the refit pipeline does (zero
+points, tare, tare outputs from a first cubic fit). Clean campaigns have no effect: any effect named
+or anything `unexplained` is a false discovery. Effect campaigns inject one effect in one of the
+*alternative* shapes of simulation/effects.py (written from the physics, not from the candidate
+terms) on one component of a group (forces F_X, F_Y, F_Z or moments M_X, M_Y, M_Z; the seed picks
+the component and the shape), undeclared, with a size in noise floors: the RMS (% FS) the effect
+adds to that component's cubic-fit residual, noise-free, divided by Table 17's cubic σ of it. Two
+effects outside every family must come out as `unexplained` with nothing named. Prints markdown
+tables (for the README) and the runtime.
 """
 from __future__ import annotations
 
@@ -77,7 +82,7 @@ def shape_effects(shape: str, parameter: float, component: str = TARGET_COMPONEN
     if shape == 'temperature_lagged':
         return [sim_effects.TemperatureShapes(sensitivity_per_k=parameter * bridge, lag_s=2400.0)], True
     if shape == 'hysteresis_play':
-        return [sim_effects.PlayHysteresis(fraction_of_rated=parameter * bridge, width_fraction=0.3)], True
+        return [sim_effects.PlayHysteresis(fraction_of_rated=parameter * bridge, width_fraction=0.2)], True
     if shape == 'hysteresis_turning':
         return [sim_effects.TurningPointHysteresis(fraction_of_rated=parameter * bridge)], True
     if shape == 'bidirectional_load_sign':
@@ -199,31 +204,49 @@ def calibrated_parameter(balance: str, name: str, noise_floors: float, component
 @dataclass(frozen=True)
 class Outcome:
     balance: str
-    effect: str | None          # injected (None: clean)
+    family: str | None          # the family injected (None: clean or outside every family)
+    shape: str | None           # the simulated shape (None: clean)
+    group: str                  # 'forces', 'moments' or 'clean'
+    component: str              # where it was injected (size measured there)
     noise_floors: float
     seed: int
     found: tuple[str, ...]
-    first_components: tuple[str, ...]
-    sigma_before: float         # target component, in-sample
+    unexplained: tuple[str, ...]            # components with an unexplained entry
+    warnings: int
+    sigma_before: float         # target component, in-sample, % FS
     sigma_after: float
     crossval_before: float
     crossval_after: float
     seconds: float
 
+    @property
+    def right(self) -> bool:
+        """Right name first and no other name (a family), or nothing named and something unexplained
+        (outside every family), or nothing at all (clean)."""
+        if self.shape is None:
+            return not self.found and not self.unexplained
+        if self.family is None:
+            return not self.found and bool(self.unexplained)
+        return self.found == (self.family,)
 
-def run_one(balance: str, effect: str | None, noise_floors: float, seed: int) -> Outcome:
+
+def run_one(balance: str, shape: str | None, noise_floors: float, seed: int, component: str = TARGET_COMPONENT,
+            group: str = 'clean', scatter: bool = True) -> Outcome:
     config = load_balance_config(balance)
-    if effect is None:
+    if shape is None:
         effects, estimate = [], True
     else:
-        effects, estimate = injected_effects(effect, calibrated_parameter(balance, effect, noise_floors))
-    reduction = simulate_reduction(config, effects, seed=seed, estimate_body_weight=estimate)
+        effects, estimate = shape_effects(shape, calibrated_parameter(balance, shape, noise_floors, component),
+                                          component)
+    reduction, extra = simulate_reduction(config, effects, seed=seed, estimate_body_weight=estimate,
+                                          samples_per_point=8, with_scatter=True)
     start = time.perf_counter()
-    result: Diagnosis = diagnose(reduction, config)
+    result: Diagnosis = diagnose(reduction, config, **(extra if scatter else {}))
     seconds = time.perf_counter() - start
-    c = TARGET_COMPONENT
-    return Outcome(balance, effect, noise_floors, seed, result.effect_names,
-                   result.effects[0].components if result.effects else (),
+    c = component
+    return Outcome(balance, shape_family(shape) if shape else None, shape, group, c, noise_floors, seed,
+                   result.effect_names, tuple(x for u in result.unexplained for x in u.components),
+                   len(result.warnings),
                    result.sigma_pct_fs['before'][c], result.sigma_pct_fs['after'][c],
                    result.sigma_pct_fs_crossval['before'][c], result.sigma_pct_fs_crossval['after'][c], seconds)
 
@@ -232,102 +255,117 @@ def _run(args):
     return run_one(*args)
 
 
-# --- tables -----------------------------------------------------------------------------------
-def _grid(outcomes, effect, balances, sizes, cell) -> list[str]:
-    """One table row: cell(runs, effect) for every balance and size ('' where nothing ran)."""
-    cells = []
+def jobs_for(balances, families, outside, sizes, seeds, clean_seeds, scatter=True) -> list[tuple]:
+    """Clean campaigns, then per family / component group / balance / size `seeds` campaigns; seed s
+    puts the effect on the group's component s mod 3 in the family's shape s mod (number of shapes)."""
+    jobs = [(b, None, 0.0, 1000 + s, TARGET_COMPONENT, 'clean', scatter) for b in balances for s in range(clean_seeds)]
     for b in balances:
-        for s in sizes:
-            runs = [o for o in outcomes if o.balance == b and o.effect == effect and o.noise_floors == s]
-            cells.append(cell(runs, effect) if runs else '')
-    return cells
+        for name in list(families) + list(outside):
+            shapes = ALTERNATIVE_SHAPES.get(name, (name,))
+            groups = {'all': ('FX',)} if name == 'tare' else GROUPS
+            for group, members in groups.items():
+                for size in sizes:
+                    for s in range(seeds):
+                        jobs.append((b, shapes[s % len(shapes)], size, 2000 + s, members[s % len(members)], group,
+                                     scatter))
+    return jobs
 
 
-def markdown_tables(outcomes: list[Outcome], sizes, balances) -> str:
+# --- tables -----------------------------------------------------------------------------------
+def markdown_tables(outcomes: list[Outcome], floors: dict, sizes, balances) -> str:
     lines = []
     names = {b: load_balance_config(b).name for b in balances}
-    lines.append('False discoveries on clean campaigns (cubic truth, Table 17 cubic noise, no effect):\n')
-    lines.append('| balance | campaigns | with any effect found | false-discovery rate | effects found |')
+    lines.append('Clean campaigns (cubic truth, Table 17 cubic noise, no effect): campaigns with any effect '
+                 'named or anything `unexplained`:\n')
+    lines.append('| balance | campaigns | effect named | unexplained | warnings |')
     lines.append('|---|---|---|---|---|')
     for b in balances:
-        clean = [o for o in outcomes if o.balance == b and o.effect is None]
-        if not clean:
-            continue
-        hits = [o for o in clean if o.found]
-        what = ', '.join(sorted({n for o in hits for n in o.found})) or '-'
-        lines.append(f'| {names[b]} | {len(clean)} | {len(hits)} | {len(hits) / len(clean):.0%} | {what} |')
+        clean = [o for o in outcomes if o.balance == b and o.shape is None]
+        if clean:
+            named = sorted({n for o in clean for n in o.found})
+            lines.append(f'| {names[b]} | {len(clean)} | {sum(1 for o in clean if o.found)}'
+                         + (f' ({", ".join(named)})' if named else '') +
+                         f' | {sum(1 for o in clean if o.unexplained)} | {sum(1 for o in clean if o.warnings)} |')
     lines.append('')
-    lines.append('Detection: campaigns where the injected effect is named first (and found at all), '
-                 'effect on the F_X bridge, size in Table 17 noise floors of σ_FX; last column: campaigns '
-                 'where another effect was named too (all sizes and balances):\n')
-    header = ('| effect | ' + ' | '.join(f'{names[b]} {s:g}x' for b in balances for s in sizes)
-              + ' | also named |')
+    lines.append('Alternative shapes (simulation/effects.py, not the candidate terms), one effect per campaign on '
+                 'the group\'s components in turn, size in Table 17 noise floors of that component. Cell: '
+                 'campaigns with the right name first and no other name (outside effects: nothing named and '
+                 '`unexplained` non-empty) / campaigns; then σ after / clean floor, in-sample and '
+                 'cross-validated (median over the cell\'s campaigns; the clean floor is the median σ of that '
+                 'component on the clean campaigns):\n')
+    header = '| effect | shapes | ' + ' | '.join(f'{names[b]} {g} {s:g}x' for b in balances for g in GROUPS for s in sizes) + ' |'
     lines.append(header)
-    lines.append('|---' * (2 + len(balances) * len(sizes)) + '|')
-    def detection(runs, effect):
-        first = sum(1 for o in runs if o.found[:1] == (effect,))
-        return f'{first}/{len(runs)} ({sum(1 for o in runs if effect in o.found)})'
-
-    for effect in EFFECT_NAMES:
-        cells = _grid(outcomes, effect, balances, sizes, detection)
-        runs = [o for o in outcomes if o.effect == effect]
-        extra = [o for o in runs if set(o.found) - {effect}]
-        others = ', '.join(sorted({n for o in extra for n in o.found} - {effect}))
-        cells.append(f'{len(extra)}/{len(runs)}' + (f' ({others})' if others else ''))
-        lines.append(f'| {effect} | ' + ' | '.join(cells) + ' |')
-    lines.append('')
-    lines.append('σ_FX (% FS) before -> after, in-sample and cross-validated (PRESS), median over seeds:\n')
-    lines.append('| effect | ' + ' | '.join(f'{names[b]} {s:g}x' for b in balances for s in sizes) + ' |')
-    lines.append('|---' * (1 + len(balances) * len(sizes)) + '|')
-    def sigmas(runs, effect):
-        med = lambda attr: float(np.median([getattr(o, attr) for o in runs]))
-        return (f'{med("sigma_before"):.3f}→{med("sigma_after"):.3f} '
-                f'(CV {med("crossval_before"):.3f}→{med("crossval_after"):.3f})')
-
-    for effect in EFFECT_NAMES:
-        cells = _grid(outcomes, effect, balances, sizes, sigmas)
-        lines.append(f'| {effect} | ' + ' | '.join(cells) + ' |')
-    lines.append('')
-    lines.append('Injected parameters (F_X bridge):\n')
-    lines.append('| effect | parameter | ' + ' | '.join(f'{names[b]} {s:g}x' for b in balances for s in sizes) + ' |')
-    lines.append('|---' * (2 + len(balances) * len(sizes)) + '|')
-    meaning = {'temperature': 'sensitivity per K', 'zero_drift': 'amplitude, mV (900 s)',
-               'hysteresis': 'fraction of rated output', 'bidirectional': 'asymmetry b (V += b·abs(V))',
-               'cross_terms': 'FXV²·FZV coefficient, N/mV³', 'tare': 'excess body weight (declared body)'}
-    for effect in EFFECT_NAMES:
-        cells = [f'{calibrated_parameter(b, effect, s):.3g}' for b in balances for s in sizes]
-        lines.append(f'| {effect} | {meaning[effect]} | ' + ' | '.join(cells) + ' |')
+    lines.append('|---' * (2 + len(balances) * len(GROUPS) * len(sizes)) + '|')
+    keys = list(ALTERNATIVE_SHAPES) + list(OUTSIDE_SHAPES)
+    for name in keys:
+        runs_all = [o for o in outcomes if (o.shape in ALTERNATIVE_SHAPES.get(name, (name,)))]
+        if not runs_all:
+            continue
+        cells = []
+        for b in balances:
+            for g in GROUPS:
+                for size in sizes:
+                    runs = [o for o in runs_all if o.balance == b and o.noise_floors == size
+                            and (o.group == g or (o.group == 'all' and g == 'forces'))]
+                    if not runs:
+                        cells.append('')
+                        continue
+                    right = sum(o.right for o in runs)
+                    ratio = np.median([o.sigma_after / floors[(b, o.component, 'sigma')] for o in runs])
+                    ratio_cv = np.median([o.crossval_after / floors[(b, o.component, 'crossval')] for o in runs])
+                    wrong = sorted({n for o in runs for n in o.found} - ({shape_family(runs[0].shape)} - {None}))
+                    cells.append(f'{right}/{len(runs)}; {ratio:.2f}, CV {ratio_cv:.2f}'
+                                 + (f' (also: {", ".join(wrong)})' if wrong else ''))
+        shapes = ', '.join(ALTERNATIVE_SHAPES.get(name, (name,)))
+        lines.append(f'| {name} | {shapes} | ' + ' | '.join(cells) + ' |')
     return '\n'.join(lines)
+
+
+def floors_from_clean(balances, clean_seeds: int, scatter: bool = True) -> dict:
+    """(balance, component, 'sigma'|'crossval') -> median σ over clean campaigns (% FS)."""
+    floors = {}
+    for b in balances:
+        config = load_balance_config(b)
+        sig, cv = [], []
+        for s in range(clean_seeds):
+            reduction, extra = simulate_reduction(config, seed=1000 + s, samples_per_point=8, with_scatter=True)
+            result = diagnose(reduction, config, **(extra if scatter else {}))
+            sig.append([result.sigma_pct_fs['before'][c] for c in config.components])
+            cv.append([result.sigma_pct_fs_crossval['before'][c] for c in config.components])
+        for k, c in enumerate(config.components):
+            floors[(b, c, 'sigma')] = float(np.median(np.array(sig)[:, k]))
+            floors[(b, c, 'crossval')] = float(np.median(np.array(cv)[:, k]))
+    return floors
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--balances', nargs='+', default=list(BALANCES))
-    parser.add_argument('--clean-seeds', type=int, default=20)
-    parser.add_argument('--seeds', type=int, default=10, help='seeds per effect and size')
-    parser.add_argument('--sizes', type=float, nargs='+', default=[0.5, 1.0, 2.0])
-    parser.add_argument('--effects', nargs='+', default=list(EFFECT_NAMES))
+    parser.add_argument('--clean-seeds', type=int, default=50)
+    parser.add_argument('--seeds', type=int, default=10, help='seeds per family, component group, balance and size')
+    parser.add_argument('--sizes', type=float, nargs='+', default=[1.0])
+    parser.add_argument('--families', nargs='+', default=list(ALTERNATIVE_SHAPES))
+    parser.add_argument('--outside', nargs='*', default=list(OUTSIDE_SHAPES))
+    parser.add_argument('--zero-points-only', action='store_true',
+                        help='repeatability from the zero points alone (no per-point sample scatter)')
     parser.add_argument('--jobs', type=int, default=2)
     args = parser.parse_args(argv)
     start = time.perf_counter()
-    jobs = [(b, None, 0.0, 1000 + s) for b in args.balances for s in range(args.clean_seeds)]
-    jobs += [(b, e, size, 2000 + s) for b in args.balances for e in args.effects for size in args.sizes
-             for s in range(args.seeds)]
-    # calibrate sizes once here (cached per process; workers recompute cheaply otherwise)
-    for b in args.balances:
-        for e in args.effects:
-            for size in args.sizes:
-                calibrated_parameter(b, e, size)
+    scatter = not args.zero_points_only
+    jobs = jobs_for(args.balances, args.families, args.outside, args.sizes, args.seeds, args.clean_seeds, scatter)
+    for b, shape, size, _, component, _, _ in jobs:        # calibrate sizes once (cached)
+        if shape is not None:
+            calibrated_parameter(b, shape, size, component)
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as pool:
             outcomes = list(pool.map(_run, jobs, chunksize=4))
     else:
         outcomes = [_run(j) for j in jobs]
+    floors = floors_from_clean(args.balances, args.clean_seeds, scatter)
     elapsed = time.perf_counter() - start
-    print(markdown_tables(outcomes, args.sizes, args.balances))
-    diagnose_time = np.mean([o.seconds for o in outcomes])
+    print(markdown_tables(outcomes, floors, args.sizes, args.balances))
     print(f'\n{len(outcomes)} campaigns in {elapsed:.0f} s wall ({args.jobs} jobs); '
-          f'diagnose() {diagnose_time:.2f} s per campaign on average.')
+          f'diagnose() {np.mean([o.seconds for o in outcomes]):.2f} s per campaign on average.')
     return 0
 
 
