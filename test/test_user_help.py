@@ -14,7 +14,7 @@ from balance_calib.nodes import _help
 
 ROOT = Path(__file__).resolve().parent.parent
 SCRIPTS = ROOT / 'launchless_scripts'
-NODES = ['bridge_publisher', 'balance_calibrator', 'balance_recorder', 'thrust_analyzer']
+NODES = ['bridge_publisher', 'balance_calibrator', 'balance_recorder', 'thrust_analyzer', 'aero_coefficients']
 # scripts whose options another issue's engineer documents (diagnosis_rates: issue 11)
 OPTIONS_DOCUMENTED_ELSEWHERE = {'diagnosis_rates'}
 
