@@ -247,6 +247,7 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
     result.report['bag_integrity'] = {'salvaged': bool(salvage and bag.losses), 'lost': list(bag.losses),
                                       'messages_read': dict(bag.message_counts)}
     result.report['wall_time_s'] = round(time.monotonic() - started, 3)
+    say(f'writing calibration.yaml, report.json, report.md{" and plots" if plots else ""} into {out_dir}')
     out = write_outputs(result, out_dir, plots=plots)
     say(f'wrote {out}')
     return RefitResult(result.calibration, out_dir / 'calibration.yaml', result.report,
