@@ -95,3 +95,24 @@ def test_axes_option_names_balfit_symbols_for_the_live_node(tmp_path, capsys):
                                rtol=1e-12, atol=1e-9)
     assert main(['fit', str(tmp_path / 'balfit.csv'), '--out', str(tmp_path / 'bad'), '--axes', 'FX,FY']) != 0
     assert '--axes' in capsys.readouterr().err and not (tmp_path / 'bad').exists()
+
+
+def test_auto_choice_lower_crossvalidated_sigma_unless_nearly_equal_and_structured():
+    from types import SimpleNamespace
+
+    from balance_calib.tables.calibrate import _choose
+    rng = np.random.default_rng(9)
+    normal = rng.normal(0, 1, (2000, 2))
+    bimodal = np.sign(rng.normal(size=(2000, 2))) + rng.normal(0, 0.2, (2000, 2))   # two bumps: structure
+    bimodal /= bimodal.std(axis=0)
+    capacity = np.array([100.0, 100.0])
+
+    def fit(residuals, scale):
+        return SimpleNamespace(load_residuals=residuals * scale, press_load_residuals=residuals * scale)
+
+    close = {'direct': fit(bimodal, 1.00), 'iterative': fit(normal / normal.std(axis=0), 1.01)}
+    chosen, why = _choose(close, capacity, ('A', 'B'))
+    assert chosen == 'iterative' and 'fewer non-normal' in why and 'direct residuals non-normal on A' in why
+    apart = {'direct': fit(bimodal, 1.00), 'iterative': fit(normal / normal.std(axis=0), 1.10)}
+    chosen, why = _choose(apart, capacity, ('A', 'B'))
+    assert chosen == 'direct' and 'fewer non-normal' not in why

@@ -211,7 +211,7 @@ def read_table(path: str | Path, text: str | None = None) -> CalibrationTable:
                 disabled += 1          # a switched-off point (or a remark) inside the data block
                 continue
             text_lower = first.lstrip(';').strip().lower()
-            if 'data' in text_lower and 'natural zero' not in text_lower.split('data')[0]:
+            if 'data' in text_lower:        # before 'zero': "; data for analysis (... natural zero ...)"
                 block = 'data'
             elif 'capacit' in text_lower:
                 block = 'capacities'

@@ -91,18 +91,26 @@ def _choose(fits: Mapping[str, SeriesTareFit], capacity, symbols) -> tuple[str, 
     """Adopt the form with the lower mean cross-validated σ (% capacity); say why, with the residual structure."""
     cv = {m: np.sqrt(np.mean(f.press_load_residuals ** 2, axis=0)) / capacity * 100 for m, f in fits.items()}
     score = {m: float(np.mean(v)) for m, v in cv.items()}
-    chosen = min(score, key=score.get)
-    other = [m for m in fits if m != chosen][0]
-    better = [s for s, a, b in zip(symbols, cv[chosen], cv[other]) if a < b]
-    structure = []
+    structure, odd_count = [], {}
     for method, fit in fits.items():
         normal = _normality(fit.load_residuals, symbols)
         odd = [f'{s} (p={p:.2g})' for s, p in normal.items() if p < 1e-3]
+        odd_count[method] = len(odd)
         if odd:
             structure.append(f'{method} residuals non-normal on {", ".join(odd)}')
+    chosen = min(score, key=score.get)
+    other = [m for m in fits if m != chosen][0]
+    tie_break = ''
+    # within 2 % on σ the residual structure decides: a form that leaves non-normal (structured)
+    # residuals misses something the other captures
+    if score[other] <= 1.02 * score[chosen] and odd_count[chosen] > odd_count[other]:
+        chosen, other = other, chosen
+        tie_break = (f'; σ within 2 %, so the form with fewer non-normal residual components '
+                     f'({odd_count[chosen]} against {odd_count[other]}) is adopted')
+    better = [s for s, a, b in zip(symbols, cv[chosen], cv[other]) if a < b]
     why = (f'{chosen}: cross-validated σ {score[chosen]:.4f} % capacity (mean over loads) against '
            f'{score[other]:.4f} % for {other}, lower on {len(better)} of {len(symbols)} loads '
-           f'({", ".join(better) or "none"})')
+           f'({", ".join(better) or "none"}){tie_break}')
     if structure:
         why += '; ' + '; '.join(structure)
     return chosen, why
@@ -172,7 +180,6 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
                 f, val_outputs, validation.series)
 
     t95 = float(scipy.stats.t.ppf(0.975, fit.dof))
-    factor = table.load_factor
     report = _report(table, validation, fits, chosen, why, term_sets, validation_sigma, validation_u, t95, terms)
     point_rows = _point_rows(table, fit, t95, 'calibration', fit.load_residuals, fit.point_uncertainty)
     if validation is not None:
@@ -192,7 +199,6 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
          'series_tares_si': {str(s): [float(x) for x in row] for s, row in zip(fit.series_labels, fit.tares)},
          'series_tares_sigma_si': {str(s): [float(x) for x in row] for s, row in zip(fit.series_labels, fit.tare_sigma)},
          'points': table.points})
-    del factor
     return TableCalibration(table, validation, fits, chosen, calibration, report, point_rows)
 
 
