@@ -151,6 +151,12 @@ def report_markdown(report) -> str:
               f'k = 1 standard uncertainty from the coefficient covariance, the residual scatter and the series '
               f'tare; 95 % prediction interval = t({report["uncertainty"]["t_95"]}) × u. Every point in '
               f'`point_uncertainty.csv`.', '']
+    lines += ['## What the residuals still follow', '']
+    if report.get('unexplained'):
+        lines += [f'- {", ".join(u["components"])}: {u["evidence"]}' for u in report['unexplained']]
+    else:
+        lines.append(f'Nothing: residuals examined against {", ".join(report["diagnosis"]["examined"])}.')
+    lines += [''] + [f'- not examined, {name}: {why}' for name, why in report['diagnosis']['skipped'].items()] + ['']
     if report.get('warnings'):
         lines += ['## Warnings', ''] + [f'- {w}' for w in report['warnings']] + ['']
     if report.get('plots'):

@@ -295,6 +295,11 @@ def _report(table, validation, fits, chosen, why, term_sets, validation_sigma, v
         report['warnings'].append(f'loads {", ".join(loads)} / outputs {", ".join(table.bridge_symbols)} are not '
                                   f'TM-663 names: balance_calibrator cannot run this calibration; refit with '
                                   f'--axes FX,FY,FZ,MX,MY,MZ (in the table\'s column order) if that is what they are')
-    report['warnings'].append('diagnosis of effects (temperature, drift, hysteresis, body tare) not run: '
-                              'a table has no sample times, temperatures or gravity directions')
+    from .diagnose_table import residual_structure
+    structure = residual_structure(table, fit)
+    report['unexplained'] = structure['unexplained']
+    report['diagnosis'] = {'examined': structure['examined'], 'skipped': structure['skipped']}
+    report['warnings'].append('the refit\'s diagnosis of effects needs sample times, temperatures and gravity '
+                              'directions a table lacks: residuals examined against point order, load '
+                              'direction and extra channels only (report.json diagnosis.skipped)')
     return report
