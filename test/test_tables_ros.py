@@ -35,14 +35,14 @@ def test_table_fitted_direct_calibration_drives_the_calibrator(tmp_path):
         publisher = probe.node.create_publisher(WrenchStamped, '/balance/raw', RELIABLE)
         subscription = [s for s in probe.node.subscriptions if s.topic_name == '/balance/wrench'][0]
         wait_for(lambda: publisher.get_subscription_count() >= 1 and subscription.get_publisher_count() >= 1,
-                 30.0, 'the calibrator to connect')
+                 60.0, 'the calibrator to connect')
         for i, values in enumerate(samples):
             msg = WrenchStamped()
             msg.header.stamp.sec, msg.header.stamp.nanosec = 100, i * 1000
             (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
              msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = (float(v) for v in values)
             publisher.publish(msg)
-        wait_for(lambda: len(wrenches) >= len(samples), 20.0, f'{len(samples)} wrenches')
+        wait_for(lambda: len(wrenches) >= len(samples), 60.0, f'{len(samples)} wrenches')
         received = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
                               m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z]
                              for m in sorted(wrenches, key=lambda m: m.header.stamp.nanosec)])
