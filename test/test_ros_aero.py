@@ -9,6 +9,7 @@ import csv
 import numpy as np
 import pytest
 from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from sensor_msgs.msg import FluidPressure
 
 from balance_calib.cli import main as cli_main
 from balance_calib.launchless.aero_story import aero_executable
@@ -33,7 +34,9 @@ def test_live_and_offline_reduction_agree_and_match_the_truth(tmp_path, installa
     attitudes = probe.subscribe(Vector3Stamped, '/aero/point_attitude')
     per_sample = probe.subscribe(WrenchStamped, '/aero/coefficients')
     truth = probe.subscribe(WrenchStamped, '/aero/truth')
-    probe.subscribe(WrenchStamped, '/balance/raw')
+    probe.subscribe(WrenchStamped, '/balance/raw')        # the publisher waits for 3 subscribers on each:
+    probe.subscribe(Vector3Stamped, '/model/attitude')    # calibrator or aero_coefficients, recorder, probe
+    probe.subscribe(FluidPressure, '/tunnel/dynamic_pressure')
     bag = tmp_path / 'run'
     # the calibrator as it is, without a tare: a tare file of its own that does not exist yet
     nodes = [NodeProcess('balance_calibrator', probe.domain_id, tmp_path, {

@@ -87,7 +87,8 @@ PARAMETERS = {                       # name: default (the type of the default is
     'temperature_rate_hz': 10.0,
     'loop': False,
     'exit_when_done': False,
-    'wait_for_subscribers': 0,       # start only when /balance/raw has this many subscribers ...
+    'wait_for_subscribers': 0,       # start only when /balance/raw has this many subscribers (with aero_model
+                                     # /model/attitude and /tunnel/dynamic_pressure too) ...
     'start_delay_s': 0.5,            # ... and this long after, so their other topics are matched too
 }
 RAW_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -303,9 +304,12 @@ class BridgePublisher(Node):
         if self._start is None:
             wanted = int(self._settings['wait_for_subscribers'])
             raw = self._outputs.get(tl.RAW) or self._outputs.get('/balance/raw')
-            if wanted > 0 and raw is not None and raw.get_subscription_count() < wanted:
+            # the physical wind-on run's attitude and q∞ are as necessary as the raw samples
+            gated = [raw] + [self._outputs[k] for k in (ATTITUDE, DYNAMIC_PRESSURE) if k in self._outputs]
+            if wanted > 0 and raw is not None and min(p.get_subscription_count() for p in gated) < wanted:
                 if not self._waiting_logged:
-                    self.get_logger().info(f'waiting for {wanted} subscriber(s) on /balance/raw')
+                    self.get_logger().info(f'waiting for {wanted} subscriber(s) on /balance/raw'
+                                           + (' and the attitude and dynamic pressure' if len(gated) > 1 else ''))
                     self._waiting_logged = True
                 return
             self._ready_at = self._ready_at or now
