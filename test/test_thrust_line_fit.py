@@ -123,3 +123,95 @@ def test_value_and_error_share_their_last_digit(value, error, text):
 def test_rounding_needs_a_positive_error():
     with pytest.raises(ValueError):
         round_result(1.0, 0.0)
+
+
+# --- the residual of a one-axis calibration examined (issue 11) --------------------------------
+# A load cell read on loading and unloading, twice (0, 10, ..., 100 N up, down, up, down: 41 points).
+# Its effects are written from the physics, not from the candidate columns: a hysteresis loop
+# widest at mid-range, h sin(pi y / FS) with the sign of the direction of travel (the candidates
+# have dir, dir*x, dir*x^2 and the travel since the turning point, no sine), and a quadratic
+# nonlinearity of the reading. Noise: 0.02 % FS per reading, so a correct fit's residual σ is
+# 0.02 % FS x sqrt((n - p) / n) <= 0.02 % FS, the clean floor.
+FS_N, SENSITIVITY, NOISE_PCT_FS = 100.0, 0.02, 0.02
+
+
+def _load_cell(seed, hysteresis=0.0, quadratic=0.0, pickup=0.0):
+    rng = np.random.default_rng(seed)
+    up = np.linspace(0.0, FS_N, 11)
+    loads = np.concatenate([up, up[::-1][1:], up[1:], up[::-1][1:]])
+    direction = np.ones(len(loads))
+    for i in range(1, len(loads)):
+        direction[i] = np.sign(loads[i] - loads[i - 1]) if loads[i] != loads[i - 1] else direction[i - 1]
+    full = SENSITIVITY * FS_N
+    readings = (SENSITIVITY * loads + hysteresis * full * direction * np.sin(np.pi * loads / FS_N)
+                + quadratic * full * (loads / FS_N) ** 2
+                + pickup * full * np.sin(2 * np.pi * np.arange(len(loads)) / 3.3)
+                + rng.normal(size=len(loads)) * NOISE_PCT_FS / 100 * full)
+    return readings, loads
+
+
+@pytest.mark.parametrize('case, kwargs, names', [
+    ('clean', {}, ()),
+    ('hysteresis', {'hysteresis': 0.003}, ('hysteresis',)),
+    ('quadratic', {'quadratic': 0.005}, ('nonlinearity',)),
+    ('both', {'hysteresis': 0.003, 'quadratic': 0.005}, ('hysteresis', 'nonlinearity')),
+])
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_a_load_unload_calibration_names_its_effects_and_returns_to_the_floor(case, kwargs, names, seed):
+    from balance_calib.thrust_stand.one_axis import examine_line
+    x, y = _load_cell(seed, **kwargs)
+    result = examine_line(x, y)                     # direction inferred from the order of y
+    assert sorted(result.effect_names) == sorted(names), [e.evidence for e in result.effects]
+    assert result.sigma_pct_fs['after'] <= 1.2 * NOISE_PCT_FS
+    assert result.sigma_pct_fs_crossval['after'] <= 1.3 * NOISE_PCT_FS
+    if names:
+        assert result.sigma_pct_fs['before'] > 1.5 * NOISE_PCT_FS      # the effect was really there
+    # the repeated points (same load, same direction) give the repeatability: about the noise
+    assert 0.5 * NOISE_PCT_FS < result.repeatability_pct_fs < 1.6 * NOISE_PCT_FS
+
+
+def test_structure_no_candidate_explains_is_unexplained_and_not_adopted():
+    """A pickup periodic in point order (3.3 points a cycle): no hysteresis, no curvature, no drift."""
+    from balance_calib.thrust_stand.one_axis import examine_line
+    x, y = _load_cell(5, pickup=0.002)
+    result = examine_line(x, y)
+    assert [e.name for e in result.effects][-1:] == ['unexplained']
+    unexplained = result.effects[-1]
+    assert 'lack of fit p = ' in unexplained.evidence and unexplained.terms == ()
+
+
+def test_few_points_carry_no_extra_terms_and_given_sigmas_are_the_yardstick():
+    """Six loading steps (the thrust stand's §4.2): at most n // 4 = 1 -> the line alone; with
+    σ_y given, a residual 10x beyond it is unexplained."""
+    from balance_calib.thrust_stand.one_axis import examine_line
+    x = np.arange(6.0)
+    y = 2.0 * x + 0.05 * (x - 2.5) ** 2
+    quiet = examine_line(x, y, np.ones(6), None, 0.5)
+    assert quiet.effect_names == () and quiet.terms == ('1', 'x')
+    loud = examine_line(x, y, np.ones(6), None, 0.005)
+    assert loud.effect_names == ('unexplained',)
+
+
+def test_line_fit_command_reports_the_examined_residual(tmp_path):
+    import json
+    import subprocess
+    import sys
+    x, y = _load_cell(1, hysteresis=0.003)
+    path = tmp_path / 'load_cell.csv'
+    direction = [1.0] + [float(np.sign(b - a)) if b != a else 1.0 for a, b in zip(y[:-1], y[1:])]
+    path.write_text('x,y,direction\n' + ''.join(f'{float(a)!r},{float(b)!r},{d:+.0f}\n' for a, b, d in zip(x, y, direction)))
+    done = subprocess.run([sys.executable, '-m', 'balance_calib.cli', 'line-fit', str(path)],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert result['a'] == pytest.approx(1 / SENSITIVITY, rel=0.01)
+    assert set(result['sigma_pct_fs']) == {'before', 'after'} and set(result['sigma_pct_fs_crossval']) == {'before', 'after'}
+    assert [e['name'] for e in result['effects']] == ['hysteresis']
+    effect = result['effects'][0]
+    assert set(effect) == {'name', 'components', 'evidence', 'terms', 'sigma_after_pct_fs'}
+    assert result['sigma_pct_fs']['after'] < result['sigma_pct_fs']['before'] / 5
+    bad = tmp_path / 'bad.csv'
+    bad.write_text('x,y,direction\n1,2,1\n2,3,0\n3,4,-1\n')
+    done = subprocess.run([sys.executable, '-m', 'balance_calib.cli', 'line-fit', str(bad)],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and 'column direction = 0' in done.stderr and done.stderr.count('\n') == 1

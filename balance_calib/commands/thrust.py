@@ -31,8 +31,11 @@ def register(subparsers) -> None:
 
     line = subparsers.add_parser(
         'line-fit', help='least-squares line y = a x + b with σ_a (manual eqs. 25-27) as JSON',
-        description='Fit y = a x + b to a CSV with columns x,y and optional sx,sy (per-point σ). '
-                    'Without sx, sy the σ come from the scatter about the line.')
+        description='Fit y = a x + b to a CSV with columns x,y and optional sx,sy (per-point σ) and direction '
+                    '(+1 loading, -1 unloading; default: from the order of y). Without sx, sy the σ come from '
+                    'the scatter about the line. The residual is then examined for hysteresis, nonlinearity and '
+                    'zero drift (adopted when the data support them, cross-validated) and for structure none of '
+                    'them explains (unexplained); sigma_pct_fs before/after, FS = the largest |y|.')
     line.add_argument('csv_file', metavar='FILE.csv',
                       help='points in the order they were taken: columns x,y; optional sx,sy and direction')
     line.set_defaults(func=run_line_fit)
@@ -86,7 +89,7 @@ def _read_points(path: Path) -> dict[str, list[float]]:
                 raise CommandError(f'{path}: missing column(s) {", ".join(missing)} '
                                    f'(header is {",".join(header) or "empty"}; need x,y and optionally sx,sy)')
             reader.fieldnames = header
-            wanted = [name for name in ('x', 'y', 'sx', 'sy') if name in header]
+            wanted = [name for name in ('x', 'y', 'sx', 'sy', 'direction') if name in header]
             columns: dict[str, list[float]] = {name: [] for name in wanted}
             for row in reader:
                 if all((value or '').strip() == '' for value in row.values()):
@@ -98,9 +101,11 @@ def _read_points(path: Path) -> dict[str, list[float]]:
                     except ValueError:
                         raise CommandError(f'{path}: line {reader.line_num}: column {name} is {text!r}, '
                                            'not a number') from None
-                    if not math.isfinite(value) or (name in ('sx', 'sy') and value < 0):
+                    if not math.isfinite(value) or (name in ('sx', 'sy') and value < 0) \
+                            or (name == 'direction' and value not in (-1.0, 1.0)):
                         raise CommandError(f'{path}: line {reader.line_num}: column {name} = {text} '
-                                           'is not allowed')
+                                           'is not allowed' + (' (+1 loading, -1 unloading)' if name == 'direction'
+                                                                else ''))
                     columns[name].append(value)
     except (OSError, UnicodeDecodeError, csv.Error) as error:
         raise CommandError(f'{path}: cannot read: {error}') from None
@@ -109,6 +114,7 @@ def _read_points(path: Path) -> dict[str, list[float]]:
 
 def run_line_fit(args) -> int:
     from balance_calib.thrust_stand.line_fit import fit_line
+    from balance_calib.thrust_stand.one_axis import examine_line
     from balance_calib.thrust_stand.significant import format_value_error
 
     path = Path(args.csv_file)
@@ -118,6 +124,8 @@ def run_line_fit(args) -> int:
         raise CommandError(f'{path}: {n} point(s); a line with an uncertainty needs at least {LINE_FIT_MIN_POINTS}')
     try:
         fit = fit_line(columns['x'], columns['y'], columns.get('sx'), columns.get('sy'))
+        examined = examine_line(columns['x'], columns['y'], columns.get('direction'), columns.get('sx'),
+                                columns.get('sy'))
     except ValueError as error:
         raise CommandError(f'{path}: {error}') from None
 
@@ -133,6 +141,8 @@ def run_line_fit(args) -> int:
         'sums': {'x': fit.sums.sum_x, 'y': fit.sums.sum_y, 'xy': fit.sums.sum_xy, 'xx': fit.sums.sum_xx},
         'formatted': formatted('a', fit.slope, fit.sigma_slope),
         'formatted_b': formatted('b', fit.intercept, fit.sigma_intercept),
+        # the residual examined (interfaces.md, "One-axis calibration with its residual examined")
+        **examined.to_report(),
     }
     json.dump(result, sys.stdout, indent=2)
     sys.stdout.write('\n')

@@ -253,11 +253,12 @@ def play_lag(outputs, times_s, half_width) -> np.ndarray:
 
 
 def direction_variables(loads, times_s, capacity, components, is_zero_point, orientation, outputs=None,
-                        outputs_names=(), rated_outputs=None):
+                        outputs_names=(), rated_outputs=None, fitted_loads=None):
     """dir_X, turn_X (and with outputs: play_XV_m) referred to the zero points, and the raw ±1 load
-    directions (N, n)."""
+    directions (N, n). turn_X is measured on fitted_loads (the base model's, from the outputs) when
+    given: a column built from the applied loads, the fit's target, would fit part of the target."""
     raw = load_directions(loads, times_s, capacity)
-    columns = [raw, turning_distances(loads, times_s, raw, capacity)]
+    columns = [raw, turning_distances(loads if fitted_loads is None else fitted_loads, times_s, raw, capacity)]
     names = [f'dir_{c}' for c in components] + [f'turn_{c}' for c in components]
     if outputs is not None:
         for m, width in enumerate(PLAY_WIDTHS, start=1):
@@ -268,7 +269,8 @@ def direction_variables(loads, times_s, capacity, components, is_zero_point, ori
 
 
 def absolute_load_variables(loads, capacity, components) -> dict[str, np.ndarray]:
-    """absload_X = |L_X| / capacity_X: keyed to the sign of the load, not of the bridge output."""
+    """absload_X = |L_X| / capacity_X: keyed to the sign of the load, not of the bridge output. Pass
+    the *fitted* loads (from the outputs): |applied load| equals the target wherever it is positive."""
     loads = np.asarray(loads, dtype=float)
     return {f'absload_{c}': np.abs(loads[:, k]) / capacity[k] for k, c in enumerate(components)}
 

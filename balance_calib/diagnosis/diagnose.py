@@ -289,15 +289,21 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
             families.append(drift_family(frequencies, settings.max_terms.get('zero_drift', 8)))
         else:
             skipped['zero_drift'] = 'point times do not span a campaign'
+    # loads as the base model fits them from the outputs: what a term keyed to the load may use (built
+    # from the applied loads themselves, the target, it would fit part of the target and not the effect)
+    base_design = design_matrix(parse_terms(base_terms), as_variables(outputs_names, corrected.bridge_outputs_mv),
+                                n_points)
+    fitted_loads = np.column_stack([base_design @ fit_columns(base_design, corrected.loads[:, k]).coefficients
+                                    for k in range(len(components))])
     directions, raw_direction = direction_variables(corrected.loads, times, capacity, components,
                                                     points.is_zero_point, points.orientation,
                                                     corrected.bridge_outputs_mv, outputs_names,
-                                                    config.rated_output_mv)
+                                                    config.rated_output_mv, fitted_loads)
     if 'hysteresis' in wanted:
         variables.update(directions)
         families.append(hysteresis_family(components, outputs_names))
     if 'bidirectional' in wanted:
-        variables.update(absolute_load_variables(corrected.loads, capacity, components))
+        variables.update(absolute_load_variables(fitted_loads, capacity, components))
         families.append(bidirectional_family(outputs_names, components))
     if 'creep' in wanted:
         taus = creep_time_constants(times)

@@ -23,6 +23,7 @@ from ..model.balance_model import BalanceModel
 from ..model.terms import parse_terms
 from ..units import STANDARD_GRAVITY_M_S2
 from .line_fit import LineFit, fit_line
+from .one_axis import OneAxisExamination, examine_line
 from .significant import format_value_error
 
 COMPONENT = 'FX'        # the stand measures thrust along its axis only
@@ -80,6 +81,7 @@ class ThrustStandCalibration:
     loads_n: np.ndarray                    # applied weights, y_i
     line: LineFit                          # the manual's closed forms, eqs. (25)-(27)
     fit: FitResult                         # the package's QR fit
+    examination: OneAxisExamination | None = None   # the line's residual examined (one_axis.py)
 
     @property
     def model(self) -> BalanceModel:
@@ -122,4 +124,7 @@ def calibrate(readings: CalibrationReadings, reading_sigma_mv: float, mass_sigma
         slope_n_per_mv=float(slope), intercept_n=float(intercept),
         sigma_slope_n_per_mv=line.sigma_slope, sigma_intercept_n=line.sigma_intercept,
         standard_error_slope_n_per_mv=float(fit.standard_errors[0, 1]),
-        readings_mv=x, loads_n=y, line=line, fit=fit)
+        readings_mv=x, loads_n=y, line=line, fit=fit,
+        # loading steps only (each corrected by its own residual zero): the examination can adopt
+        # terms only where the points carry them, and says when the line leaves more than σ_x, σ_y allow
+        examination=examine_line(x, y, np.ones(y.size), sigma_x, sigma_y))
