@@ -115,24 +115,32 @@ class TermEvaluator:
         self.columns = [[(v, np.flatnonzero(variable_of[k] == v)) for v in range(len(variables))
                          if (variable_of[k] == v).any()] for k in range(self.k)]
 
-    def _tables(self, values: np.ndarray, derivative: bool):
-        n = values.shape[0]
-        highest = max(self.max_plain, self.max_absolute)
-        px = np.empty((n, values.shape[1], highest + 1))
-        pa = np.empty_like(px)
-        px[:, :, 0] = pa[:, :, 0] = 1.0
-        magnitude = np.abs(values)
-        for k in range(1, highest + 1):
-            px[:, :, k] = px[:, :, k - 1] * values
-            pa[:, :, k] = pa[:, :, k - 1] * magnitude
+    @cached_property
+    def _flat(self):
+        """Flat column indices into the (N, n_vars x (h + 1)) power tables, h the highest power."""
+        h = max(self.max_plain, self.max_absolute) + 1
         var = np.maximum(self.factor_variable, 0)
         a, b = self.factor_plain, self.factor_absolute
-        table = px[:, var, a] * pa[:, var, b]
+        return (h, var * h + a, var * h + b, var * h + np.maximum(a - 1, 0), var * h + np.maximum(b - 1, 0),
+                var, a.astype(float), b.astype(float))
+
+    def _tables(self, values: np.ndarray, derivative: bool):
+        h, plain_at, abs_at, plain_down, abs_down, var, a, b = self._flat
+        n = values.shape[0]
+        px = np.empty((n, values.shape[1], h))                        # 1, x, x², ... per variable
+        pa = np.empty_like(px)                                         # 1, |x|, |x|², ...
+        px[:, :, 0] = pa[:, :, 0] = 1.0
+        magnitude = np.abs(values)
+        for k in range(1, h):
+            np.multiply(px[:, :, k - 1], values, out=px[:, :, k])
+            np.multiply(pa[:, :, k - 1], magnitude, out=pa[:, :, k])
+        px, pa = px.reshape(n, -1), pa.reshape(n, -1)
+        x_part, a_part = px[:, plain_at], pa[:, abs_at]
+        table = x_part * a_part
         table[:, 0] = 1.0
         if not derivative:
             return table, None
-        d_table = a * px[:, var, np.maximum(a - 1, 0)] * pa[:, var, b] \
-            + b * px[:, var, a] * pa[:, var, np.maximum(b - 1, 0)] * np.sign(values)[:, var]
+        d_table = a * px[:, plain_down] * a_part + b * x_part * pa[:, abs_down] * np.sign(values)[:, var]
         d_table[:, 0] = 0.0
         return table, d_table
 
@@ -261,26 +269,20 @@ class IterativeModel:
         # steps converge in a few design evaluations each.
         inverse = None
         converged = ~finite
+        coefficients_t = self.coefficients.T
+        outputs_used = np.where(finite[:, None], outputs, 0.0)
         for iteration in range(self.max_iterations):
             if iteration % 6 == 0:
                 predicted, jac = self.output_jacobian(loads)
-                with np.errstate(all='ignore'):
-                    try:
-                        inverse = np.linalg.inv(jac)
-                    except np.linalg.LinAlgError:
-                        inverse = np.linalg.pinv(jac)
+                try:
+                    inverse = np.linalg.inv(jac)
+                except np.linalg.LinAlgError:
+                    inverse = np.linalg.pinv(jac)
             else:
-                predicted = self.design(loads) @ self.coefficients.T
-            step = np.einsum('nmk,nk->nm', inverse, outputs - predicted)
-            step[~finite] = 0.0
+                predicted = self.evaluator.design(loads) @ coefficients_t
+            step = np.einsum('nmk,nk->nm', inverse, outputs_used - predicted)
             loads = loads + step
-            bad = ~np.all(np.isfinite(loads), axis=1)
-            if bad.any():
-                first = int(np.flatnonzero(bad)[0])
-                raise InverseDidNotConverge(
-                    f'model {self.name}: Newton iteration for the loads diverged at sample {first} (outputs '
-                    f'{np.round(outputs[first], 6).tolist()}): outside the calibrated range?')
-            converged = np.all(np.abs(step) <= scale, axis=1) | ~finite
+            converged = (np.abs(step) <= scale).all(axis=1)      # NaN steps never converge
             if converged.all():
                 break
         if not converged.all():
