@@ -116,3 +116,30 @@ def test_auto_choice_lower_crossvalidated_sigma_unless_nearly_equal_and_structur
     apart = {'direct': fit(bimodal, 1.00), 'iterative': fit(normal / normal.std(axis=0), 1.10)}
     chosen, why = _choose(apart, capacity, ('A', 'B'))
     assert chosen == 'direct' and 'fewer non-normal' not in why
+
+
+def test_a_campaign_split_over_two_files_fits_as_one_and_the_report_has_the_promised_keys(tmp_path, capsys):
+    from dataclasses import replace
+
+    from balance_calib.tables.balfit_reader import read_table
+    rng = np.random.default_rng(7)
+    _table(rng, tmp_path / 'whole.csv')
+    whole = read_table(tmp_path / 'whole.csv')
+    half = whole.points // 2
+    for name, part in (('a', slice(0, half)), ('b', slice(half, None))):
+        write_table(tmp_path / f'{name}.csv', replace(
+            whole, point_id=whole.point_id[part], series=whole.series[part], point_zero_set=whole.point_zero_set[part],
+            applied_loads=whole.applied_loads[part], outputs=whole.outputs[part]))
+    for name, files in (('one', ['whole.csv']), ('two', ['a.csv', 'b.csv'])):
+        assert main(['fit', *[str(tmp_path / f) for f in files], '--out', str(tmp_path / name), '--method', 'direct',
+                     '--no-plots']) == 0
+    one, two = (json.loads((tmp_path / n / 'report.json').read_text()) for n in ('one', 'two'))
+    assert one['series_tares'] == two['series_tares'] and one['sigma_pct_capacity'] == two['sigma_pct_capacity']
+    promised = {'balance', 'points', 'base_model', 'sigma_pct_fs', 'sigma_pct_fs_crossval', 'effects', 'adopted',
+                'unexplained', 'warnings', 'format', 'method', 'terms', 'load_symbols', 'load_units', 'capacities',
+                'sigma_pct_capacity', 'series_tares', 'series_tares_sigma', 'prediction_interval_95_pct_capacity',
+                'methods_compared'}
+    assert promised <= set(one) and one['format'] == 'balfit'
+    assert one['load_units'] == ['lbs'] * 3 + ['in-lbs'] * 3 and one['capacities']['FZ'] == 800.0
+    assert set(one['points']) == {'calibration', 'validation'}
+    assert (tmp_path / 'one' / 'report.md').read_text().startswith('# Calibration from tables')
