@@ -284,3 +284,41 @@ def test_fast_path_bytes_carry_exactly_the_pure_cores_wrench():
     np.testing.assert_allclose(wrench, core, rtol=1e-12, atol=1e-12)
     assert back[3].header.stamp.nanosec == 999_999_000 - 3 and back[0].header.frame_id == 'tunnel'
     assert len(encoded[0]) == len(serialize_message(back[0]))
+
+
+def calibration_with_covariance():
+    """The memo's cubic model with a coefficient covariance and residual σ from 300 synthetic points."""
+    from dataclasses import replace
+
+    from balance_calib.model.uncertainty import with_fitted_covariance
+    rng = np.random.default_rng(11)
+    outputs = rng.uniform(-1.0, 1.0, (300, 6)) * MEMO.rated_output_mv
+    residuals = rng.normal(0.0, 1e-4, (300, 6)) * CAPACITY
+    cubic = with_fitted_covariance(MEMO.model('cubic'), outputs, residuals)
+    return replace(MEMO, models={**MEMO.models, 'cubic': cubic})
+
+
+def test_published_uncertainty_is_the_calibrations_own_with_the_tare_scatter_added():
+    from balance_calib.model.uncertainty import load_standard_uncertainty
+    calibration = calibration_with_covariance()
+    active = activate(calibration, 'cubic', INVERTED)
+    live = LiveCalibrator(active)
+    rng = np.random.default_rng(12)
+    outputs = rng.uniform(-0.5, 0.5, (40, 6)) * MEMO.rated_output_mv
+    batch = live.process(outputs, np.arange(1, 41) * 10**6, now_s=0.0)
+    singles = np.vstack([live.process(row[None, :], np.array([10**9 + k * 10**6]), now_s=0.0).uncertainty
+                         for k, row in enumerate(outputs)])
+    direct = load_standard_uncertainty(active.model, outputs)                 # balance axes, FX..MZ
+    np.testing.assert_allclose(batch.uncertainty, np.abs(INVERTED.to_tunnel(direct)), rtol=1e-12)
+    np.testing.assert_allclose(singles, batch.uncertainty, rtol=1e-12)
+    assert np.all(batch.uncertainty > 0)
+    _, wind_off, _, _ = show_run(INVERTED)
+    assert take(live, 'tare', wind_off, 2 * 10**9).ok
+    sigma = live.tare.tare_sigma
+    np.testing.assert_allclose(sigma, np.std(compute_wrench(active, wind_off).loads_total, axis=0, ddof=1) / 10.0,
+                               rtol=1e-12)                                   # scatter / √100
+    after = live.process(outputs, 3 * 10**9 + np.arange(40) * 10**6, now_s=0.0).uncertainty
+    np.testing.assert_allclose(after, np.sqrt(batch.uncertainty ** 2 + np.abs(INVERTED.to_tunnel(sigma)) ** 2),
+                               rtol=1e-12)
+    assert LiveCalibrator(activate(MEMO, 'cubic', UPRIGHT)).process(outputs, np.arange(1, 41), now_s=0.0) \
+        .uncertainty is None                                                 # the memo's matrices: no covariance

@@ -283,3 +283,25 @@ def test_input_qos_is_set_through_rclpys_standard_qos_overrides(probe, tmp_path,
     assert node._raw_sub.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
     assert node._raw_sub.qos_profile.depth == 7
     assert node._wrench_pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE     # untouched: the default
+
+
+def test_wrench_uncertainty_is_published_beside_each_wrench(probe, tmp_path):
+    from test_live_stream import calibration_with_covariance
+
+    from balance_calib.live.stream import wrench_uncertainty
+    path = tmp_path / 'calibration.yaml'
+    save_calibration(path, calibration_with_covariance())
+    node = start_calibrator(probe, tmp_path, path, model='cubic')
+    wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
+    uncertainties = probe.subscribe(WrenchStamped, '/balance/wrench_uncertainty')
+    source = Stamped(probe)
+    connected(node, source)
+    wait_for(lambda: node._uncertainty_pub.get_subscription_count() >= 1, 10.0, 'the uncertainty topic')
+    outputs = np.array([[0.2, -0.1, 0.3, 0.05, -0.2, 0.1], [0.1, 0.2, -0.3, 0.0, 0.1, -0.1]])
+    for row in outputs:
+        source.send(row)
+    wait_for(lambda: len(uncertainties) == 2 and len(wrenches) == 2, 10.0, 'two wrenches and their uncertainties')
+    assert [m.header.stamp for m in uncertainties] == [m.header.stamp for m in wrenches]
+    expected = wrench_uncertainty(node._live.active, outputs, None)
+    np.testing.assert_allclose(wrench_values(uncertainties), expected, rtol=1e-12)
+    assert np.all(expected > 0) and np.all(expected < 0.01 * CAPACITY.max())

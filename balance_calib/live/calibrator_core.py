@@ -429,6 +429,7 @@ class TareResult:
     message: str
     zero_mv: np.ndarray | None = None      # for kind 'zero'
     tare_load: np.ndarray | None = None    # for kind 'tare': balance axes, N / N·m
+    tare_sigma: np.ndarray | None = None   # standard uncertainty of that mean (scatter / √n), balance axes
 
 
 def evaluate_window(window: TareWindow, active: ActiveCalibration, *, max_ratio: float, zero_mv=None,
@@ -466,7 +467,7 @@ def evaluate_window(window: TareWindow, active: ActiveCalibration, *, max_ratio:
                                 for b in active.calibration.bridge_outputs)
                       + ('' if zero_mv is not None else '; no electrical zero taken (~/zero with nothing on the '
                          'balance): the calibration sees outputs measured from the bridges\' own zero'),
-                      tare_load=tare_load)
+                      tare_load=tare_load, tare_sigma=np.std(batch.loads_total, axis=0, ddof=1) / np.sqrt(n))
 
 
 def describe_loads(loads_balance, active: ActiveCalibration) -> str:

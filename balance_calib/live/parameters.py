@@ -53,9 +53,10 @@ PARAMETERS: dict[str, Spec] = {
                               0.01, 10.0),
     'overload_clear_s': Spec(1.0, 'balance/overload returns to false after the loads stayed inside this long, s',
                              0.0, 3600.0),
+    'publish_uncertainty': Spec(True, 'publish balance/wrench_uncertainty (k = 1, N and N·m, tunnel axes) when the '
+                                      'calibration carries its coefficient covariance'),
     'lowpass_hz': Spec(0.0, 'first-order low-pass cut-off on the published wrench, Hz (0 = off); reset by '
                             '~/tare and ~/zero', 0.0, 100_000.0),
-    'publish_uncertainty': Spec(True, 'publish balance/wrench_uncertainty (when the calibration has the data)'),
 }
 
 MAX_CALIBRATION_BYTES = 16 << 20

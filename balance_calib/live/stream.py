@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..units import COMPONENTS
+from ..units import BRIDGE_OUTPUTS, COMPONENTS
 from .calibrator_core import (ActiveCalibration, InputCounters, LiveState, LoadHistory, StatusReport, TareResult,
                               TareWindow, WrenchBatch, compute_wrench, diagnostics, evaluate_window, six_axis_loads)
 from .tare_store import TareState, now_iso
@@ -25,6 +25,7 @@ class LiveSettings:
     overload_clear_s: float = 1.0
     lowpass_hz: float = 0.0             # 0 = off
     tare_max_ratio: float = 4.0         # steadiness: scatter and step limit, x the window's own noise
+    publish_uncertainty: bool = True
 
 
 class InputMonitor:
@@ -209,6 +210,25 @@ class Published:
     indices: np.ndarray
     wrench: np.ndarray
     batch: WrenchBatch
+    uncertainty: np.ndarray | None = None     # (M, 6) standard uncertainty, tunnel axes; None = not available
+
+
+def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, tare_sigma) -> np.ndarray | None:
+    """Standard uncertainty (k = 1) of each published load (M, 6), N / N·m, tunnel axes: the calibration's
+    coefficient covariance and residual σ (model/uncertainty.py) at these outputs, and the tare's own
+    scatter. None when the calibration has no covariance (the memo's matrices) or the model needs inputs
+    besides the bridge outputs."""
+    from ..model.uncertainty import has_uncertainty, load_standard_uncertainty
+    model = active.model
+    if model.extra_variables or not has_uncertainty(model):
+        return None
+    columns = [BRIDGE_OUTPUTS.index(v) for v in model.inputs]
+    per_component = load_standard_uncertainty(model, zeroed_outputs[:, columns], tare_sigma=None if tare_sigma is None
+                                              else np.asarray(tare_sigma)[[COMPONENTS.index(c)
+                                                                           for c in model.components]])
+    six = np.zeros((len(zeroed_outputs), 6))
+    six[:, [COMPONENTS.index(c) for c in model.components]] = per_component
+    return np.abs(active.installation.to_tunnel(six))       # a signed permutation: magnitudes carry over
 
 
 @dataclass
@@ -272,7 +292,12 @@ class LiveCalibrator:
         if self.lowpass.cutoff_hz > 0:
             interval = None if self.inputs.interval_ns is None else self.inputs.interval_ns * 1e-9
             wrench = self.lowpass.apply(wrench, interval)
-        return Published(indices, wrench, batch)
+        uncertainty = None
+        if self.settings.publish_uncertainty and len(indices):
+            accepted_outputs = outputs if all_accepted else outputs[indices]
+            zeroed = accepted_outputs if tare.zero_mv is None else accepted_outputs - tare.zero_mv
+            uncertainty = wrench_uncertainty(active, zeroed, tare.tare_sigma)
+        return Published(indices, wrench, batch, uncertainty)
 
     # --- ~/tare, ~/zero, ~/clear_tare ------------------------------------------------------------
     def start_window(self, kind: str, samples: int) -> TareWindow:
@@ -296,7 +321,8 @@ class LiveCalibrator:
                                   now_iso())
             result = replace(result, message=result.message + cleared)
         else:
-            self.tare = replace(tare, tare_load=result.tare_load, tare_taken_at=now_iso())
+            self.tare = replace(tare, tare_load=result.tare_load, tare_taken_at=now_iso(),
+                                tare_sigma=result.tare_sigma)
         self.lowpass.reset()
         return result
 
@@ -306,7 +332,7 @@ class LiveCalibrator:
 
     def clear_tare(self) -> str:
         had = self.tare.tare_load
-        self.tare = replace(self.tare, tare_load=None, tare_taken_at='')
+        self.tare = replace(self.tare, tare_load=None, tare_taken_at='', tare_sigma=None)
         self.lowpass.reset()
         if had is None:
             return 'clear_tare: there was no tare load; the electrical zero stays'
@@ -315,6 +341,16 @@ class LiveCalibrator:
             ' in tunnel axes); the electrical zero stays'
 
     # --- /diagnostics ---------------------------------------------------------------------------
+    def _uncertainty_state(self) -> str:
+        from ..model.uncertainty import has_uncertainty
+        if not self.settings.publish_uncertainty:
+            return 'off (publish_uncertainty false)'
+        if self.active.model.extra_variables:
+            return 'not available: the model needs inputs besides the bridge outputs'
+        if not has_uncertainty(self.active.model):
+            return 'not available: the calibration carries no coefficient covariance (e.g. the memo matrices)'
+        return 'published'
+
     def report(self, *, period_s: float, last_sample_age_s: float | None, temperature_age_s: float | None,
                refit_running: bool, tare_source: str, node_name: str) -> list[StatusReport]:
         interval = self.inputs.interval_ns
@@ -324,6 +360,7 @@ class LiveCalibrator:
             fallback_reason=self.fallback_reason, tare_zero_mv=self.tare.zero_mv, refit_running=refit_running,
             tare_load=self.tare.tare_load, tare_source=tare_source, input_problems=self.inputs.problems(),
             input_values=(('nominal_interval_ms', 'unknown' if interval is None else f'{interval * 1e-6:.4g}'),
+                          ('wrench_uncertainty', self._uncertainty_state()),
                           ('frame_ids_seen_from_other_balances', ', '.join(sorted(self.inputs.foreign_frames))
                            or 'none')),
             overload=self.overload.components if self.overload.active else None,

@@ -31,6 +31,7 @@ class TareState:
     zero_taken_at: str = ''
     tare_load: np.ndarray | None = None           # (6,) FX..MZ, balance axes, N / N·m
     tare_taken_at: str = ''
+    tare_sigma: np.ndarray | None = None          # (6,) standard uncertainty of the tare load, N / N·m
 
     def to_dict(self) -> dict:
         def plain(values, names):
@@ -38,7 +39,8 @@ class TareState:
         return {'format': FORMAT, 'balance': self.balance,
                 'zero_mv': plain(self.zero_mv, BRIDGE_OUTPUTS), 'zero_temperature_c': self.zero_temperature_c,
                 'zero_direction': plain(self.zero_direction, COMPONENTS), 'zero_taken_at': self.zero_taken_at,
-                'tare_load_balance_axes': plain(self.tare_load, COMPONENTS), 'tare_taken_at': self.tare_taken_at}
+                'tare_load_balance_axes': plain(self.tare_load, COMPONENTS), 'tare_taken_at': self.tare_taken_at,
+                'tare_sigma_balance_axes': plain(self.tare_sigma, COMPONENTS)}
 
 
 def now_iso() -> str:
@@ -94,4 +96,5 @@ def load_tare(path: Path, balance: str) -> TareState | None:
     temperature = data.get('zero_temperature_c')
     return TareState(balance, vector('zero_mv', BRIDGE_OUTPUTS), None if temperature is None else float(temperature),
                      vector('zero_direction', COMPONENTS), str(data.get('zero_taken_at') or ''),
-                     vector('tare_load_balance_axes', COMPONENTS), str(data.get('tare_taken_at') or ''))
+                     vector('tare_load_balance_axes', COMPONENTS), str(data.get('tare_taken_at') or ''),
+                     vector('tare_sigma_balance_axes', COMPONENTS))

@@ -123,6 +123,8 @@ class BalanceCalibrator(Node):
         overrides = QoSOverridingOptions.with_default_policies()
         self._wrench_pub = self.create_publisher(WrenchStamped, 'balance/wrench', WRENCH_QOS,
                                                  qos_overriding_options=overrides)
+        self._uncertainty_pub = self.create_publisher(WrenchStamped, 'balance/wrench_uncertainty', WRENCH_QOS,
+                                                      qos_overriding_options=overrides)
         self._overload_pub = self.create_publisher(Bool, 'balance/overload', OVERLOAD_QOS)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._raw_sub = self.create_subscription(WrenchStamped, 'balance/raw', self._on_raw, qos, raw=True,
@@ -154,7 +156,7 @@ class BalanceCalibrator(Node):
         value = (lambda n: (changes or {}).get(n, self._param(n)))
         return LiveSettings(float(value('stale_after_s')), float(value('overload_fraction')),
                             float(value('overload_clear_s')), float(value('lowpass_hz')),
-                            float(value('tare_max_scatter')))
+                            float(value('tare_max_scatter')), bool(value('publish_uncertainty')))
 
     def _activate(self, path: str, changes: dict) -> ActiveCalibration:
         """The calibration `path` with the (changed) parameters; ConfigError/ValueError with a reason."""
@@ -251,9 +253,14 @@ class BalanceCalibrator(Node):
         if self._window_done is not None and self._live.window is not None and self._live.window.complete \
                 and not self._window_done.done():
             self._window_done.set_result(True)
+        stamps = stamps_ns[published.indices]
         publish = self._wrench_pub.publish
-        for data in self._encoder.encode(stamps_ns[published.indices], published.wrench):
+        for data in self._encoder.encode(stamps, published.wrench):
             publish(data)
+        if published.uncertainty is not None:
+            publish = self._uncertainty_pub.publish
+            for data in self._encoder.encode(stamps, published.uncertainty):
+                publish(data)
 
     def _after_batch(self, fallback_reason: str) -> None:
         live = self._live
