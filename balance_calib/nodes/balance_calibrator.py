@@ -1,5 +1,14 @@
 """balance_calibrator: balance/raw (mV) -> balance/wrench (N, N·m, tunnel axes) with the active calibration.
 
+Topics (relative: `--ros-args -r __ns:=/left` runs a second balance beside the first): in balance/raw,
+balance/temperature; out balance/wrench, balance/wrench_uncertainty (when the calibration carries
+its covariance), balance/overload (std_msgs/Bool, transient local), /diagnostics. Services
+(std_srvs/Trigger): ~/zero (electrical zero, output space: only with nothing on the balance),
+~/tare (tare load, e.g. the model's weight wind-off: load space, the calibration on the full outputs),
+~/clear_tare, ~/refit. ~/zero and ~/tare refuse a window that is not steady and say why; both are
+kept in <calibration>.tare.yaml beside the calibration file and restored at start-up. QoS through
+the standard overrides, e.g. -p qos_overrides./balance/raw.subscription.reliability:=best_effort.
+
 The math is live/calibrator_core.py, the state between samples live/stream.py, the parameters
 live/parameters.py, the refit's process live/refit_process.py; this node translates.
 
