@@ -47,3 +47,28 @@ def test_newton_inverse_recovers_loads_and_names_the_sample_it_cannot_invert():
     with pytest.raises(InverseDidNotConverge, match=r'sample 2 \(outputs \[0\.9\]\)'):
         folding.loads(outputs)
     np.testing.assert_allclose(folding.outputs(folding.loads(outputs[:2])), outputs[:2], atol=1e-12)
+
+
+def test_select_drops_the_terms_the_truth_lacks_and_validates_no_worse():
+    from dataclasses import replace
+
+    from balance_calib.tables.calibrate import calibrate_table
+    rng = np.random.default_rng(3)
+    truth = sy.iterative_truth(rng)
+    absent = rng.random(len(truth.terms)) < 0.5
+    absent[[j for j, t in enumerate(truth.terms) if t.degree == 1 and not t.factors[0].absolute]] = False
+    coefficients = np.array(truth.coefficients)
+    coefficients[:, absent] = 0.0
+    truth = replace(truth, coefficients=coefficients)
+    calibration, validation = sy.support_schedule(rng, 21, 100), sy.support_schedule(rng, 15, 200)
+    tares = sy.tares_for(rng, np.unique(calibration.series))
+    tables = [sy.make_table(*sy.iterative_campaign(rng, truth, s, tares, 0.0006), s.series)
+              for s in (calibration, validation)]
+    full, selected = (calibrate_table(tables[0], method='iterative', validation=tables[1], select=select,
+                                      statistics=False).report for select in (False, True))
+    removed = set(selected['term_selection']['iterative']['removed'])
+    lacking = {truth.terms[j].name for j in np.flatnonzero(absent)}
+    assert len(removed) >= 0.8 * len(lacking) and len(removed - lacking) <= 2
+    assert len(selected['terms']) == len(truth.terms) - len(removed)
+    for load in sy.LOADS:
+        assert selected['sigma_pct_capacity']['validation'][load] <= 1.01 * full['sigma_pct_capacity']['validation'][load]

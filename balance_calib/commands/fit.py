@@ -30,6 +30,8 @@ def register(subparsers) -> None:
                         help='name the loads (in column order) as these TM-663 components, and the bridge '
                              'outputs FXV..MZV likewise, so balance_calibrator can run the calibration '
                              '(e.g. a table whose loads are FX..MZ under other symbols)')
+    parser.add_argument('--select', action='store_true',
+                        help='drop terms by backward elimination (insignificant everywhere and lowering PRESS)')
     parser.add_argument('--no-plots', action='store_true', help='skip the residual figures')
     parser.set_defaults(func=run)
 
@@ -57,7 +59,7 @@ def run(args) -> int:
             table = rename_axes(table, args.axes)
             validation = rename_axes(validation, args.axes) if validation is not None else None
         result = calibrate_table(table, method=args.method, terms=args.terms, validation=validation,
-                                 excitation_v=args.excitation_v)
+                                 excitation_v=args.excitation_v, select=args.select)
     except (TableError, TableCalibrationError) as err:
         raise CommandError(str(err)) from None
     out = write_fit_outputs(result, Path(args.out), plots=not args.no_plots)
@@ -146,6 +148,9 @@ def report_markdown(report) -> str:
         lines += [f'- {method}: {len(rows_)} terms; {len(high_vif)} with VIF > 10; '
                   f'{len(weak)} insignificant everywhere (p ≥ 0.01) whose removal lowers PRESS: '
                   f'{", ".join(weak[:20]) or "none"}{" ..." if len(weak) > 20 else ""}']
+    for method, selection in report.get('term_selection', {}).items():
+        lines += [f'- {method}, --select: kept {selection["kept"]} terms, removed {len(selection["removed"])}: '
+                  f'{", ".join(selection["removed"][:30]) or "none"}{" ..." if len(selection["removed"]) > 30 else ""}']
     lines += ['', 'Per term and load in report.json (`term_statistics`): VIF, p-value of the coefficient, '
               'PRESS without the term / PRESS with it.', '', '## Uncertainty of each point', '',
               f'k = 1 standard uncertainty from the coefficient covariance, the residual scatter and the series '

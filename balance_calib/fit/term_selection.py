@@ -76,3 +76,42 @@ def term_statistics(design: np.ndarray, targets: np.ndarray, coefficients: np.nd
         press_without[j] = ((e_without / (1 - h_without)[:, None]) ** 2).sum(axis=0)
     return TermStatistics(tuple(term_names), tuple(target_names), vif, t_value, p_value,
                           press_without / np.maximum(press_full, 1e-300))
+
+
+@dataclass(frozen=True)
+class Selection:
+    kept: tuple[str, ...]
+    removed: tuple[str, ...]
+    reasons: tuple[str, ...]           # one line per removed term, in removal order
+
+
+def backward_elimination(design: np.ndarray, targets: np.ndarray, n_terms: int, term_names: Sequence[str],
+                         target_names: Sequence[str], keep: Sequence[str] = (), alpha: float = 0.01) -> Selection:
+    """R-091-style math-model search by PRESS: repeatedly drop the term whose removal lowers PRESS most
+    (mean over targets of log(PRESS without / PRESS with) < 0) among terms significant on no target
+    (p >= alpha); stop when no such term is left. Columns after `n_terms` (tares) are never dropped;
+    nor are the names in `keep` (e.g. the linear terms the Newton inverse starts from)."""
+    names = list(term_names)
+    columns = list(range(n_terms))
+    removed, reasons = [], []
+    nuisance = design[:, n_terms:]
+    while len(columns) > 1:
+        current = np.hstack([design[:, columns], nuisance])
+        u, singular, vt = np.linalg.svd(current / np.linalg.norm(current, axis=0), full_matrices=False)
+        scales = np.linalg.norm(current, axis=0)
+        v_scaled = vt.T / singular
+        covariance = (v_scaled @ v_scaled.T) / np.outer(scales, scales)
+        coefficients = (v_scaled @ (u.T @ targets)) / scales[:, None]
+        stats = term_statistics(current, targets, coefficients, covariance, len(columns),
+                                [names[c] for c in columns], target_names)
+        score = np.mean(np.log(np.maximum(stats.press_ratio, 1e-300)), axis=1)
+        candidates = [i for i in range(len(columns)) if names[columns[i]] not in keep
+                      and np.all(stats.p_value[i] >= alpha) and score[i] < 0]
+        if not candidates:
+            break
+        worst = min(candidates, key=lambda i: score[i])
+        removed.append(names[columns[worst]])
+        reasons.append(f'{names[columns[worst]]}: p ≥ {alpha} on every target (min {stats.p_value[worst].min():.2g}), '
+                       f'PRESS {100 * (np.exp(score[worst]) - 1):+.2f} % without it, VIF {stats.vif[worst]:.3g}')
+        del columns[worst]
+    return Selection(tuple(names[c] for c in columns), tuple(removed), tuple(reasons))

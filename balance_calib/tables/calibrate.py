@@ -116,9 +116,28 @@ def _choose(fits: Mapping[str, SeriesTareFit], capacity, symbols) -> tuple[str, 
     return chosen, why
 
 
+def _select(method: str, terms, fit: SeriesTareFit, table: CalibrationTable, outputs, loads_si):
+    """Backward elimination by PRESS on the linear problem of a fitted form (its tares held)."""
+    from ..fit.series_tares import series_indicator
+    from ..fit.term_selection import backward_elimination
+    from ..model.r091 import TermEvaluator
+    _, index, onehot = series_indicator(table.series)
+    names = [t.name for t in terms]
+    linear = [t.name for t in terms if t.degree == 1 and not t.factors[0].absolute]
+    if method == 'direct':
+        design = np.hstack([TermEvaluator(terms, table.bridge_symbols).design(outputs), -onehot])
+        targets, target_names = loads_si, table.load_symbols
+    else:
+        totals = loads_si + fit.tares[index]
+        design = np.hstack([TermEvaluator(terms, table.load_symbols).design(totals), onehot])
+        targets, target_names = outputs, table.bridge_symbols
+    selection = backward_elimination(design, targets, len(terms), names, target_names, keep=linear)
+    return tuple(t for t in terms if t.name in selection.kept), selection
+
+
 def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str = 'auto',
                     validation: CalibrationTable | None = None, excitation_v: float | None = None,
-                    statistics: bool = True) -> TableCalibration:
+                    statistics: bool = True, select: bool = False) -> TableCalibration:
     if method not in ('auto',) + METHODS:
         raise TableCalibrationError(f'--method {method!r}: expected auto, direct or iterative')
     _check_names(table)
@@ -144,6 +163,7 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
     except ValueError as err:
         raise TableCalibrationError(str(err)) from None
     fits: dict[str, SeriesTareFit] = {}
+    selections = {}
     try:
         for m in methods:
             if m == 'direct':
@@ -152,6 +172,15 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
             else:
                 fits[m] = fit_iterative(term_sets[m], loads_si, outputs, table.series, components=loads,
                                         inputs=inputs, capacity=capacity, name='iterative', statistics=statistics)
+        if select:
+            for m in list(fits):
+                term_sets[m], selections[m] = _select(m, term_sets[m], fits[m], table, outputs, loads_si)
+                if selections[m].removed:
+                    fits[m] = (fit_direct(term_sets[m], outputs, loads_si, table.series, components=loads,
+                                          inputs=inputs, name='direct', statistics=statistics) if m == 'direct' else
+                               fit_iterative(term_sets[m], loads_si, outputs, table.series, components=loads,
+                                             inputs=inputs, capacity=capacity, name='iterative',
+                                             statistics=statistics))
     except (UnexcitedTermsError, IterationDidNotConverge, InverseDidNotConverge) as err:
         raise TableCalibrationError(f'{table.source}: {err}') from None
 
@@ -181,6 +210,9 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
 
     t95 = float(scipy.stats.t.ppf(0.975, fit.dof))
     report = _report(table, validation, fits, chosen, why, term_sets, validation_sigma, validation_u, t95, terms)
+    if select:
+        report['term_selection'] = {m: {'kept': len(sel.kept), 'removed': list(sel.removed), 'why': list(sel.reasons)}
+                                    for m, sel in selections.items()}
     point_rows = _point_rows(table, fit, t95, 'calibration', fit.load_residuals, fit.point_uncertainty)
     if validation is not None:
         point_rows += _point_rows(validation, fit, t95, 'validation', validation_sigma[chosen][1],
