@@ -314,8 +314,8 @@ def excitation_basis(times_s, n_steps: int = 16) -> tuple[np.ndarray, list[str]]
     t0, span = float(times.min()), float(np.ptp(times)) or 1.0
     columns = [(times - t0) / span - 0.5]
     labels = ['a gain drifting linearly in time']
-    for j in range(1, n_steps + 1):
-        when = t0 + span * j / (n_steps + 1)
+    for j in range(1, n_steps + 1):        # from 10 % to 90 % of the campaign: a step at its very
+        when = t0 + span * (0.1 + 0.8 * (j - 1) / max(n_steps - 1, 1))   # edge is a few points' offset
         columns.append((times >= when).astype(float) - 0.5)
         labels.append(f'a gain step at t ≈ {when - t0:.0f} s')
     return np.column_stack(columns), labels

@@ -45,7 +45,7 @@ from .tare_refit import refit_body
 
 @dataclass(frozen=True)
 class DiagnosisSettings:
-    alpha: float = 0.002                 # level of one family's test in a round (Bonferroni within it)
+    alpha: float = 1e-4                  # level of one family's test in a round (Bonferroni within it)
     min_effect_pct_fs: float = 0.01      # an effect must remove at least this RMS in a component
     max_rounds: int = 6
     max_terms: Mapping[str, int] = field(default_factory=lambda: {'cross_terms': 4, 'zero_drift': 8})
@@ -499,7 +499,8 @@ def _examine_excitation(family, fits, comp_terms, problem, capacity, settings):
     columns = np.column_stack([np.concatenate([problem.white_columns([g[k]])[:, 0] / sigmas[k]
                                                for k in range(n_components)]) for g in groups])
     selection = forward_select(stacked, columns, [(i,) for i in range(len(groups))],
-                               alpha_per_test=settings.alpha / len(groups), max_groups=family.max_groups)
+                               alpha_per_test=settings.alpha / len(groups) / n_components,
+                               max_groups=family.max_groups)
     if not selection.steps:
         return None
     chosen = [groups[i] for i in selection.groups]
@@ -519,7 +520,7 @@ def _examine_excitation(family, fits, comp_terms, problem, capacity, settings):
         added = [g[k] for g in chosen]
         stats = _component_statistics(fit, problem.fit(k, comp_terms[k] + added), capacity[k], 1)
         stats.update(added=tuple(added), groups=tuple((t,) for t in added), f=f_joint,
-                     p=min(1.0, p_joint * len(groups)),
+                     p=min(1.0, p_joint * len(groups) * n_components),
                      label='a gain common to all bridges (' + family.label(chosen) + ')')
         if _passes(stats, settings):
             accepted[k] = stats
