@@ -139,6 +139,10 @@ def calibration_record(config, points, reduction, fits, diagnosis, body) -> dict
     }
 
 
+def _duration(seconds: float) -> str:
+    return f'{seconds / 3600:.2f} h' if seconds >= 3600 else f'{seconds / 60:.1f} min'
+
+
 def _iso(seconds: float) -> str:
     return _dt.datetime.fromtimestamp(seconds, _dt.timezone.utc).isoformat(timespec='seconds')
 
@@ -174,14 +178,16 @@ def record_markdown(report: Mapping) -> list[str]:
     campaign = record['campaign']
     span = (f'{campaign["first_point_utc"]} to {campaign["last_point_utc"]} UTC'
             if 'first_point_utc' in campaign else 'simulated clock (no wall-clock date)')
-    temperature_text = (f'{temperature["min"]:.2f} to {temperature["max"]:.2f} °C (mean {temperature["mean"]:.2f} °C, '
-                        f'{temperature["points_with_temperature"]} points)' if temperature
+    temperature_text = (f'{temperature["min"]:.2f} to {temperature["max"]:.2f} °C '
+                        f'(mean {temperature["mean"]:.2f} °C, {temperature["points_with_temperature"]} points)'
+                        if temperature
                         else 'not recorded (no /balance/temperature)')
     sources = ', '.join(f'`{s}`' for s in report.get('sources', [])) or 'simulation (no bag)'
     lines += ['',
               f'- Excitation: {volts} ({excitation["source"]}).',
               f'- Balance temperature: {temperature_text}.',
-              f'- Campaign: {span}, {campaign["duration_h"]:.2f} h from first to last point.',
+              f'- Campaign: {span}, {_duration(campaign["last_point_s"] - campaign["first_point_s"])} from first '
+              'to last point.',
               f'- Fitted: {report.get("fitted_at", "")}.',
               f'- Source files: {sources}.',
               '']
