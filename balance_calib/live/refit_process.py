@@ -9,15 +9,21 @@ with one line saying why; the caller keeps its calibration.
 """
 from __future__ import annotations
 
+import datetime as _dt
 import multiprocessing
 import os
 import signal
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
-from ..calibration_file import Calibration, calibration_from_dict
+import yaml
+
+from ..calibration_file import Calibration, calibration_from_dict, save_calibration
+from ..tunnel_axes import Installation
+from .calibrator_core import activate
+from .parameters import check_regular_file
 
 
 class RefitFailed(Exception):
@@ -95,3 +101,91 @@ def run_refit_in_process(bags, balance: str, out_dir: Path, model: str, *, progr
                             None if path is None else Path(path))
     except ValueError as err:
         raise RefitFailed(str(err)) from None
+
+
+# --- ~/refit as a job: what the node fixes when it is called, and what comes back ------------------
+@dataclass(frozen=True)
+class RefitJob:
+    bags: tuple[Path, ...]
+    balance: str
+    out_dir: Path
+    model: str                    # the node's `model` parameter
+    installation: Installation
+    envelope_margin: float
+    output_range_factor: float
+    timeout_s: float
+    calibration_file: Path        # replaced by the result (unless it is a balance config)
+
+    @property
+    def base(self) -> str:
+        return self.model if self.model in ('linear', 'quadratic', 'cubic') else 'cubic'
+
+
+def is_balance_config(path) -> bool:
+    """True for a balance description (config/*.yaml); a refit must not overwrite one of those."""
+    try:
+        check_regular_file(path, 'calibration_file')
+        data = yaml.safe_load(Path(path).read_text())
+    except (OSError, ValueError, yaml.YAMLError):
+        return False
+    return isinstance(data, dict) and 'matrices' in data and 'models' not in data
+
+
+def make_refit_job(bags, balance: str, report_dir, model: str, installation: Installation, envelope_margin: float,
+                   output_range_factor: float, timeout_s: float, calibration_file) -> RefitJob:
+    """ValueError (or OSError) saying what is wrong with the parameters, before any work."""
+    bags = tuple(Path(b).expanduser() for b in bags if b)
+    if not bags:
+        raise ValueError('parameter calibration_bags is empty')
+    missing = [str(b) for b in bags if not b.exists()]
+    if missing:
+        raise ValueError(f'calibration bag {", ".join(missing)} does not exist')
+    root = Path(report_dir).expanduser()
+    root.mkdir(parents=True, exist_ok=True)
+    out_dir = root / ('refit-' + _dt.datetime.now(_dt.timezone.utc).strftime('%Y%m%dT%H%M%SZ'))
+    for k in range(1, 1000):
+        if not out_dir.exists():
+            break
+        out_dir = out_dir.with_name(f'{out_dir.name.split("+")[0]}+{k}')
+    return RefitJob(bags, balance, out_dir, model, installation, envelope_margin, output_range_factor, timeout_s,
+                    Path(calibration_file))
+
+
+def run_refit_job(job: RefitJob, refit_function, progress: Callable[[str], None]):
+    """(ActiveCalibration, calibration file, reply) on success, else the one-line reason (str).
+
+    refit_function: run_refit's signature, called in this thread (tests inject one); None = the
+    pipeline in its own process. The calibration file is replaced atomically only after the new
+    calibration has been checked (activate); a balance config is never overwritten.
+    """
+    try:
+        if refit_function is not None:
+            result = refit_function(list(job.bags), job.balance, job.out_dir, model=job.base, diagnose=True,
+                                    progress=progress)
+            calibration, summary = result.calibration, getattr(result, 'summary', '') or 'done'
+            path = getattr(result, 'calibration_path', None)
+        else:
+            product = run_refit_in_process(job.bags, job.balance, job.out_dir, job.base, progress=progress,
+                                           timeout_s=job.timeout_s)
+            calibration, summary, path = product.calibration, product.summary, product.calibration_path
+        if not isinstance(calibration, Calibration):
+            raise TypeError(f'the refit returned {type(calibration).__name__}, not a Calibration')
+        active = activate(calibration, job.model, job.installation, job.envelope_margin,
+                          output_range_factor=job.output_range_factor)
+    except (RefitFailed, ValueError) as err:   # RefitError, BagError, ConfigError: the message names the file
+        return str(err)
+    target = job.calibration_file
+    try:
+        if is_balance_config(target):
+            # never overwrite a balance description: it carries the schedule the refit needs
+            target = Path(path or job.out_dir / 'calibration.yaml')
+            if not target.exists():
+                save_calibration(target, calibration)
+            note = f'{job.calibration_file} is a balance config and stays as it is; calibration_file is now {target}'
+        else:
+            save_calibration(target, calibration)       # atomic replace
+            note = f'{target} replaced'
+    except OSError as err:
+        return f'cannot write {target}: {err}'
+    message = f'refit OK: {summary}; now {active.model_name} model; {note}; report in {job.out_dir}; zero and tare kept'
+    return replace(active, source=str(target)), target, message

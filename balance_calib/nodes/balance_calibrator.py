@@ -22,18 +22,14 @@ executor thread, i.e. between two samples.
 """
 from __future__ import annotations
 
-import datetime as _dt
-import importlib
 import sys
 import threading
 import time
-from dataclasses import replace
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 import rclpy
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
@@ -50,13 +46,12 @@ from sensor_msgs.msg import Temperature
 from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
-from balance_calib.calibration_file import Calibration, ConfigError, save_calibration
+from balance_calib.calibration_file import ConfigError
 from balance_calib.config import resolve_config_path
 from balance_calib.live.calibrator_core import ActiveCalibration, activate, parse_reliability
-from balance_calib.live.parameters import (PARAMETERS, STRING_ARRAY, check_parameter, check_regular_file,
-                                           load_calibration_checked)
+from balance_calib.live.parameters import PARAMETERS, STRING_ARRAY, check_parameter, load_calibration_checked
 from balance_calib.live.raw_codec import WrenchEncoder, decode_wrenches
-from balance_calib.live.refit_process import RefitFailed, run_refit_in_process
+from balance_calib.live.refit_process import RefitJob, is_balance_config, make_refit_job, run_refit_job
 from balance_calib.live.stream import LiveCalibrator, LiveSettings
 from balance_calib.live.tare_store import load_tare, save_tare, tare_file_for
 
@@ -68,21 +63,6 @@ CALIBRATION_PARAMETERS = {'calibration_file', 'model', 'installation', 'envelope
 
 def default_calibration_file() -> Path:
     return resolve_config_path('lmc6522')
-
-
-def is_balance_config(path: str | Path) -> bool:
-    """True for a balance description (config/*.yaml); a refit must not overwrite one of those."""
-    try:
-        check_regular_file(path, 'calibration_file')
-        data = yaml.safe_load(Path(path).read_text())
-    except (OSError, ValueError, yaml.YAMLError):
-        return False
-    return isinstance(data, dict) and 'matrices' in data and 'models' not in data
-
-
-def load_refit_function():
-    """The refit pipeline behind `balance-calib refit` (imported when first needed)."""
-    return importlib.import_module('balance_calib.refit.pipeline').run_refit
 
 
 def _descriptor(name, spec) -> ParameterDescriptor:
@@ -350,78 +330,27 @@ class BalanceCalibrator(Node):
             return response
         new_active, target, message = outcome
         self._live.set_active(new_active)            # in the executor thread: between two samples
-        if str(target) != str(job['calibration_file']):
+        if str(target) != str(job.calibration_file):
             self._pending = None
             self.set_parameters([Parameter('calibration_file', value=str(target))])
         response.success, response.message = True, message
         self.get_logger().info(message)
         return response
 
-    def _refit_job(self) -> dict:
-        bags = tuple(Path(b).expanduser() for b in (self._param('calibration_bags') or []) if b)
-        if not bags:
-            raise ValueError('parameter calibration_bags is empty')
-        missing = [str(b) for b in bags if not b.exists()]
-        if missing:
-            raise ValueError(f'calibration bag {", ".join(missing)} does not exist')
-        root = Path(self._param('report_dir')).expanduser()
-        root.mkdir(parents=True, exist_ok=True)
-        out_dir = root / ('refit-' + _dt.datetime.now(_dt.timezone.utc).strftime('%Y%m%dT%H%M%SZ'))
-        for k in range(1, 1000):
-            if not out_dir.exists():
-                break
-            out_dir = out_dir.with_name(f'{out_dir.name.split("+")[0]}+{k}')
-        model = str(self._param('model'))
+    def _refit_job(self) -> RefitJob:
         active = self._live.active
-        return dict(bags=bags, balance=str(self._param('balance')), out_dir=out_dir, model=model,
-                    base=model if model in ('linear', 'quadratic', 'cubic') else 'cubic',
-                    installation=active.installation, envelope_margin=float(self._param('envelope_margin')),
-                    output_range_factor=float(self._param('output_range_factor')),
-                    timeout_s=float(self._param('refit_timeout_s')), calibration_file=Path(active.source))
+        return make_refit_job(self._param('calibration_bags') or [], str(self._param('balance')),
+                              self._param('report_dir'), str(self._param('model')), active.installation,
+                              float(self._param('envelope_margin')), float(self._param('output_range_factor')),
+                              float(self._param('refit_timeout_s')), active.source)
 
-    def _refit_worker(self, job: dict, done: Future) -> None:
+    def _refit_worker(self, job: RefitJob, done: Future) -> None:
         """Runs in its own thread: completes `done` with (active, file, message) or a reason (str)."""
         try:
-            outcome = self._refit(job)
+            outcome = run_refit_job(job, self._refit_function, lambda line: self.get_logger().info(f'refit: {line}'))
         except Exception as err:    # any failure leaves the node and its calibration as they were
             outcome = f'{type(err).__name__}: {err}'
         done.set_result(outcome)
-
-    def _refit(self, job: dict):
-        progress = (lambda line: self.get_logger().info(f'refit: {line}'))
-        try:
-            if self._refit_function is not None:
-                result = self._refit_function(list(job['bags']), job['balance'], job['out_dir'], model=job['base'],
-                                              diagnose=True, progress=progress)
-                calibration, summary = result.calibration, getattr(result, 'summary', '') or 'done'
-                path = getattr(result, 'calibration_path', None)
-            else:
-                product = run_refit_in_process(job['bags'], job['balance'], job['out_dir'], job['base'],
-                                               progress=progress, timeout_s=job['timeout_s'])
-                calibration, summary, path = product.calibration, product.summary, product.calibration_path
-            if not isinstance(calibration, Calibration):
-                raise TypeError(f'the refit returned {type(calibration).__name__}, not a Calibration')
-            active = activate(calibration, job['model'], job['installation'], job['envelope_margin'],
-                              output_range_factor=job['output_range_factor'])
-        except (RefitFailed, ValueError) as err:   # RefitError, BagError, ConfigError: the message names the file
-            return str(err)
-        target = job['calibration_file']
-        try:
-            if is_balance_config(target):
-                # never overwrite a balance description: it carries the schedule the refit needs
-                target = Path(path or job['out_dir'] / 'calibration.yaml')
-                if not target.exists():
-                    save_calibration(target, calibration)
-                note = f'{job["calibration_file"]} is a balance config and stays as it is; calibration_file is ' \
-                       f'now {target}'
-            else:
-                save_calibration(target, calibration)       # atomic replace
-                note = f'{target} replaced'
-        except OSError as err:
-            return f'cannot write {target}: {err}'
-        message = (f'refit OK: {summary}; now {active.model_name} model; {note}; report in {job["out_dir"]}; '
-                   f'zero and tare kept')
-        return replace(active, source=str(target)), target, message
 
     # --- parameters ---------------------------------------------------------------------------
     def _validate_parameters(self, parameters) -> SetParametersResult:
