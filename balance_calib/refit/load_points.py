@@ -31,7 +31,7 @@ class CutSummary:
     points: int
     samples_used: int
     samples_rejected_outliers: int
-    samples_rejected_nan: int
+    samples_rejected_nan: int    # NaN, infinite or beyond 1000x the rated output
     empty_points: int            # applied_load messages with no samples before the next one
     markers_out_of_order: int = 0        # applied_load stamps going back against receive order
     first_marker_out_of_order: int = -1  # its index (0-based, receive order), -1: none
@@ -177,11 +177,15 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
     means = np.full((len(point_index), values.shape[1]), np.nan)
     times = np.full(len(point_index), np.nan)
     temps = np.full(len(point_index), np.nan)
+    # no bridge gives 1000x its rated output; without a config, no amplifier gives 1e6 mV
+    plausible_mv = (1000.0 * np.abs(config.rated_output_mv) if config is not None
+                    else np.full(values.shape[1], 1e6))
     used = outliers = nans = empty = 0
     inside_values, inside_points = [], []
     for p, (a, b) in enumerate(zip(starts, ends)):
         block = values[a:b]
-        finite = np.all(np.isfinite(block), axis=1)
+        # a finite but absurd output (a flipped exponent bit) is as unusable as a NaN
+        finite = np.all(np.isfinite(block) & (np.abs(block) <= plausible_mv), axis=1)
         nans += int(np.count_nonzero(~finite))
         block = block[finite]
         block_stamps = stamps[a:b][finite]

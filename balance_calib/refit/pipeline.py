@@ -113,8 +113,9 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
         limits = acceptance_limits(config, base_model)
     except (ZeroPointError, InverseDidNotConverge, LoadPointError, ConfigError, RefitError) as err:
         raise RefitError(_named(str(err), sources)) from None
-    except (np.linalg.LinAlgError, FloatingPointError) as err:
-        raise RefitError(f'{_where(sources)}: the load points cannot be fitted ({err})') from None
+    except (np.linalg.LinAlgError, FloatingPointError, ValueError) as err:
+        # absurd numbers that survived the edges (a flipped exponent bit): say so, never a traceback
+        raise RefitError(f'{_where(sources)}: the load points cannot be fitted ({" ".join(str(err).split())})') from None
     gates = data_gates(config, points, reduction, fits, cut, active, limits)
     if not diagnose:
         residuals, press = base_fit_arrays(reduction, fits[base_model])
