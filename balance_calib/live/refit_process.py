@@ -136,7 +136,8 @@ def make_refit_job(bags, balance: str, report_dir, model: str, installation: Ins
     """ValueError (or OSError) saying what is wrong with the parameters, before any work."""
     bags = tuple(Path(b).expanduser() for b in bags if b)
     if not bags:
-        raise ValueError('parameter calibration_bags is empty')
+        raise ValueError('parameter calibration_bags is empty: set it first, e.g. '
+                         'launchless_scripts/ros param set /balance_calibrator calibration_bags "[BAG_DIR]"')
     missing = [str(b) for b in bags if not b.exists()]
     if missing:
         raise ValueError(f'calibration bag {", ".join(missing)} does not exist')
