@@ -119,3 +119,24 @@ def test_memo_balance_six_loads_at_once_the_uncertainty_says_the_fit_errs_there(
     assert result['six'][0] >= 0.93                       # conservative there (see notes: ~99 %)
     assert np.max(result['six'][1] / config.capacity) > 0.005             # the fit errs by > 0.5 % FS ...
     assert np.all(result['six'][2] > 5 * result['single'][2])             # ... and u says so
+
+
+def test_an_adopted_temperature_model_carries_its_own_covariance():
+    """refit adopts cubic+temperature for an undeclared F_X temperature sensitivity: the live model it
+    writes has a covariance too, and its u on F_X is its own (smaller) scatter, not the base model's."""
+    from balance_calib.config import load_balance_config
+    from balance_calib.model.uncertainty import has_uncertainty
+    from balance_calib.refit.pipeline import calibrate_points, campaign_points
+    from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
+    from balance_calib.simulation.effects import parse_effects
+    config = load_balance_config('lmc6522')
+    campaign = simulate_campaign(config, settings=SimulationSettings(noise_sigma_pct_fs=table17_noise(config), seed=2),
+                                 effects=parse_effects('temperature:sensitivity_per_k=0.0045|0|0|0|0|0'))
+    calibration = calibrate_points(campaign_points(campaign), config).calibration
+    assert calibration.model().extra_variables == ('dT',) and has_uncertainty(calibration)
+    outputs = np.diag(config.rated_output_mv) * 0.5
+    adopted = load_standard_uncertainty(calibration, outputs, {'dT': np.full(6, 2.0)})
+    base = load_standard_uncertainty(calibration, outputs, model=calibration.base_model)
+    sigma = np.asarray(calibration.model().metadata['uncertainty']['residual_sigma'])
+    assert np.all(adopted >= sigma) and np.all(adopted < 1.2 * sigma)
+    assert np.all(adopted[:, 0] < 0.6 * base[:, 0])

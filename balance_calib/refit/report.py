@@ -54,6 +54,17 @@ def _body(reduction, diagnosis):
     return diagnosis.calibration_body, ('declared' if detail == 'declared' else 'estimated'), detail
 
 
+def _live_with_covariance(live, diagnosis):
+    """The adopted live model with its coefficient covariance on the points the diagnosis fitted
+    (one shared (XᵀX)⁻¹ over the union of terms: conservative for components that use fewer)."""
+    from ..model.uncertainty import with_fitted_covariance
+    try:
+        return with_fitted_covariance(live, diagnosis.corrected.bridge_outputs_mv, diagnosis.residuals_after,
+                                      diagnosis.extra_variables)
+    except (AttributeError, KeyError, ValueError):
+        return live          # no covariance: load_standard_uncertainty gives NaN for it, never a made-up number
+
+
 def build_calibration(config, reduction, fits, base_model, diagnosis, sources: Sequence[str]) -> Calibration:
     from ..model.uncertainty import with_fitted_covariance      # covariance for /balance/wrench_uncertainty
     models = {order: with_fitted_covariance(fit.fit.model, reduction.corrected.bridge_outputs_mv, fit.fit.residuals)
@@ -62,7 +73,7 @@ def build_calibration(config, reduction, fits, base_model, diagnosis, sources: S
     adopted = base_model
     if live is not None:
         adopted = live.name
-        models[adopted] = live
+        models[adopted] = _live_with_covariance(live, diagnosis)
     body, source, _ = _body(reduction, diagnosis)
     return Calibration(
         config.name, models, adopted, base_model, config.capacity, config.rated_output_mv, config.components,
