@@ -192,3 +192,19 @@ def test_unit_conversions_at_the_edges():
         ratiometric_to_mv(1.0, 'V', 5.0)
     # B660H Table 6: 0.83325 mV at 1666.5 µst, K = 2 -> exactly 1 V
     assert implied_excitation_v([0.83325], [1666.5]) == pytest.approx(1.0, rel=1e-6)
+
+
+def test_refit_command_writes_lab_units_on_request(tmp_path):
+    import subprocess
+    from balance_calib.simulation.campaign_bag import write_campaign_bag
+    config = load_balance_config('lmc6522')
+    settings = SimulationSettings(samples_per_point=3, transition_samples=2, seed=1,
+                                  noise_sigma_pct_fs=table17_noise(config))
+    bag = write_campaign_bag(simulate_campaign(config, settings=settings), tmp_path / 'bag')
+    done = subprocess.run(['balance-calib', 'refit', str(bag), '--balance', 'lmc6522', '--out', str(tmp_path / 'out'),
+                           '--no-diagnosis', '--report-units', 'lbf'], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    report = (tmp_path / 'out' / 'report.md').read_text()
+    assert table_row(report, ['FZ', '2203', 'lbf'])          # 9800 N / 4.4482216 N/lbf
+    assert table_row(report, ['MY', '6939', 'in-lbf'])       # 784 N·m / 0.11298483 N·m/in-lbf
+    assert f'`{bag}`' in report                              # the source file is named
