@@ -77,3 +77,36 @@ def test_samples_without_a_recent_attitude_are_dropped_as_stale():
     # samples up to 0.5 s after the last attitude still use it; later ones are stale
     assert core.counters.samples == 300 and core.counters.stale == 300 - 100 - 50
     assert 'attitude older than 0.5 s' in core.counters.last_stale_reason
+
+
+def test_a_point_on_demand_averages_the_next_samples_of_the_hold_or_says_why_not():
+    profile, raw = simulated_run()
+    loads = readings(raw)
+    stamps = START_NS + np.round(profile.times_s * 1e9).astype(np.int64)
+    core = LiveReduction(MODEL, HoldSettings(), np.ones(6))
+
+    def play(indices):
+        for i in indices:
+            core.add_attitude(stamps[i], profile.support_attitude[i])
+            core.add_dynamic_pressure(stamps[i], profile.q_pa[i])
+            core.add_wrench(stamps[i], loads[i])
+
+    first_wind_on = int(np.flatnonzero(profile.q_pa > 0)[0])       # holds of 50 samples from here
+    request = core.request_point(20)
+    play(range(first_wind_on - 5))
+    assert request.done and not request.success and 'wind off' in request.message
+    play(range(first_wind_on - 5, first_wind_on))
+    request = core.request_point(20)
+    play(range(first_wind_on, first_wind_on + 10))
+    assert not request.done                                          # 10 of 20 so far
+    play(range(first_wind_on + 10, first_wind_on + 30))
+    assert request.done and request.success and request.point.samples == 20
+    # the point of samples 0..19 of the hold: exactly the reduction of those samples' mean
+    from balance_calib.aero.coefficients import reduce_loads
+    expected = reduce_loads(loads[first_wind_on:first_wind_on + 20].mean(axis=0),
+                            profile.support_attitude[first_wind_on], 50e3, MODEL, core.tracker.tare)
+    assert np.allclose(request.point.reduced.body, expected.body, atol=1e-14, rtol=0)
+    assert np.allclose(request.point.reduced.body, profile.body_coefficients[first_wind_on], atol=1e-9)
+    request = core.request_point(30)                                 # 20 samples left in this hold
+    play(range(first_wind_on + 30, first_wind_on + 60))
+    assert request.done and not request.success and 'changed after 20 of 30' in request.message

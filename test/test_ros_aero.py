@@ -85,3 +85,51 @@ def test_live_and_offline_reduction_agree_and_match_the_truth(tmp_path, installa
     u = np.array([six(m) for m in uncertainty])
     ratio = np.abs(live[:, :6] - true_body) / u
     assert np.max(ratio) < 4.5, ratio.max(axis=0)
+
+
+def test_take_point_service_averages_the_next_samples_of_a_held_attitude(tmp_path):
+    from std_srvs.srv import Trigger
+    probe = Probe(new_domain_id())
+    points = probe.subscribe(WrenchStamped, '/aero/point')
+    scatter = probe.subscribe(WrenchStamped, '/aero/point_scatter')
+    uncertainty = probe.subscribe(WrenchStamped, '/aero/point_uncertainty')
+    per_sample = probe.subscribe(WrenchStamped, '/aero/coefficients')
+    truth = probe.subscribe(WrenchStamped, '/aero/truth')
+    probe.subscribe(WrenchStamped, '/balance/raw')
+    probe.subscribe(Vector3Stamped, '/model/attitude')
+    probe.subscribe(FluidPressure, '/tunnel/dynamic_pressure')
+    nodes = [NodeProcess('balance_calibrator', probe.domain_id, tmp_path, {
+                 'model': 'cubic', 'tare_file': str(tmp_path / 'no_tare.yaml')}),
+             NodeProcess(aero_executable(tmp_path), probe.domain_id, tmp_path, {
+                 'model': 'euler_replica_lmc6522', 'take_point_samples': 40})]
+    publisher = None
+    replies = []
+    try:
+        for topic in ('/balance/wrench', '/model/attitude'):
+            wait_for(lambda: probe.node.count_subscribers(topic) >= 1, 60.0, f'a subscriber on {topic}')
+        publisher = NodeProcess('bridge_publisher', probe.domain_id, tmp_path, {
+            'mode': 'wind_on', 'aero_model': 'euler_replica_lmc6522', 'rate_hz': 100.0, 'hold_s': 2.0,
+            'alpha_step_deg': 8.0, 'wind_off_hold_s': 0.3, 'electrical_zero_mv': 0.0, 'seed': 9,
+            'exit_when_done': True, 'wait_for_subscribers': 2, 'start_delay_s': 2.0})
+        wait_for(lambda: len(per_sample) > 0, 60.0, 'the wind-on samples')
+        for _ in range(3):          # a request that meets the end of a hold fails; the next lands in a fresh one
+            replies.append(probe.call(Trigger, '/aero_coefficients/take_point', timeout_s=30.0))
+            if replies[-1].success:
+                break
+        assert publisher.wait(120.0) == 0, publisher.output()
+        wait_for(lambda: len(points) == 5 and len(uncertainty) == 5, 30.0, 'four automatic points and the requested one')
+    finally:
+        if publisher is not None:
+            publisher.stop()
+        for node in nodes:
+            node.stop()
+        probe.close()
+    assert replies[-1].success and '40 samples at α =' in replies[-1].message, [r.message for r in replies]
+    assert all('changed after' in r.message for r in replies[:-1])
+    stamps = {(m.header.stamp.sec, m.header.stamp.nanosec) for m in points}
+    assert len(stamps) == 5        # the requested point ends on its 40th sample, not with its hold
+    assert all(np.all(np.isfinite(six(m))) and np.all(six(m) >= 0) for m in scatter)
+    true_by_stamp = {(m.header.stamp.sec, m.header.stamp.nanosec): six(m) for m in truth}
+    for message, u in zip(points, uncertainty):    # every point, automatic or requested, at its hold's truth
+        expected = true_by_stamp[(message.header.stamp.sec, message.header.stamp.nanosec)]
+        assert np.all(np.abs(six(message) - expected) < 4.5 * six(u)), (six(message), expected, six(u))

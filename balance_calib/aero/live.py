@@ -6,6 +6,10 @@ t. It waits (`pending`) until both inputs have been seen at or after t, because 
 arrive independently; `flush(now)` then settles samples older than `max_input_age_s` with what
 there is. A sample whose attitude or q∞ is missing or older than `max_input_age_s` is stale: it is
 counted and dropped, as `reduce` drops it (bag_io.match_latest).
+
+Besides the automatic point of every hold, `request_point(n)` takes one on demand (the node's
+~/take_point service): the next n wind-on samples, all in the same hold; `request` then holds the
+outcome (done, message, point). The attitude or q∞ changing first, or wind-off, fails it.
 """
 from __future__ import annotations
 
@@ -32,6 +36,21 @@ class SampleResult:
 class LivePoint:
     stamp_ns: int                 # stamp of the last sample in the point
     point: HeldPoint
+
+
+@dataclass
+class PointRequest:
+    samples: int
+    hold: int | None = None
+    rows: list = field(default_factory=list)
+    done: bool = False
+    success: bool = False
+    message: str = ''
+    point: HeldPoint | None = None
+    stamp_ns: int = 0
+
+    def finish(self, success: bool, message: str, point: HeldPoint | None = None, stamp_ns: int = 0):
+        self.done, self.success, self.message, self.point, self.stamp_ns = True, success, message, point, stamp_ns
 
 
 @dataclass
@@ -89,6 +108,7 @@ class LiveReduction:
         self._hold_index = -1
         self._hold_taken = False
         self.last_stamp_ns = 0          # stamp of the last sample processed (a point's stamp)
+        self.request: PointRequest | None = None
 
     # --- inputs ---------------------------------------------------------------------------------
     def add_attitude(self, stamp_ns: int, attitude) -> tuple[list[SampleResult], list[LivePoint]]:
@@ -151,6 +171,40 @@ class LiveReduction:
                 samples.append(SampleResult(stamp, reduce_loads(loads, support, q_pa, self.model, tare)))
         if ready:
             self._take_point(len(self._hold), points)
+        if self.request is not None and not self.request.done:
+            self._serve_request(stamp, loads, support, q_pa)
+
+    # --- a point on demand ----------------------------------------------------------------------
+    def request_point(self, samples: int) -> PointRequest:
+        """Average the next `samples` wind-on samples of the current hold into one point."""
+        if int(samples) < 1:
+            raise ValueError(f'a point needs at least one sample, not {samples}')
+        self.request = PointRequest(int(samples))
+        return self.request
+
+    def _serve_request(self, stamp, loads, support, q_pa) -> None:
+        request = self.request
+        if self.settings.wind_off(q_pa):
+            request.finish(False, f'wind off (q∞ = {q_pa:.3g} Pa): no coefficients to average')
+            return
+        if request.hold is None:
+            request.hold = self._hold_index
+        elif request.hold != self._hold_index:
+            request.finish(False, f'the attitude or q∞ changed after {len(request.rows)} of {request.samples} '
+                                  f'samples: the point was not held')
+            return
+        request.rows.append((stamp, loads, support, q_pa))
+        if len(request.rows) < request.samples:
+            return
+        if self.tracker.current() is None:
+            request.finish(False, 'no weight tare yet: run a wind-off sweep first')
+            return
+        readings = np.array([r[1] for r in request.rows])
+        attitudes = np.array([r[2] for r in request.rows])
+        q = np.array([r[3] for r in request.rows])
+        point = held_point(self._hold_index, 0, readings, attitudes, q, self.settings, self.model, self.tracker,
+                           self.sigma_loads)
+        request.finish(True, f'{request.samples} samples averaged', point, stamp)
 
     def _close_hold(self, points: list) -> None:
         if self._hold and not self._hold_taken and self.settings.point_samples == 0:

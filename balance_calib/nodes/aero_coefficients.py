@@ -15,13 +15,16 @@ and per held attitude (the averaged data point; stamp of its last sample):
                                        calibration σ and the weight tare
   aero/point_attitude                  the deflection-corrected (φ, α, β) of the point, rad
   /diagnostics                         samples, stale inputs, points, the weight tare in force
+Service ~/take_point (std_srvs/Trigger): a point on demand, the next `take_point_samples` wind-on
+samples of the current hold, published on the point topics like the automatic ones; the reply
+gives its coefficients ± scatter, or why there is none (attitude moved, wind off, no tare, timeout).
 
 The steps are aero/live.py's, the same as `balance-calib reduce` (aero/run.py). Parameters:
 model (a config/models file or name), estimate_weight, calibration_file and installation (for the
 calibration σ that weights the tare fit and gives the uncertainty; as the calibrator's), wind_off_q_pa,
 attitude_tolerance_rad, q_tolerance_pa, q_tolerance_fraction, settle_samples, point_samples (0: a
 point per hold at its end; N: a point of the first N settled samples, as soon as they are in),
-min_samples, max_input_age_s, diagnostics_period_s.
+min_samples, max_input_age_s, diagnostics_period_s, take_point_samples, take_point_timeout_s.
 """
 from __future__ import annotations
 
@@ -30,11 +33,14 @@ import sys
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 from rclpy.time import Time
 from sensor_msgs.msg import FluidPressure
+from std_srvs.srv import Trigger
 
 from balance_calib.aero.held_points import HoldSettings
 from balance_calib.aero.live import LiveReduction
@@ -58,6 +64,8 @@ PARAMETERS = {
     'min_samples': 5,
     'max_input_age_s': 0.5,
     'diagnostics_period_s': 1.0,
+    'take_point_samples': 100,
+    'take_point_timeout_s': 30.0,
 }
 QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -97,6 +105,10 @@ class AeroCoefficients(Node):
         except (ConfigError, ValueError) as err:
             raise StartupError(f'aero_coefficients: {err}') from None
         self._max_age_s = float(p['max_input_age_s'])
+        self._take_samples, self._take_timeout_s = int(p['take_point_samples']), float(p['take_point_timeout_s'])
+        if self._take_samples < 1 or not self._take_timeout_s > 0:
+            raise StartupError('aero_coefficients: take_point_samples and take_point_timeout_s must be positive')
+        self._request = None          # (core request, Future, deadline)
         out = {name: self.create_publisher(WrenchStamped, f'aero/{name}', QOS)
                for name in ('coefficients', 'wind_coefficients', 'point', 'point_wind', 'point_scatter',
                             'point_uncertainty')}
@@ -108,6 +120,8 @@ class AeroCoefficients(Node):
         self.create_subscription(FluidPressure, 'tunnel/dynamic_pressure', self._on_q, QOS)
         self.create_timer(min(self._max_age_s / 2, 0.1), self._on_flush)
         self.create_timer(float(p['diagnostics_period_s']), self._on_diagnostics)
+        # a coroutine in its own group, so the sample callbacks keep running while it awaits its point
+        self.create_service(Trigger, '~/take_point', self._on_take_point, callback_group=ReentrantCallbackGroup())
         self.get_logger().info(f'{model.name}: S = {model.reference_area_m2} m², weight '
                                f'{"estimated from the wind-off sweep" if model.weight_n is None else model.weight_n}')
 
@@ -130,7 +144,42 @@ class AeroCoefficients(Node):
             self.get_logger().warn(f'{self.core.counters.stale - stale_before} wrench sample(s) dropped: '
                                    f'{self.core.counters.last_stale_reason}', throttle_duration_sec=5.0)
 
+    async def _on_take_point(self, request, response):
+        if self._request is not None:
+            response.success, response.message = False, 'a point is being taken already'
+            return response
+        future = Future(executor=self.executor)      # its completion wakes the executor to resume us
+        future.add_done_callback(lambda _: None)
+        deadline = self.get_clock().now().nanoseconds + int(self._take_timeout_s * 1e9)
+        self._request = (self.core.request_point(self._take_samples), future, deadline)
+        success, message = await future
+        response.success, response.message = success, message
+        return response
+
+    def _check_request(self):
+        if self._request is None:
+            return
+        core_request, future, deadline = self._request
+        if not core_request.done and self.get_clock().now().nanoseconds > deadline:
+            core_request.finish(False, f'timed out after {self._take_timeout_s:g} s with '
+                                       f'{len(core_request.rows)} of {core_request.samples} samples')
+        if not core_request.done:
+            return
+        self._request = None
+        point = core_request.point
+        if core_request.success:
+            from balance_calib.aero.live import LivePoint
+            self._publish([], [LivePoint(core_request.stamp_ns, point)])
+            body = ', '.join(f'{name} {value:+.5f} ± {scatter:.5f}' for name, value, scatter in
+                             zip(('C_AF', 'C_Y', 'C_N', 'C_l', 'C_m', 'C_n'), point.reduced.body, point.scatter_body))
+            message = (f'{point.samples} samples at α = {float(point.reduced.alpha_deg):.3f}°, '
+                       f'q∞ = {point.q_pa:.0f} Pa: {body} (± sample scatter)')
+        else:
+            message = core_request.message
+        future.set_result((core_request.success, message))
+
     def _publish(self, samples, points):
+        self._check_request()
         for sample in samples:
             self._out['coefficients'].publish(_wrench(sample.stamp_ns, 'body', sample.reduced.body))
             self._out['wind_coefficients'].publish(_wrench(sample.stamp_ns, 'wind', sample.reduced.wind))
