@@ -98,3 +98,17 @@ def test_sourcing_env_leaves_the_interactive_shell_options_alone():
     # inside a script (non-interactive) the same file turns fail-fast on
     script = run(['bash', '-c', 'source launchless_scripts/_env.sh; false; echo "not reached"'])
     assert script.returncode == 1 and 'not reached' not in script.stdout
+
+
+def test_every_command_the_readme_lists_exists_and_explains_itself():
+    readme = (ROOT / 'README.md').read_text()
+    subcommands = sorted(set(re.findall(r'`balance-calib ([a-z][a-z-]+)', readme)))
+    scripts = sorted(set(re.findall(r'launchless_scripts/([a-z_]+)', readme)) - {'_env'})
+    assert {'refit', 'simulate'} <= set(subcommands) and {'demo', 'test'} <= set(scripts)
+    for name in subcommands:
+        done = run(['balance-calib', name, '--help'])
+        assert done.returncode == 0 and done.stdout.startswith(f'usage: balance-calib {name}'), (name, done.stderr)
+    for name in scripts:
+        assert (SCRIPTS / name).is_file(), f'README lists launchless_scripts/{name}, which does not exist'
+        done = run([str(SCRIPTS / name), '--help'])
+        assert done.returncode == 0 and len(done.stdout) > 100, (name, done.stderr)
