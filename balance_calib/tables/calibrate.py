@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import Mapping
 
 import numpy as np
 import scipy.stats
@@ -18,7 +18,7 @@ from ..fit.least_squares import UnexcitedTermsError
 from ..fit.series_tares import SeriesTareFit, direct_point_uncertainty, fit_direct
 from ..model.inverse import InverseDidNotConverge
 from ..model.r091 import term_set
-from .balfit_reader import CalibrationTable, TableError
+from .balfit_reader import CalibrationTable
 
 METHODS = ('direct', 'iterative')
 _NAME_RE = re.compile(r'^[A-Za-z_][A-Za-z0-9_]*$')
