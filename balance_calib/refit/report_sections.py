@@ -223,7 +223,7 @@ def residual_markdown(report: Mapping) -> list[str]:
     components = list(record['rated_loads'])
     lines = ['## Residuals per component: σ, 2σ and the largest (% FS)', '',
              'σ by eqs. (44)-(49); about 95 % of the points lie within 2σ if the residuals are normal; '
-             f'"beyond ±{PLOT_RANGE_PCT_FS:g}" counts the points the residual plots draw on their edge.', '']
+             f'"beyond ±{PLOT_RANGE_PCT_FS:g} %" counts the points the residual plots draw on their edge.', '']
     rows = []
     for model, stats in record['residuals'].items():
         for c in components:
@@ -231,7 +231,7 @@ def residual_markdown(report: Mapping) -> list[str]:
             rows.append([model, c, f'{s["sigma_pct_fs"]:.3f}', f'{s["two_sigma_pct_fs"]:.3f}',
                          f'{s["max_signed_pct_fs"]:+.3f}', s['max_at_point'], s['beyond_plot_range']])
     lines += _md_table(['model', 'component', 'σ', '2σ', 'largest residual', 'at point',
-                        f'beyond ±{PLOT_RANGE_PCT_FS:g}'], rows)
+                        f'beyond ±{PLOT_RANGE_PCT_FS:g} %'], rows)
     return lines + ['']
 
 
