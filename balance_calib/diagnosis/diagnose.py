@@ -52,6 +52,7 @@ class DiagnosisSettings:
     alpha_lack_of_fit: float = 0.001     # per component: residual beyond the repeatability
     min_explained: float = 0.75          # effects on a component with structure left over must
                                          # explain this fraction of its excess variance, or none is adopted
+    alpha_constancy: float = 1e-4        # Chow test of a static family's coefficients (first vs second half)
     equal_score: float = 0.8             # a runner-up within this fraction of the winner's score that the
                                          # winner absorbs: "cannot be separated" (a warning)
     drift_oversampling: float = 2.0      # Fourier grid spacing = 1 / (oversampling x campaign span)
@@ -168,8 +169,9 @@ class _Problem:
     """
 
     def __init__(self, outputs_names, corrected: CorrectedData, variables, whitening: ZeroPointWhitening,
-                 components=()):
+                 components=(), times=None):
         self.outputs_names = tuple(outputs_names)
+        self.times = None if times is None else np.asarray(times, dtype=float)
         self.components = tuple(components)
         self.variables = variables
         self.whiten = whitening
@@ -325,7 +327,7 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
     n_searches = len(families) + int(tare_available)
 
     whitening = ZeroPointWhitening.for_points(points.times_s, points.is_zero_point, points.orientation)
-    problem = _Problem(outputs_names, corrected, variables, whitening, components)
+    problem = _Problem(outputs_names, corrected, variables, whitening, components, times)
     comp_terms = [list(base_terms) for _ in components]
     fits = [problem.fit(k, comp_terms[k]) for k in range(len(components))]
     base_fits = list(fits)
@@ -359,6 +361,12 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
         if not candidates:
             break
         winner = max(candidates, key=lambda c: c.score)
+        # a generic family (a time basis, any monomial) that wins only narrowly over a specific one
+        # yields to it: the specific effect explains about as much with its physics
+        specific = [c for c in candidates if c.family not in GENERIC_FAMILIES
+                    and c.score >= settings.equal_score * winner.score]
+        if winner.family in GENERIC_FAMILIES and specific:
+            winner = max(specific, key=lambda c: c.score)
         close_runners = [(winner, c) for c in candidates if c is not winner and c.family != 'tare'
                          and winner.family != 'tare' and c.score >= settings.equal_score * winner.score
                          and set(c.components) & set(winner.components)]
@@ -472,11 +480,36 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
         if family.name == 'zero_drift':
             label = f'the time drift between zero points (periods {label.replace(" + ", ", ")})'
         stats.update(added=tuple(added), groups=tuple(chosen), label=label)
-        if _passes(stats, settings):
+        if _passes(stats, settings) and not (family.name in STATIC_FAMILIES and
+                                             _changes_over_campaign(problem, k, comp_terms[k], added, fit,
+                                                                    settings.alpha_constancy)):
             accepted[k] = stats
     if not accepted:
         return None
     return _Candidate(family.name, accepted, sum(s['bic_gain'] for s in accepted.values()))
+
+
+GENERIC_FAMILIES = ('cross_terms', 'zero_drift')
+# Families whose coefficients a physical effect keeps over the campaign (the time-keyed ones,
+# temperature, zero drift, excitation, follow time themselves and are not tested so).
+STATIC_FAMILIES = ('hysteresis', 'bidirectional', 'cross_terms', 'creep')
+
+
+def _changes_over_campaign(problem, k, terms, added, fit, alpha) -> bool:
+    """Chow test: do the added terms' coefficients differ between the first and the second half of
+    the campaign (in time)? Something the family only resembles (a drift of a load-dependent term, a
+    temperature that lags) fits with coefficients that move; the family's own effect does not."""
+    times = problem.times
+    late = (times > np.median(times)).astype(float)
+    extra = problem.whiten(problem.columns(list(added)) * late[:, None])
+    base = np.hstack([problem.white_columns(list(terms) + list(added))])
+    current = fit_columns(base, problem.loads_white[:, k])
+    trial = fit_columns(np.hstack([base, extra]), problem.loads_white[:, k])
+    q = trial.rank - current.rank
+    if q <= 0 or trial.dof <= 0:
+        return False
+    f_value, p_value = partial_f(current.rss, trial.rss, q, trial.dof)
+    return p_value < alpha
 
 
 def _examine_excitation(family, fits, comp_terms, problem, capacity, settings):

@@ -9,8 +9,9 @@ freedom, level alpha_lack_of_fit / 6) has structure left over.
 
 Such structure is reported as `unexplained`, with what it follows most strongly (`tracks`). When
 the effects found on that component explain less than `min_explained` of its excess variance
-(base-model variance minus s²), none of them is adopted there: they fit part of something else,
-and adopting them would put the wrong physics into the live model.
+(base-model variance minus s²), or fit it with coefficients that differ between the first and the
+second half of the campaign (a Chow test), none of them is adopted there: they fit part of
+something else, and adopting them would put the wrong physics into the live model.
 
 Caveat: the zero points do not see scatter of the loading hardware (weights, pans, alignment), so
 on real data the loaded points can be less repeatable than s says; the zero-point scatter is a
@@ -24,7 +25,7 @@ from typing import Mapping
 import numpy as np
 import scipy.stats
 
-from .statistics import sigma_pct_fs
+from .statistics import fit_columns, sigma_pct_fs
 
 # A component whose repeatability is this many times the median of the others is warned about.
 REPEATABILITY_WARNING_RATIO = 4.0   # LMC6522's own F_X (Table 17) is ~3x its other components
@@ -169,6 +170,30 @@ def within_point_variance(linear, point_variance_mv2, point_samples, loaded):
     return np.mean(variance[ok] @ (linear ** 2).T, axis=0), int(np.sum(samples[ok] - 1))
 
 
+def _unstable(problem, k, terms, fit, found, late, alpha) -> list[tuple[str, float]]:
+    """Families found on component k whose coefficients differ between the first and second half of
+    the campaign (a Chow test on their terms x the second-half indicator): a physical effect of that
+    family keeps its coefficients; something else that the family only resembles does not."""
+    from .diagnose import STATIC_FAMILIES
+    out = []
+    for entry in found:
+        if entry['candidate'].family not in STATIC_FAMILIES:
+            continue
+        added = list(entry['candidate'].components[k]['added'])
+        if not added:
+            continue
+        extra = problem.whiten(problem.columns(added) * late[:, None])
+        trial = fit_columns(np.hstack([problem.white_columns(list(terms)), extra]), problem.loads_white[:, k])
+        q = trial.rank - fit.gls.rank
+        if q <= 0 or trial.dof <= 0:
+            continue
+        f = (fit.gls.rss - trial.rss) / q / max(trial.rss / trial.dof, 1e-300)
+        p = float(scipy.stats.f.sf(f, q, trial.dof)) * len(found)
+        if p < alpha:
+            out.append((entry['candidate'].family, p))
+    return out
+
+
 def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, effects, settings, components,
                       outputs_names, capacity, variables, direction, times, temps, point_variance_mv2=None,
                       point_samples=None) -> Leftovers:
@@ -219,21 +244,24 @@ def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, 
                      for k in range(n_components)}
     ratios, p_values, dropped, unexplained = {}, {}, {}, []
     alpha = settings.alpha_lack_of_fit / n_components
+    late = (times > np.median(times)).astype(float)
     for k, c in enumerate(components):
         fit = fits[k]
+        found = per_component[k]
+        unstable = _unstable(problem, k, comp_terms[k], fit, found, late, alpha)
         variance = fit.gls.rss / fit.gls.dof
         ratio = variance / s2[k] if s2[k] > 0 else float('inf')
         p = float(scipy.stats.f.sf(ratio, fit.gls.dof, nu[k]))
         excess = np.sqrt(max(variance - s2[k], 0.0)) / capacity[k] * 100.0
         ratios[c], p_values[c] = float(ratio), p
-        if not (p < alpha and excess >= settings.min_effect_pct_fs):
+        lack_of_fit = p < alpha and excess >= settings.min_effect_pct_fs
+        if not (lack_of_fit or unstable):
             continue
         partly, explained_note = (), ''
-        found = per_component[k]
         if found:
             base_excess = max(base_fits[k].gls.rss / base_fits[k].gls.dof - s2[k], 0.0)
             explained = 1.0 - max(variance - s2[k], 0.0) / base_excess if base_excess > 0 else 0.0
-            if explained < settings.min_explained:
+            if unstable or explained < settings.min_explained:
                 partly = tuple(e['candidate'].family for e in found)
                 terms = set()
                 for e in found:
@@ -243,8 +271,13 @@ def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, 
                 variance = fit.gls.rss / fit.gls.dof
                 ratio = variance / s2[k]
                 p = float(scipy.stats.f.sf(ratio, fit.gls.dof, nu[k]))
-                explained_note = (f'; {", ".join(partly)} fitted only {explained:.0%} of the excess: '
-                                  'not adopted on ' + c)
+                if unstable:
+                    explained_note = ('; ' + ', '.join(f'{name} fitted it with coefficients that change over the '
+                                                       f'campaign (first vs second half, p = {q:.1g})'
+                                                       for name, q in unstable) + ': not adopted on ' + c)
+                else:
+                    explained_note = (f'; {", ".join(partly)} fitted only {explained:.0%} of the excess: '
+                                      'not adopted on ' + c)
             else:
                 explained_note = (f'; left after {", ".join(e["candidate"].family for e in found)} '
                                   f'(which explained {explained:.0%} of the excess)')
