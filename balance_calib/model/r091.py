@@ -212,6 +212,13 @@ class IterativeModel:
     def term_names(self) -> tuple[str, ...]:
         return tuple(t.name for t in self.terms)
 
+    @property
+    def _exponents(self):
+        # BalanceModel's polynomial shortcut (loads = coefficients · terms(outputs)) does not exist for
+        # outputs = f(loads): say so instead of letting a fast path compute wrong loads
+        raise AttributeError(f'model {self.name} is an iterative (R-091) model: loads come from model.loads() '
+                             f'(Newton), not from a polynomial of the outputs')
+
     @cached_property
     def evaluator(self) -> TermEvaluator:
         return TermEvaluator(self.terms, self.components)
