@@ -12,7 +12,6 @@ from typing import Sequence
 import numpy as np
 
 from ..calibration_file import Calibration, load_calibration
-from ..config import ConfigError
 from ..live.calibrator_core import activate, six_axis_loads
 from ..tunnel_axes import Installation, parse_installation
 from .bag_io import DEFAULT_MAX_INPUT_AGE_S, RunSamples, read_run
@@ -101,6 +100,3 @@ def reduce_bags(bags: Sequence[str | Path], calibration_path: str, model_path: s
                           f'(q∞ ≥ {settings.wind_off_q_pa} Pa held for {settings.min_samples} samples or more)')
     return Reduction(samples, calibration, str(calibration_path), model, parsed, settings, sigma, sigma_source,
                      runs[0], tuple(runs[1:]))
-
-
-__all__ = ['ConfigError', 'ReduceError', 'Reduction', 'reduce_bags']

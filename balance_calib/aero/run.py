@@ -21,7 +21,7 @@ import numpy as np
 from .coefficients import Reduced, reduce_loads
 from .held_points import HoldSettings, find_holds
 from .model_file import ModelDescription
-from .weight_tare import WeightTare, WeightTareError, declared_tare, fit_weight_tare
+from .weight_tare import WeightTare, WeightTareError, fit_weight_tare
 
 FALLBACK_SIGMA_PCT_FS = 0.1     # weights of the tare fit when the calibration states no σ
 
@@ -174,7 +174,3 @@ def reduce_run(readings, support_attitude, q_pa, model: ModelDescription, settin
         warnings.append(f'{missing} wind-on held point(s) before any usable wind-off sweep were not reduced '
                         f'(no weight tare and offsets)')
     return RunResult(tuple(points), len(holds), tuple(warnings), tuple(tares))
-
-
-__all__ = ['HeldPoint', 'RunResult', 'TareTracker', 'declared_tare', 'held_point', 'point_uncertainty',
-           'reduce_run', 'sigma_loads_tunnel']
