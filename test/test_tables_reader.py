@@ -145,3 +145,15 @@ def test_reader_errors_are_table_errors_naming_the_file(tmp_path):
         read_table(path)
     with pytest.raises(TableError, match='cannot read'):
         read_table(tmp_path / 'missing.csv')
+
+
+def test_a_validation_file_without_natural_zeros_uses_the_calibration_files(tmp_path, hand_table):
+    calibration = read_table(hand_table)
+    lines = _fix_width(HAND_TABLE).splitlines()
+    kept = [line for line in lines if not line.startswith(',NZ')]            # no natural-zero readings
+    path = tmp_path / 'val.csv'
+    path.write_text('\n'.join(kept) + '\n')
+    with pytest.raises(TableError, match=r"column D: natural-zero set 'A' does not exist \(the file has none\)"):
+        read_table(path)
+    validation = read_table(path, natural_zeros_from=calibration)
+    np.testing.assert_array_equal(validation.bridge_outputs, calibration.bridge_outputs)

@@ -53,7 +53,7 @@ def run(args) -> int:
         raise CommandError(f'--excitation-v must be positive, not {args.excitation_v}')
     try:
         table = read_tables(args.tables)
-        validation = read_tables(args.validate) if args.validate else None
+        validation = read_tables(args.validate, natural_zeros_from=table) if args.validate else None
         if args.axes:
             from ..tables.calibrate import rename_axes
             table = rename_axes(table, args.axes)

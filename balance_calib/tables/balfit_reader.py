@@ -162,8 +162,13 @@ def _number(text: str, where: str, what: str) -> float:
     return value
 
 
-def read_table(path: str | Path, text: str | None = None) -> CalibrationTable:
-    """Read one table file. TableError names the file, row and column of anything malformed."""
+def read_table(path: str | Path, text: str | None = None,
+               natural_zeros_from: CalibrationTable | None = None) -> CalibrationTable:
+    """Read one table file. TableError names the file, row and column of anything malformed.
+
+    natural_zeros_from: a table of the same campaign (the calibration file) whose natural-zero
+    readings a file without its own (a validation file) uses.
+    """
     path = Path(path)
     name = str(path)
     if text is None:
@@ -322,6 +327,13 @@ def read_table(path: str | Path, text: str | None = None) -> CalibrationTable:
         zero_outputs.append([_number(cells[c], f'{name}: row {line}, column {column_letter(c)}',
                                      f'output {symbols[c - FIRST_DATA_COLUMN]}')
                              for c in range(FIRST_DATA_COLUMN + n_loads, last)])
+    if not zero_rows and natural_zeros_from is not None and natural_zeros_from.zero_id:
+        if natural_zeros_from.output_symbols != tuple(symbols[n_loads:]):
+            raise TableError(f'{name}: outputs {", ".join(symbols[n_loads:])} differ from '
+                             f'{natural_zeros_from.source}\'s, whose natural zeros it would use')
+        zero_id, zero_set = list(natural_zeros_from.zero_id), list(natural_zeros_from.zero_set)
+        zero_roll = list(natural_zeros_from.zero_roll_deg)
+        zero_outputs = [list(row) for row in natural_zeros_from.zero_outputs]
     sets = list(dict.fromkeys(zero_set))
 
     point_id, series, point_set, loads, outputs, point_row = [], [], [], [], [], []
@@ -378,9 +390,10 @@ def _count_loads(zero_rows, capacity_row, n_columns: int, name: str) -> int:
     return n_columns // 2
 
 
-def read_tables(paths: Sequence[str | Path]) -> CalibrationTable:
-    """Several files of one campaign as one table (same symbols and units; series numbers shared)."""
-    tables = [read_table(p) for p in paths]
+def read_tables(paths: Sequence[str | Path], natural_zeros_from: CalibrationTable | None = None) -> CalibrationTable:
+    """Several files of one campaign as one table (same symbols and units; series numbers shared).
+    Files without natural zeros use those of `natural_zeros_from` (the campaign's calibration table)."""
+    tables = [read_table(p, natural_zeros_from=natural_zeros_from) for p in paths]
     if not tables:
         raise TableError('no table files given')
     first = tables[0]
