@@ -69,6 +69,7 @@ def iterative_campaign(tmp_path_factory):
     return tmp_path, truth, tares, floor
 
 
+@pytest.mark.slow
 def test_iterative_truth_auto_picks_iterative_and_validates_at_the_noise_floor(iterative_campaign, capsys):
     tmp_path, truth, tares, floor = iterative_campaign
     report, out = _fit(tmp_path, capsys)
@@ -92,6 +93,7 @@ def test_iterative_truth_auto_picks_iterative_and_validates_at_the_noise_floor(i
     assert np.max(np.abs(loads - totals) / sy.capacity_si()) < 0.003
 
 
+@pytest.mark.slow
 def test_direct_truth_auto_picks_direct_and_validates_at_the_noise_floor(tmp_path, capsys):
     rng = np.random.default_rng(909)
     truth = sy.direct_truth(rng, nonlinear_fraction=0.02)
