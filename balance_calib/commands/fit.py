@@ -154,7 +154,8 @@ def report_markdown(report) -> str:
     lines += ['', 'Per term and load in report.json (`term_statistics`): VIF, p-value of the coefficient, '
               'PRESS without the term / PRESS with it.', '', '## Uncertainty of each point', '',
               f'k = 1 standard uncertainty from the coefficient covariance, the residual scatter and the series '
-              f'tare; 95 % prediction interval = t({report["uncertainty"]["t_95"]}) × u. Every point in '
+              f'tare; 95 % prediction interval = t × u, t = {report["uncertainty"]["t_95"]} (Student, 97.5 %, the '
+              f'fit\'s degrees of freedom). Every point in '
               f'`point_uncertainty.csv`.', '']
     lines += ['## What the residuals still follow', '']
     if report.get('unexplained'):
