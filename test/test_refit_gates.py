@@ -43,8 +43,8 @@ def test_a_clean_campaign_passes_every_gate_and_the_report_shows_them(clean, tmp
     campaign, events = clean
     result = _refit(tmp_path, events)
     gates = _gates(result)
-    assert set(gates) == {'sigma', 'outliers', 'sensitivity', 'zero_points', 'body_weight', 'capacity',
-                          'clipping', 'marker_order'}
+    assert set(gates) == {'output_range', 'sigma', 'outliers', 'sensitivity', 'zero_points', 'body_weight',
+                          'capacity', 'clipping', 'marker_order'}
     assert all(g['passed'] for g in gates.values()), [g['reason'] for g in gates.values() if not g['passed']]
     assert result.report['acceptance'] == {**result.report['acceptance'], 'passed': True, 'forced': False}
     # the fitted linear sensitivities are the truth's (Table 10): noise moves them by far less than 1 %
@@ -67,6 +67,15 @@ def test_loads_recorded_in_kgf_are_refused_by_the_sensitivities(clean, tmp_path)
     # forced, the ratio is 1/g: loads 9.81x too small need a 9.81x smaller N per mV
     gates = _gates(_refit(tmp_path, events, force=True))
     assert all(r == pytest.approx(1 / KGF_N, rel=0.01) for r in gates['sensitivity']['ratio'].values())
+
+
+def test_outputs_recorded_in_volts_are_refused_before_any_fit(clean, tmp_path):
+    events = _copy_events(clean[1])
+    for event in events:
+        if event.topic == RAW:
+            event.values = event.values / 1000.0
+    with pytest.raises(RefitError, match=r'acceptance gate output_range: .*FXV 0\.00\d+ mV of 1\.908.*V instead of mV'):
+        _refit(tmp_path, events)
 
 
 def test_the_wrong_balance_config_is_refused(clean, tmp_path):

@@ -3,6 +3,8 @@
 As AIAA R-091 practice checks a calibration before it is used, every refit is checked before
 calibration.yaml is written or swapped in:
 
+    output_range       the bridge outputs span about their rated outputs (the schedule loads the
+                       balance to its capacity): outputs recorded in V, or µV, cannot pass
     sigma              σ of the base model per component (TM-663 eqs. (44)-(49)) within its limit
     outliers           no load point whose loads disagree with its outputs (leave-one-out residual
                        beyond k robust σ): a weight typo, a misplaced marker, a clipped point
@@ -164,6 +166,29 @@ def evaluate_gates(config: BalanceConfig, points, reduction, fits, base_model: s
     residuals, press = base_fit_arrays(reduction, fits[base_model])
     return (fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits)
             + data_gates(config, points, reduction, fits, cut, active, limits))
+
+
+OUTPUT_RANGE = (0.05, 20.0)     # largest |zeroed output| / rated output, per bridge
+
+
+def output_range_gate(config: BalanceConfig, reduction) -> Gate:
+    """Before any fit: do the outputs have the size the balance's rated outputs say?"""
+    zeroed = np.abs(reduction.zero.zeroed_outputs_mv)
+    with np.errstate(invalid='ignore'):
+        largest = np.nanmax(np.where(np.isfinite(zeroed), zeroed, np.nan), axis=0)
+    ratio = largest / np.abs(config.rated_output_mv)
+    details = {'largest_over_rated': dict(zip(config.bridge_outputs, ratio))}
+    low, high = OUTPUT_RANGE
+    bad = [i for i, r in enumerate(ratio) if not (low <= r <= high)]
+    if bad:
+        text = ', '.join(f'{config.bridge_outputs[i]} {largest[i]:.3g} mV of {config.rated_output_mv[i]:.4g}'
+                         for i in bad)
+        hint = ('; recorded in V instead of mV?' if np.all(ratio[bad] < low) else
+                '; recorded in µV instead of mV?' if np.all(ratio[bad] > high) else '')
+        return Gate('output_range', False, f'bridge outputs outside {low:g}-{high:g}x their rated outputs '
+                                           f'(largest vs rated: {text}){hint}', details)
+    return Gate('output_range', True, f'bridge outputs reach {ratio.min():.2f}-{ratio.max():.2f}x their '
+                                      f'rated outputs', details)
 
 
 def _sigma_gate(config, sigma, limits, what) -> Gate:

@@ -95,7 +95,8 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
     Raises RefitError when an acceptance gate fails (refit/gates.py), unless force; active is the
     calibration in use, whose sensitivities the new one must stay near.
     """
-    from .gates import acceptance_limits, base_fit_arrays, data_gates, failed, fit_gates, gates_report
+    from .gates import (acceptance_limits, base_fit_arrays, data_gates, failed, fit_gates, gates_report,
+                        output_range_gate)
     say = progress or (lambda message: None)
     if base_model not in MODEL_ORDERS:
         raise RefitError(f'base model {base_model!r}: expected one of {", ".join(MODEL_ORDERS)}')
@@ -105,6 +106,8 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
         reduction = reduce_points(points, config, estimate_body_weight=estimate_body)
         say(f'zero points and tare applied to {len(points.label)} points '
             f'(body {reduction.body.weight_n:.2f} N, {reduction.body_source})')
+        range_gate = output_range_gate(config, reduction)
+        _refuse_unless_forced([range_gate], force, sources, say)
         orders = [o for o in MODEL_ORDERS if MODEL_ORDERS.index(o) <= max(MODEL_ORDERS.index(base_model), 2)]
         fits = _fit_all(reduction, config, orders)
         # tare outputs from the fitted model's inverse instead of the linear eqs. (32)-(37), then refit
@@ -116,7 +119,7 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as err:
         # absurd numbers that survived the edges (a flipped exponent bit): say so, never a traceback
         raise RefitError(f'{_where(sources)}: the load points cannot be fitted ({" ".join(str(err).split())})') from None
-    gates = data_gates(config, points, reduction, fits, cut, active, limits)
+    gates = [range_gate] + data_gates(config, points, reduction, fits, cut, active, limits)
     if not diagnose:
         residuals, press = base_fit_arrays(reduction, fits[base_model])
         gates += fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits)
@@ -155,7 +158,7 @@ def _refuse_unless_forced(gates, force: bool, sources: Sequence[str], say: Progr
     for gate in gates:
         say(f'gate {gate.name}: {"ok" if gate.passed else "FAILED"}: {gate.reason}')
     # the most specific cause first: a unit error also spoils σ, not the other way round
-    priority = ('marker_order', 'clipping', 'sensitivity', 'active_calibration', 'capacity', 'body_weight',
+    priority = ('marker_order', 'clipping', 'output_range', 'sensitivity', 'active_calibration', 'capacity', 'body_weight',
                 'zero_points', 'outliers', 'sigma')
     bad = sorted(failed(gates), key=lambda g: priority.index(g.name) if g.name in priority else len(priority))
     if bad and not force:
@@ -335,7 +338,8 @@ def write_outputs(result: CalibrationResult, out_dir: Path, *, plots: bool = Tru
         figures = []
         if plots:
             from .plots import residual_figures
-            figures = residual_figures(result, staging)
+            from ..diagnosis.plots import unexplained_figures
+            figures = residual_figures(result, staging) + unexplained_figures(result.diagnosis, staging)
         result.report.setdefault('plots', [f.name for f in figures])
         (staging / 'report.json').write_text(json.dumps(result.report, indent=2, allow_nan=False) + '\n')
         (staging / 'report.md').write_text(report_markdown(result.report, result))
