@@ -235,3 +235,27 @@ def test_a_campaign_split_by_hours_refits_like_the_unsplit_one_in_the_same_memor
         assert np.max(np.abs(difference)) < 0.005
         # memory follows the messages, not the hours between them
         assert split_peak < 1.3 * unsplit_peak
+
+
+def test_salvage_refits_what_is_intact_and_the_report_says_what_was_lost(clean, tmp_path):
+    bag = write_mcap(clean[1], tmp_path / 'campaign.mcap')
+    from mcap.reader import make_reader
+    with open(bag, 'rb') as stream:
+        chunks = sorted(make_reader(stream).get_summary().chunk_indexes, key=lambda c: c.chunk_start_offset)
+    # a chunk without a gravity message: losing one of those is refused (test above), rightly
+    gravity_ns = [e.log_ns for e in clean[1] if e.topic == GRAVITY]
+    victim = next(c for c in chunks[len(chunks) // 2:]
+                  if not any(c.message_start_time <= t <= c.message_end_time for t in gravity_ns))
+    data = bytearray(bag.read_bytes())
+    middle = victim.chunk_start_offset + victim.chunk_length // 2
+    data[middle] ^= 0xFF
+    bag.write_bytes(bytes(data))
+    with pytest.raises(RefitError, match=f'campaign.mcap: damaged data at byte offset {victim.chunk_start_offset}'):
+        run_refit([bag], 'lmc6522', tmp_path / 'out', diagnose=False, plots=False)
+    result = run_refit([bag], 'lmc6522', tmp_path / 'out', diagnose=False, plots=False, salvage=True)
+    lost = result.report['bag_integrity']['lost']
+    assert result.report['bag_integrity']['salvaged'] is True
+    assert any(f'byte offset {victim.chunk_start_offset}' in line for line in lost)
+    assert f'byte offset {victim.chunk_start_offset}' in (tmp_path / 'out' / 'report.md').read_text()
+    mutant = Mutant('salvaged', 'salvaged', [bag], 'lmc6522', 'lmc6522', clean[0])
+    assert np.all(calibration_error_pct_fs(result.calibration, mutant) < 0.1)
