@@ -70,8 +70,12 @@ def reduce_bags(bags: Sequence[str | Path], calibration_path: str, model_path: s
                 settings: HoldSettings = HoldSettings(), max_input_age_s: float = DEFAULT_MAX_INPUT_AGE_S,
                 estimate_weight: bool = False, raw_topic: str = '/balance/raw',
                 attitude_topic: str = '/model/attitude',
-                dynamic_pressure_topic: str = '/tunnel/dynamic_pressure') -> Reduction:
-    """Everything `reduce` computes. Raises ReduceError (or ConfigError/BagError) naming the input."""
+                dynamic_pressure_topic: str = '/tunnel/dynamic_pressure', electrical_zero_mv=None) -> Reduction:
+    """Everything `reduce` computes. Raises ReduceError (or ConfigError/BagError) naming the input.
+
+    electrical_zero_mv (6,): the bridge outputs with nothing on the balance (the calibrator's ~/zero),
+    subtracted from the raw outputs before the calibration (output space, exact for any model);
+    what remains constant is taken by the wind-off sweep's offsets in load space."""
     try:
         calibration = load_calibration(calibration_path)
         model = load_model(model_path)
@@ -93,7 +97,8 @@ def reduce_bags(bags: Sequence[str | Path], calibration_path: str, model_path: s
     sigma, sigma_source = calibration_sigma(calibration, parsed)
     runs = []
     for name in names:
-        readings = readings_for(calibration, name, parsed, samples.raw_mv)
+        raw = samples.raw_mv if electrical_zero_mv is None else samples.raw_mv - np.asarray(electrical_zero_mv, float)
+        readings = readings_for(calibration, name, parsed, raw)
         runs.append(ModelRun(name, reduce_run(readings, samples.support_attitude, samples.q_pa, model, settings, sigma)))
     if not runs[0].result.wind_on:
         raise ReduceError(f'{", ".join(map(str, bags))}: no held wind-on attitude found '

@@ -33,6 +33,9 @@ def register(subparsers) -> None:
                         help='a support angle moving more than this between samples starts a new hold')
     parser.add_argument('--max-input-age-s', type=float, default=0.5,
                         help='attitude and q∞ older than this at a raw sample make it stale (left out)')
+    parser.add_argument('--electrical-zero-mv', default='',
+                        help='six bridge outputs with nothing on the balance (the calibrator\'s ~/zero), mV, '
+                             'comma-separated: subtracted in output space before the calibration')
     parser.add_argument('--raw-topic', default='/balance/raw',
                         help='topic of the bridge outputs in the bags (default /balance/raw)')
     parser.add_argument('--attitude-topic', default='/model/attitude',
@@ -57,11 +60,21 @@ def run(args) -> int:
                                 min_samples=args.min_samples)
         if not args.max_input_age_s > 0:
             raise ValueError(f'--max-input-age-s must be positive, not {args.max_input_age_s}')
+        zero = None
+        if args.electrical_zero_mv.strip():
+            try:
+                zero = [float(v) for v in args.electrical_zero_mv.split(',')]
+            except ValueError:
+                zero = []
+            if len(zero) != 6 or not all(math.isfinite(v) for v in zero):
+                raise ValueError(f'--electrical-zero-mv {args.electrical_zero_mv!r}: give six numbers in mV, '
+                                 f'F_XV,F_YV,F_ZV,M_XV,M_YV,M_ZV')
         reduction = reduce_bags(args.bags, args.calibration, args.model, compare=compare,
                                 calibration_model=args.calibration_model, installation=args.installation,
                                 settings=settings, max_input_age_s=args.max_input_age_s,
                                 estimate_weight=args.estimate_weight, raw_topic=args.raw_topic,
-                                attitude_topic=args.attitude_topic, dynamic_pressure_topic=args.dynamic_pressure_topic)
+                                attitude_topic=args.attitude_topic, dynamic_pressure_topic=args.dynamic_pressure_topic,
+                                electrical_zero_mv=zero)
     except (ReduceError, BagError, ConfigError, ValueError) as err:
         raise CommandError(str(err)) from None
     written = write_outputs(reduction, Path(args.out))
