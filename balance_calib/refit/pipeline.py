@@ -265,20 +265,31 @@ def summary_line(report: Mapping) -> str:
     return f'{report["balance"]}: {report["points"]} points; σ % FS {parts}; effects: {effects}'
 
 
-def check_out_dir(out_dir: Path) -> None:
-    """Refuse, before any work, an --out that is not a directory or cannot be written."""
+def _writable(directory: Path) -> bool:
+    try:  # os.access says yes to root everywhere: try it
+        with tempfile.TemporaryFile(dir=directory, prefix='.refit-probe-'):
+            return True
+    except OSError:
+        return False
+
+
+def check_out_dir(out_dir: Path) -> Path:
+    """Refuse, before any work, an --out that is not a directory or cannot be written.
+
+    Returns where to stage the outputs: DIR's parent (so that a new DIR appears with one rename),
+    or DIR itself when only DIR is writable.
+    """
+    out_dir = Path(out_dir).absolute()
     if out_dir.exists() and not out_dir.is_dir():
         raise RefitError(f'{out_dir}: --out exists and is not a directory')
-    parent = next((p for p in [out_dir, *out_dir.parents] if p.exists()), Path('.'))
-    if not parent.is_dir():
-        raise RefitError(f'{out_dir}: cannot create the output directory ({parent} is not a directory)')
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise RefitError(f'{out_dir}: output directory not writable ({parent} is not writable)')
-    try:  # os.access says yes to root everywhere: try it
-        with tempfile.TemporaryFile(dir=parent, prefix='.refit-probe-'):
-            pass
-    except OSError as err:
-        raise RefitError(f'{out_dir}: output directory not writable ({parent}: {err.strerror})') from None
+    base = next((p for p in [out_dir, *out_dir.parents] if p.exists()), Path('/'))
+    if not base.is_dir():
+        raise RefitError(f'{out_dir}: cannot create the output directory ({base} is not a directory)')
+    if not _writable(base):
+        raise RefitError(f'{out_dir}: output directory not writable ({base} is not writable)')
+    if out_dir.exists() and not _writable(out_dir.parent):
+        return out_dir
+    return out_dir.parent
 
 
 _STAGING_PREFIX = '.refit-staging-'
@@ -328,8 +339,7 @@ def write_outputs(result: CalibrationResult, out_dir: Path, *, plots: bool = Tru
     """
     from .report import report_markdown
     out_dir = Path(out_dir)
-    check_out_dir(out_dir)
-    parent = out_dir.absolute().parent
+    parent = check_out_dir(out_dir)
     parent.mkdir(parents=True, exist_ok=True)
     _clean_stale_staging(parent, out_dir.name)
     staging = Path(tempfile.mkdtemp(prefix=f'{_STAGING_PREFIX}{out_dir.name}-{os.getpid()}-', dir=parent))
