@@ -259,3 +259,13 @@ def test_salvage_refits_what_is_intact_and_the_report_says_what_was_lost(clean, 
     assert f'byte offset {victim.chunk_start_offset}' in (tmp_path / 'out' / 'report.md').read_text()
     mutant = Mutant('salvaged', 'salvaged', [bag], 'lmc6522', 'lmc6522', clean[0])
     assert np.all(calibration_error_pct_fs(result.calibration, mutant) < 0.1)
+
+
+def test_out_is_checked_before_any_work(tmp_path):
+    afile = tmp_path / 'afile'
+    afile.write_text('not a directory')
+    # the bag does not even exist: the --out problem is found first
+    with pytest.raises(RefitError, match=f'{afile}: --out exists and is not a directory'):
+        run_refit([tmp_path / 'missing.mcap'], 'lmc6522', afile)
+    with pytest.raises(RefitError, match='/proc/refit-out: output directory not writable'):
+        run_refit([tmp_path / 'missing.mcap'], 'lmc6522', '/proc/refit-out')
