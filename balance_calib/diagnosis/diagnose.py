@@ -156,7 +156,7 @@ class Diagnosis:
         return {'sigma_pct_fs': rounded(self.sigma_pct_fs), 'sigma_pct_fs_crossval': rounded(self.sigma_pct_fs_crossval),
                 'effects': [e.to_report() for e in self.effects],
                 'unexplained': [u.to_report() for u in self.unexplained],
-                'repeatability_pct_fs': {c: round(float(v), 4) for c, v in self.repeatability_pct_fs.items()},
+                'repeatability_pct_fs': {c: round(float(v), 4) for c, v in self.repeatability_pct_fs.items() if v == v},
                 'warnings': list(self.warnings)}
 
 

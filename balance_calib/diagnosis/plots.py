@@ -5,6 +5,8 @@
   edge as open triangles so that nothing disappears silently.
 - `plot_effect`: per effect found, the residual with that effect put back (partial residual)
   against the variable that explains it, with the fitted contribution.
+- `plot_unexplained`: per unexplained leftover, the residual against what it tracks and against
+  point number, with the repeatability in the title.
 
 Figures are built on `matplotlib.figure.Figure` with the Agg canvas (no pyplot state), so plotting
 is safe inside a node's callback thread.
@@ -99,4 +101,41 @@ def plot_diagnosis(diagnosis: Diagnosis, directory) -> list[Path]:
         paths.append(plot_residuals(diagnosis, directory / 'residuals_adopted.png', which='after'))
     for effect in diagnosis.effects:
         paths.append(plot_effect(diagnosis, effect, directory / f'effect_{effect.name}.png'))
-    return paths
+    return paths + unexplained_figures(diagnosis, directory)
+
+
+def plot_unexplained(diagnosis: Diagnosis, entry, path) -> Path:
+    """What is left and unexplained (% FS): against what it tracks, and against point number."""
+    component = entry.components[0]
+    k = diagnosis.components.index(component)
+    residual = np.asarray(entry.residual if entry.residual is not None else diagnosis.residuals_after[:, k],
+                          dtype=float) / diagnosis.capacity[k] * 100.0
+    figure = Figure(figsize=(10, 4.2))
+    figure.suptitle(f'{diagnosis.balance} — {component}: left over and not explained '
+                    f'(σ {entry.sigma_pct_fs[component]:.3f} % FS, repeatability '
+                    f'{diagnosis.repeatability_pct_fs.get(component, float("nan")):.3f} % FS)')
+    axes = figure.add_subplot(1, 2, 1)
+    if entry.tracks_values is not None:
+        x = np.asarray(entry.tracks_values, dtype=float)
+        keep = np.isfinite(x)
+        axes.plot(x[keep], residual[keep], linestyle='none', marker='o', markersize=2.5, color='C3')
+        axes.set_xlabel(f'{entry.tracks} (first column of the tracker)')
+    else:
+        axes.text(0.5, 0.5, 'follows nothing examined', ha='center', va='center', transform=axes.transAxes)
+    axes.set_ylabel(f'{component} residual (% FS)')
+    axes.grid(True, linewidth=0.3)
+    axes = figure.add_subplot(1, 2, 2)
+    axes.plot(np.asarray(diagnosis.point_labels, dtype=float), residual, linestyle='none', marker='o',
+              markersize=2.5, color='C3')
+    axes.set_xlabel('point number')
+    axes.grid(True, linewidth=0.3)
+    figure.tight_layout(rect=(0, 0, 1, 0.92))
+    return _save(figure, path)
+
+
+def unexplained_figures(diagnosis: Diagnosis | None, directory) -> list[Path]:
+    """One figure per unexplained entry (none without a diagnosis)."""
+    if diagnosis is None:
+        return []
+    return [plot_unexplained(diagnosis, entry, Path(directory) / f'unexplained_{entry.components[0]}.png')
+            for entry in diagnosis.unexplained]

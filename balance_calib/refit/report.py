@@ -98,6 +98,11 @@ def build_report(config, points, reduction, fits, base_model, diagnosis, cut, so
         'sigma_pct_fs_crossval': {'before': _round(cv_before), 'after': _round(cv_after)},
         'effects': effects,
         'adopted': live is not None,
+        # what is left and what to check (issue 11): empty / unknown without a diagnosis
+        'unexplained': [u.to_report() for u in getattr(diagnosis, 'unexplained', ())],
+        'repeatability_pct_fs': {c: v for c, v in _round(getattr(diagnosis, 'repeatability_pct_fs', {}) or {}, 4).items()
+                                 if v == v},                     # unknown (NaN): left out
+        'warnings': list(getattr(diagnosis, 'warnings', ())),
         # beyond the promised keys
         'adopted_model': live.name if live is not None else base_model,
         'models': {order: {'sigma_pct_fs': _round(f.sigma_pct_fs), 'sigma_pct_fs_crossval': _round(f.sigma_crossval_pct_fs),
@@ -150,13 +155,8 @@ def report_markdown(report: Mapping, result=None, units: str = 'si') -> str:
     rows['after, cross-validated'] = report['sigma_pct_fs_crossval']['after']
     lines += [format_sigma_table(rows, components), '```', '']
     lines += residual_markdown(report) + lab_units_markdown(report, units)
-    lines += ['## Effects found in the residuals', '']
-    if not report['effects']:
-        lines.append('None: the residuals of the base model show nothing it lacks (nothing adopted).')
-    for i, effect in enumerate(report['effects'], 1):
-        sig = ', '.join(f'{k} {v:.3f}' for k, v in effect.get('sigma_after_pct_fs', {}).items())
-        lines += [f'{i}. **{effect["name"]}** on {", ".join(effect["components"])}: {effect["evidence"]}',
-                  f'   terms: `{", ".join(effect.get("terms", []))}`; σ after: {sig}']
+    from ..diagnosis.report_text import findings_markdown
+    lines += findings_markdown(report)
     if report.get('plots'):
         lines += ['', '## Residual plots', ''] + [f'![{p}]({p})' for p in report['plots']]
     if result is not None:
