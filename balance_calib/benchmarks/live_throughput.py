@@ -11,7 +11,8 @@ each as a subprocess between the same source and sink (reliable, depth 1000 both
 - bare relay: Python messages, the default executor, what users write (relay_node.py);
 - raw relay: bytes in, bytes out, the calibrator's executor (`--node raw-relay` of this module):
   rclpy's own ceiling for a node;
-- balance_calibrator: the memo's cubic matrix, diagnostics at 1 Hz.
+- balance_calibrator: the memo's cubic matrix with a coefficient covariance (so balance/wrench_uncertainty
+  is published too, one more message per sample), diagnostics at 1 Hz.
 
 Per rate: messages back / sent and latency p50/p99 (receive time minus the sample's stamp). Per node:
 the highest rate with zero loss, and at 1 kHz the process CPU time per sample (/proc/PID/stat
@@ -136,10 +137,27 @@ class Harness:
         self.node.destroy_node()
 
 
-def _node_commands():
+def calibration_with_covariance(directory: str) -> str:
+    """The memo's LMC6522 cubic matrix with a coefficient covariance and residual σ (from 300 synthetic
+    points), so that the calibrator publishes balance/wrench_uncertainty as a refit's calibration makes it."""
+    from dataclasses import replace
+
+    from balance_calib.calibration_file import load_calibration, save_calibration
+    from balance_calib.model.uncertainty import with_fitted_covariance
+    memo = load_calibration('lmc6522')
+    rng = np.random.default_rng(11)
+    outputs = rng.uniform(-1.0, 1.0, (300, 6)) * memo.rated_output_mv
+    residuals = rng.normal(0.0, 1e-4, (300, 6)) * memo.capacity
+    cubic = with_fitted_covariance(memo.model('cubic'), outputs, residuals)
+    path = os.path.join(directory, 'calibration.yaml')
+    save_calibration(path, replace(memo, models={**memo.models, 'cubic': cubic}))
+    return path
+
+
+def _node_commands(calibration_file: str):
     relay = [sys.executable, '-m', 'balance_calib.benchmarks.relay_node']
     raw_relay = [sys.executable, '-m', 'balance_calib.benchmarks.live_throughput', '--node', 'raw-relay']
-    calibrator = ['balance_calibrator', '--ros-args', '-p', 'calibration_file:=lmc6522',
+    calibrator = ['balance_calibrator', '--ros-args', '-p', f'calibration_file:={calibration_file}',
                   '-p', 'diagnostics_period_s:=1.0', '-p', f'input_depth:={QOS_DEPTH}']
     return [('harness ceiling', None), ('bare relay', relay), ('raw relay', raw_relay),
             ('balance_calibrator', calibrator)]
@@ -186,12 +204,15 @@ def _machine_line() -> str:
 
 
 def throughput(rates, seconds) -> None:
+    import tempfile
+
     import rclpy
     env = dict(os.environ)
     summary = {}
+    calibration_file = calibration_with_covariance(tempfile.mkdtemp(prefix='live_throughput_'))
     rclpy.init()
     try:
-        for label, command in _node_commands():
+        for label, command in _node_commands(calibration_file):
             print(f'{label}:', flush=True)
             process = None if command is None else _start(command, env)
             harness = Harness(rclpy.create_node(f'benchmark_{label.replace(" ", "_")}'),
