@@ -1,23 +1,32 @@
-"""Residual diagnosis: which physical effect does the base model of TM-663 lack? (issue 4)
+"""Residual diagnosis: which physical effect does the base model of TM-663 lack? (issues 4, 11)
 
 After the base fit (cubic, §2.3) of the corrected data (§5(4) zero points, §6-7 tare), the residuals
-of every component are examined against each candidate explanation (candidates.py, tare_refit.py).
-Per round, for every effect and component:
+of every component are examined against each candidate family of shapes (candidates.py,
+tare_refit.py): temperature, zero_drift, hysteresis, bidirectional, cross_terms, tare, creep and
+excitation. Per round, for every family and component:
 
-1. forward selection of the effect's terms, each step a partial F-test at a Bonferroni level
-   α / (effects examined × candidate groups × components) -- the search is wide, the level strict.
-   The tests run on the loaded points whitened against the noise the zero points share with
-   their block (generalised least squares, statistics.ZeroPointWhitening); plain least squares
-   would see drift and temperature in the brackets' noise;
-2. the component counts only if the terms remove at least `min_effect_pct_fs` (RMS, % FS) and the
-   cross-validated σ (PRESS, e_i / (1 - h_ii), of the eq. (19) fit) improves;
-3. effects are ranked by the gain in BIC, Σ_k [n ln(RSS_before/RSS_after) - q_k ln n] (whitened,
-   n loaded points), so a large generic family that soaks up residual with many terms loses to
-   the specific effect that explains it with one or two.
+1. forward selection of the family's terms, each step a partial F-test at a level Bonferroni-
+   corrected *within the family* (α / (its candidate groups × components)): one test per family,
+   not one search-wide level, so a specific effect is not drowned by the size of the generic
+   families. The tests run on the loaded points whitened against the noise the zero points share
+   with their block (generalised least squares, statistics.ZeroPointWhitening). Excitation (one
+   gain common to all bridges) is one joint selection over the six components stacked;
+2. the component counts only if the terms remove at least `min_effect_pct_fs` (RMS, % FS), the
+   cross-validated σ (PRESS, e_i / (1 - h_ii), of the eq. (19) fit) improves, and -- for the static
+   families (hysteresis, bidirectional, cross terms, creep) -- their coefficients do not change
+   between the campaign's halves (a Chow test: something the family only resembles would);
+3. families are ranked by the gain in BIC, Σ_k [n ln(RSS_before/RSS_after) - q_k ln n] (whitened,
+   n loaded points); a generic family (cross_terms, zero_drift) winning by less than `equal_score`
+   yields to the specific one. A runner-up about as good as the winner that no longer passes once
+   the winner is in explained the same residual: a warning ("cannot separate"), not a second name.
 
-The best effect is added (its terms only for its components), everything refitted, and the search
-repeats until no effect passes. The adopted fit keeps every term; the live model drops the nuisance
-ones (the zero-drift time basis) and needs only outputs, dT and the load directions.
+The best family is added (its terms only for its components), everything refitted, and the search
+repeats until no family passes. Then leftovers.py tests what remains against the repeatability of
+the points (lack of fit) and reports structure no family explains as `unexplained`, dropping the
+families that fitted only part of it. The adopted fit keeps every term; the live model drops the
+nuisance ones (time basis, creep, excitation) and the terms the live calibrator cannot evaluate
+(loops keyed to the turning point or a bridge's play, the sign of the fitted load): it needs only
+outputs, dT and the load directions.
 """
 from __future__ import annotations
 
@@ -411,7 +420,8 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
     used = set(adopted.extra_variables)
     extra_values = {name: values for name, values in variables.items() if name in used}
 
-    found = tuple(_effect_found(e, fits, comp_terms, components, problem, points, times) for e in effects)
+    found = tuple(_effect_found(e, fits, comp_terms, components, problem, points, times, set(live_terms))
+                  for e in effects)
 
     def sigma_row(fit_list, press=False):
         return {c: sigma_pct_fs(f.ols.press_residuals if press else f.ols.residuals, capacity[k])
@@ -639,7 +649,7 @@ def _body_label(declared: CalibrationBody, fitted: CalibrationBody) -> str:
     return 'the calibration body (' + ', '.join(parts) + ')'
 
 
-def _effect_found(entry, final_fits, comp_terms, components, problem, points, times) -> EffectFound:
+def _effect_found(entry, final_fits, comp_terms, components, problem, points, times, live_terms=None) -> EffectFound:
     candidate: _Candidate = entry['candidate']
     name = candidate.family
     per = {components[k]: s for k, s in candidate.components.items()}
@@ -685,5 +695,9 @@ def _effect_found(entry, final_fits, comp_terms, components, problem, points, ti
         removed_pct_fs={c: per[c]['removed'] for c in per},
         f_value={c: per[c]['f'] for c in per}, p_value={c: per[c]['p'] for c in per},
         correlation={c: per[c]['r'] for c in per}, evidence_by_component=lines,
-        score=float(candidate.score), nuisance=name in NUISANCE_EFFECTS, parameters=parameters,
+        score=float(candidate.score),
+        # not applied live: a nuisance family, or none of its terms is one the live calibrator evaluates
+        nuisance=name in NUISANCE_EFFECTS or (live_terms is not None and bool(terms)
+                                              and not set(terms) & live_terms),
+        parameters=parameters,
         explaining_variable=explaining_variable, explaining_values=explaining_values, contribution=contribution)
