@@ -73,7 +73,9 @@ def test_samples_without_a_recent_attitude_are_dropped_as_stale():
             core.add_attitude(stamps[i], profile.support_attitude[i])
         core.add_wrench(stamps[i], loads[i])
     assert core.counters.samples == 100        # the rest wait for an attitude at or after their stamp ...
-    core.flush(int(stamps[299]) + 10 ** 9)     # ... until they are older than max_input_age_s
+    core.flush(int(stamps[299]) + 503 * 10 ** 6)   # ... for match_wait_s (2 s) after they arrived:
+    assert core.counters.samples == 150            # at 3.498 s, those stamped (= arrived) before 1.498 s
+    core.flush(int(stamps[299]) + 3 * 10 ** 9)
     # samples up to 0.5 s after the last attitude still use it; later ones are stale
     assert core.counters.samples == 300 and core.counters.stale == 300 - 100 - 50
     assert 'attitude older than 0.5 s' in core.counters.last_stale_reason

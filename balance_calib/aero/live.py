@@ -3,8 +3,8 @@ and dynamic pressures -> per-sample coefficients and held points (the same steps
 
 Matching by stamp: a wrench sample (stamp t) takes the latest attitude and q∞ stamped at or before
 t. It waits (`pending`) until both inputs have been seen at or after t, because the three topics
-arrive independently; `flush(now)` then settles samples older than `max_input_age_s` with what
-there is. A sample whose attitude or q∞ is missing or older than `max_input_age_s` is stale: it is
+arrive independently (a reliable topic may lag while DDS repeats a lost packet); `flush(now)` then
+settles samples that have waited longer than `match_wait_s` since they arrived with what there is. A sample whose attitude or q∞ is missing or older than `max_input_age_s` is stale: it is
 counted and dropped, as `reduce` drops it (bag_io.match_latest).
 
 Besides the automatic point of every hold, `request_point(n)` takes one on demand (the node's
@@ -93,9 +93,11 @@ class _Latest:
 
 
 class LiveReduction:
-    def __init__(self, model: ModelDescription, settings: HoldSettings, sigma_loads, max_input_age_s: float = 0.5):
-        if not max_input_age_s > 0:
-            raise ValueError(f'max_input_age_s must be positive, not {max_input_age_s}')
+    def __init__(self, model: ModelDescription, settings: HoldSettings, sigma_loads, max_input_age_s: float = 0.5,
+                 match_wait_s: float = 2.0):
+        if not max_input_age_s > 0 or not match_wait_s > 0:
+            raise ValueError(f'max_input_age_s and match_wait_s must be positive, not {max_input_age_s}, {match_wait_s}')
+        self.match_wait_ns = int(round(match_wait_s * 1e9))
         self.model, self.settings = model, settings
         self.sigma_loads = np.asarray(sigma_loads, float)
         self.max_age_ns = int(round(max_input_age_s * 1e9))
@@ -103,7 +105,7 @@ class LiveReduction:
         self.holds = HoldTracker(settings)
         self.counters = LiveCounters()
         self._attitude, self._q = _Latest(), _Latest()
-        self._pending: deque[tuple[int, np.ndarray]] = deque()
+        self._pending: deque[tuple[int, np.ndarray, int]] = deque()     # (stamp, loads, arrival) ns
         self._hold: list[tuple[int, np.ndarray, np.ndarray, float]] = []   # current hold's (stamp, reading, attitude, q)
         self._hold_index = -1
         self._hold_taken = False
@@ -119,21 +121,22 @@ class LiveReduction:
         self._q.add(stamp_ns, [q_pa])
         return self._drain(None)
 
-    def add_wrench(self, stamp_ns: int, loads) -> tuple[list[SampleResult], list[LivePoint]]:
-        self._pending.append((int(stamp_ns), np.asarray(loads, float)))
+    def add_wrench(self, stamp_ns: int, loads, arrival_ns: int | None = None) -> tuple[list[SampleResult], list[LivePoint]]:
+        """arrival_ns: when it was received (node clock); None: its stamp (simulated time)."""
+        self._pending.append((int(stamp_ns), np.asarray(loads, float), int(stamp_ns if arrival_ns is None else arrival_ns)))
         return self._drain(None)
 
     def flush(self, now_ns: int) -> tuple[list[SampleResult], list[LivePoint]]:
-        """Settle samples that have waited longer than max_input_age_s for their inputs."""
+        """Settle samples that have waited longer than match_wait_s for their inputs."""
         return self._drain(now_ns)
 
     # --- processing -----------------------------------------------------------------------------
     def _drain(self, now_ns):
         samples, points = [], []
         while self._pending:
-            stamp, loads = self._pending[0]
+            stamp, loads, arrival = self._pending[0]
             complete = all(s.newest is not None and s.newest >= stamp for s in (self._attitude, self._q))
-            if not complete and (now_ns is None or now_ns - stamp <= self.max_age_ns):
+            if not complete and (now_ns is None or now_ns - arrival <= self.match_wait_ns):
                 break
             self._pending.popleft()
             self._process(stamp, loads, samples, points)

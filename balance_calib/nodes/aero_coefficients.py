@@ -24,7 +24,8 @@ model (a config/models file or name), estimate_weight, calibration_file and inst
 calibration σ that weights the tare fit and gives the uncertainty; as the calibrator's), wind_off_q_pa,
 attitude_tolerance_rad, q_tolerance_pa, q_tolerance_fraction, settle_samples, point_samples (0: a
 point per hold at its end; N: a point of the first N settled samples, as soon as they are in),
-min_samples, max_input_age_s, diagnostics_period_s, take_point_samples, take_point_timeout_s.
+min_samples, max_input_age_s, match_wait_s (how long a wrench sample waits for its attitude and q∞
+to arrive), diagnostics_period_s, take_point_samples, take_point_timeout_s.
 """
 from __future__ import annotations
 
@@ -63,6 +64,7 @@ PARAMETERS = {
     'point_samples': 0,
     'min_samples': 5,
     'max_input_age_s': 0.5,
+    'match_wait_s': 2.0,
     'diagnostics_period_s': 1.0,
     'take_point_samples': 100,
     'take_point_timeout_s': 30.0,
@@ -101,7 +103,7 @@ class AeroCoefficients(Node):
             settings = HoldSettings(float(p['attitude_tolerance_rad']), float(p['q_tolerance_pa']),
                                     float(p['q_tolerance_fraction']), float(p['wind_off_q_pa']),
                                     int(p['settle_samples']), int(p['point_samples']), int(p['min_samples']))
-            self.core = LiveReduction(model, settings, sigma, float(p['max_input_age_s']))
+            self.core = LiveReduction(model, settings, sigma, float(p['max_input_age_s']), float(p['match_wait_s']))
         except (ConfigError, ValueError) as err:
             raise StartupError(f'aero_coefficients: {err}') from None
         self._max_age_s = float(p['max_input_age_s'])
@@ -118,7 +120,7 @@ class AeroCoefficients(Node):
         self.create_subscription(WrenchStamped, 'balance/wrench', self._on_wrench, QOS)
         self.create_subscription(Vector3Stamped, 'model/attitude', self._on_attitude, QOS)
         self.create_subscription(FluidPressure, 'tunnel/dynamic_pressure', self._on_q, QOS)
-        self.create_timer(min(self._max_age_s / 2, 0.1), self._on_flush)
+        self.create_timer(0.1, self._on_flush)
         self.create_timer(float(p['diagnostics_period_s']), self._on_diagnostics)
         # a coroutine in its own group, so the sample callbacks keep running while it awaits its point
         self.create_service(Trigger, '~/take_point', self._on_take_point, callback_group=ReentrantCallbackGroup())
@@ -129,7 +131,8 @@ class AeroCoefficients(Node):
     def _on_wrench(self, msg: WrenchStamped):
         w = msg.wrench
         self._publish(*self.core.add_wrench(_ns(msg.header.stamp), (w.force.x, w.force.y, w.force.z, w.torque.x,
-                                                                    w.torque.y, w.torque.z)))
+                                                                    w.torque.y, w.torque.z),
+                                            self.get_clock().now().nanoseconds))
 
     def _on_attitude(self, msg: Vector3Stamped):
         self._publish(*self.core.add_attitude(_ns(msg.header.stamp), (msg.vector.x, msg.vector.y, msg.vector.z)))
