@@ -305,3 +305,30 @@ def test_wrench_uncertainty_is_published_beside_each_wrench(probe, tmp_path):
     expected = wrench_uncertainty(node._live.active, outputs, None)
     np.testing.assert_allclose(wrench_values(uncertainties), expected, rtol=1e-12)
     assert np.all(expected > 0) and np.all(expected < 0.01 * CAPACITY.max())
+
+
+@pytest.mark.slow
+def test_refit_process_killed_with_sigkill_keeps_the_calibration_and_the_stream(probe, tmp_path, calibration_file):
+    import multiprocessing
+
+    from balance_calib.config import load_balance_config
+    from balance_calib.simulation import campaign_bag
+    from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign
+    config = load_balance_config('lmc6522')
+    bag = campaign_bag.write_campaign_bag(simulate_campaign(config, settings=SimulationSettings(
+        samples_per_point=5, point_duration_s=0.1, transition_s=0.05, seed=5)), tmp_path / 'bag')
+    node = start_calibrator(probe, tmp_path, calibration_file, calibration_bags=[str(bag)])
+    wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
+    source = Stamped(probe)
+    connected(node, source)
+    before = calibration_file.read_bytes()
+    reply = probe.call_async(Trigger, '/balance_calibrator/refit')
+    child = wait_for(lambda: [p for p in multiprocessing.active_children() if p.name == 'balance_calib refit'],
+                     30.0, 'the refit process')[0]
+    os.kill(child.pid, 9)
+    wait_for(reply.done, 30.0, 'the refit reply')
+    assert not reply.result().success and 'killed by signal SIGKILL' in reply.result().message
+    assert 'stays in force' in reply.result().message and calibration_file.read_bytes() == before
+    count = len(wrenches)
+    source.send()
+    wait_for(lambda: len(wrenches) > count, 10.0, 'a wrench after the killed refit')
