@@ -79,6 +79,13 @@ class BalanceCalibrator(Node):
         """refit_function: run_refit's signature, run in a thread; None = the pipeline in its own process."""
         super().__init__('balance_calibrator', **kwargs)
         try:
+            overrides = getattr(self, '_parameter_overrides', {})     # command line and params files
+            for name, spec in PARAMETERS.items():
+                if name in overrides and spec.default != STRING_ARRAY:
+                    value = overrides[name].value
+                    check_parameter(name, value)       # our one-line reason, before rclpy's
+                    if type(spec.default) is float and type(value) is int:    # tare_timeout_s:=5 means 5.0
+                        overrides[name] = Parameter(name, value=float(value))
             for name, spec in PARAMETERS.items():
                 default = Parameter.Type.STRING_ARRAY if spec.default == STRING_ARRAY else spec.default
                 self.declare_parameter(name, default, _descriptor(name, spec))
