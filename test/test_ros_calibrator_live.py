@@ -332,3 +332,13 @@ def test_refit_process_killed_with_sigkill_keeps_the_calibration_and_the_stream(
     count = len(wrenches)
     source.send()
     wait_for(lambda: len(wrenches) > count, 10.0, 'a wrench after the killed refit')
+
+
+def test_an_integer_for_a_float_parameter_is_that_number(probe, tmp_path, calibration_file):
+    node = BalanceCalibrator(context=probe.context, parameter_overrides=[
+        Parameter('calibration_file', value=str(calibration_file)), Parameter('tare_timeout_s', value=5),
+        Parameter('tare_file', value=str(tmp_path / 'tare.yaml'))])
+    try:
+        assert node.get_parameter('tare_timeout_s').value == 5.0
+    finally:
+        node.destroy_node()
