@@ -147,7 +147,9 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
     point_index = np.flatnonzero(is_point)
     first_gravity = gravity.stamps_ns.min()
     if marker_stamps[point_index[0]] < first_gravity:
-        raise LoadPointError(f'{source} has no {names.gravity} messages before its first load point')
+        order_hint = (f'; {len(backwards)} {names.applied_load} message(s) are stamped out of time order '
+                      f'(first: message {int(backwards[0]) + 2})' if len(backwards) else '')
+        raise LoadPointError(f'{source} has no {names.gravity} messages before its first load point{order_hint}')
 
     # a point ends at the next marker, or at most POINT_PERIODS typical marker periods after its
     # own: samples beyond (a session ended without a marker, a clock jump, a recorder left
