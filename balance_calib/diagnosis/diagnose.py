@@ -178,8 +178,9 @@ class _Problem:
     """
 
     def __init__(self, outputs_names, corrected: CorrectedData, variables, whitening: ZeroPointWhitening,
-                 components=(), times=None):
+                 components=(), times=None, gravity=None):
         self.outputs_names = tuple(outputs_names)
+        self.gravity = None if gravity is None else np.asarray(gravity, dtype=float)
         self.times = None if times is None else np.asarray(times, dtype=float)
         self.components = tuple(components)
         self.variables = variables
@@ -336,7 +337,7 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
     n_searches = len(families) + int(tare_available)
 
     whitening = ZeroPointWhitening.for_points(points.times_s, points.is_zero_point, points.orientation)
-    problem = _Problem(outputs_names, corrected, variables, whitening, components, times)
+    problem = _Problem(outputs_names, corrected, variables, whitening, components, times, points.gravity)
     comp_terms = [list(base_terms) for _ in components]
     fits = [problem.fit(k, comp_terms[k]) for k in range(len(components))]
     base_fits = list(fits)
@@ -490,9 +491,8 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
         if family.name == 'zero_drift':
             label = f'the time drift between zero points (periods {label.replace(" + ", ", ")})'
         stats.update(added=tuple(added), groups=tuple(chosen), label=label)
-        if _passes(stats, settings) and not (family.name in STATIC_FAMILIES and
-                                             _changes_over_campaign(problem, k, comp_terms[k], added, fit,
-                                                                    settings.alpha_constancy)):
+        if _passes(stats, settings) and not _changes_over_campaign(problem, k, comp_terms[k], added, fit,
+                                                                   settings.alpha_constancy, family.name):
             accepted[k] = stats
     if not accepted:
         return None
@@ -505,21 +505,31 @@ GENERIC_FAMILIES = ('cross_terms', 'zero_drift')
 STATIC_FAMILIES = ('hysteresis', 'bidirectional', 'cross_terms', 'creep')
 
 
-def _changes_over_campaign(problem, k, terms, added, fit, alpha) -> bool:
-    """Chow test: do the added terms' coefficients differ between the first and the second half of
-    the campaign (in time)? Something the family only resembles (a drift of a load-dependent term, a
-    temperature that lags) fits with coefficients that move; the family's own effect does not."""
-    times = problem.times
-    late = (times > np.median(times)).astype(float)
-    extra = problem.whiten(problem.columns(list(added)) * late[:, None])
-    base = np.hstack([problem.white_columns(list(terms) + list(added))])
+def _changes_over_campaign(problem, k, terms, added, fit, alpha, family) -> bool:
+    """Chow tests: do the added terms' coefficients differ between the first and the second half of
+    the campaign (static families), or between the body's orientations with gravity on the + and
+    the - side of Y+Z (every family but tare)? A physical effect of the family keeps its
+    coefficients; something it only resembles (a load-dependent term that drifts, one that flips
+    with the gravity direction, a temperature that lags) fits with coefficients that move."""
+    splits = []
+    if family in STATIC_FAMILIES:
+        splits.append((problem.times > np.median(problem.times)).astype(float))
+    if family != 'tare' and problem.gravity is not None:
+        side = (problem.gravity[:, 1] + problem.gravity[:, 2] > 0).astype(float)
+        if 0 < side.sum() < len(side):
+            splits.append(side)
+    base = problem.white_columns(list(terms) + list(added))
     current = fit_columns(base, problem.loads_white[:, k])
-    trial = fit_columns(np.hstack([base, extra]), problem.loads_white[:, k])
-    q = trial.rank - current.rank
-    if q <= 0 or trial.dof <= 0:
-        return False
-    f_value, p_value = partial_f(current.rss, trial.rss, q, trial.dof)
-    return p_value < alpha
+    for split in splits:
+        extra = problem.whiten(problem.columns(list(added)) * split[:, None])
+        trial = fit_columns(np.hstack([base, extra]), problem.loads_white[:, k])
+        q = trial.rank - current.rank
+        if q <= 0 or trial.dof <= 0:
+            continue
+        _, p_value = partial_f(current.rss, trial.rss, q, trial.dof)
+        if p_value * len(splits) < alpha:
+            return True
+    return False
 
 
 def _examine_excitation(family, fits, comp_terms, problem, capacity, settings):
