@@ -299,10 +299,11 @@ class NeighbourDeadBand(Effect):
     name = 'neighbour_dead_band'
 
     def outputs(self, outputs_mv, ctx):
-        x = np.abs(ctx.loads[:, self.source]) / ctx.capacity[self.source]
+        source, target = int(self.source), int(self.target)      # a parameter string gives floats
+        x = np.abs(ctx.loads[:, source]) / ctx.capacity[source]
         leak = np.clip(x - self.dead_band, 0.0, None) / (1.0 - self.dead_band)
         out = outputs_mv.copy()
-        out[:, self.target] += self.fraction_of_rated * ctx.rated_output_mv[self.target] * leak
+        out[:, target] += self.fraction_of_rated * ctx.rated_output_mv[target] * leak
         return out
 
 
