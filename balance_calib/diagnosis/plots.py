@@ -119,7 +119,7 @@ def plot_unexplained(diagnosis: Diagnosis, entry, path) -> Path:
         x = np.asarray(entry.tracks_values, dtype=float)
         keep = np.isfinite(x)
         axes.plot(x[keep], residual[keep], linestyle='none', marker='o', markersize=2.5, color='C3')
-        axes.set_xlabel(f'{entry.tracks} (first column of the tracker)')
+        axes.set_xlabel(f'{entry.tracks} (scaled to ±1; loaded points)')
     else:
         axes.text(0.5, 0.5, 'follows nothing examined', ha='center', va='center', transform=axes.transAxes)
     axes.set_ylabel(f'{component} residual (% FS)')
