@@ -81,7 +81,10 @@ class OneAxisExamination:
                 'effects': [e.to_report() for e in self.effects],
                 'repeatability_pct_fs': None if self.repeatability_pct_fs is None
                 else round(float(self.repeatability_pct_fs), 4),
-                'adopted_terms': list(self.terms), 'warnings': list(self.warnings)}
+                'adopted_terms': list(self.terms),
+                # per term; x^k, dir*x... use x centred and scaled to ±1, t the point order scaled to ±1
+                'adopted_coefficients': {t: float(c) for t, c in zip(self.terms, self.coefficients)},
+                'warnings': list(self.warnings)}
 
 
 def directions_from_order(y) -> np.ndarray:
