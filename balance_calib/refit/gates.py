@@ -26,7 +26,7 @@ gives one line a person can act on. A failed gate raises nothing here: the pipel
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -383,7 +383,3 @@ def _marker_gate(cut) -> Gate:
                                            f'before the one recorded ahead of it ({cut.markers_out_of_order} '
                                            f'marker(s) out of time order): points cannot be trusted', details)
     return Gate('marker_order', True, 'applied_load markers in time order', details)
-
-
-def as_dicts(gates: Sequence[Gate]) -> list[dict]:
-    return [asdict(g) for g in gates]
