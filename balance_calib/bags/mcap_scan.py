@@ -8,10 +8,13 @@ the byte offset. With salvage, a damaged chunk is skipped (the scan resumes at t
 index knows) and the losses are returned as one line each: what was lost, where, and how many
 messages per topic the summary says are missing.
 
-Memory: the payloads kept are the messages asked for; a chunk is decompressed one at a time.
+Memory: the file is mapped, not read; the payloads kept are the messages asked for; a chunk is
+copied and decompressed one at a time.
 """
 from __future__ import annotations
 
+import mmap
+import os
 import stat
 import struct
 import zlib
@@ -193,7 +196,14 @@ class _Reader:
         path = self.path
         check_regular_file(path)
         with open(path, 'rb') as stream:
-            data = stream.read()
+            if os.fstat(stream.fileno()).st_size == 0:
+                raise McapDamage(f'{path}: not an MCAP file (0 bytes)')
+            # mapped, not read: one chunk at a time is in memory, whatever the file's size
+            with mmap.mmap(stream.fileno(), 0, access=mmap.ACCESS_READ) as data:
+                return self._read(data)
+
+    def _read(self, data) -> Scan:
+        path = self.path
         size = len(data)
         if size < len(MAGIC) or data[:len(MAGIC)] != MAGIC:
             raise McapDamage(f'{path}: not an MCAP file ({size} bytes, no MCAP magic at offset 0)')
@@ -216,7 +226,7 @@ class _Reader:
                 opcode, length = _RECORD_HEAD.unpack_from(data, at)
                 if length > _MAX_RECORD or at + 9 + length > size:
                     raise ValueError(f'record length {length} runs past the end of the file')
-                content = memoryview(data)[at + 9:at + 9 + length]
+                content = data[at + 9:at + 9 + length]
                 if opcode == _OP_DATA_END:
                     break
                 if opcode == _OP_CHUNK:
@@ -270,7 +280,7 @@ class _Reader:
         try:
             while at < footer_at:
                 opcode, length = _RECORD_HEAD.unpack_from(data, at)
-                content = memoryview(data)[at + 9:at + 9 + length]
+                content = data[at + 9:at + 9 + length]
                 if at + 9 + length > footer_at:
                     raise ValueError('summary record runs into the footer')
                 if opcode == _OP_SCHEMA:
