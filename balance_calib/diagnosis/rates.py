@@ -339,16 +339,25 @@ def floors_from_clean(balances, clean_seeds: int, scatter: bool = True) -> dict:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--balances', nargs='+', default=list(BALANCES))
-    parser.add_argument('--clean-seeds', type=int, default=50)
-    parser.add_argument('--seeds', type=int, default=10, help='seeds per family, component group, balance and size')
-    parser.add_argument('--sizes', type=float, nargs='+', default=[1.0])
-    parser.add_argument('--families', nargs='+', default=list(ALTERNATIVE_SHAPES))
-    parser.add_argument('--outside', nargs='*', default=list(OUTSIDE_SHAPES))
+    parser = argparse.ArgumentParser(
+        description=__doc__.split('\n')[0] + ': clean campaigns, one effect in an alternative shape per '
+        'campaign, and two effects outside every family; prints markdown tables and the runtime.')
+    parser.add_argument('--balances', nargs='+', default=list(BALANCES), metavar='NAME',
+                        help='balance configs to run (default: lmc6522 b660h)')
+    parser.add_argument('--clean-seeds', type=int, default=50, metavar='N',
+                        help='clean campaigns per balance (default 50)')
+    parser.add_argument('--seeds', type=int, default=10, metavar='N',
+                        help='campaigns per family, component group, balance and size (default 10)')
+    parser.add_argument('--sizes', type=float, nargs='+', default=[1.0], metavar='FLOORS',
+                        help='effect sizes in Table 17 noise floors of the component (default 1)')
+    parser.add_argument('--families', nargs='+', default=list(ALTERNATIVE_SHAPES), metavar='FAMILY',
+                        help='families to inject: ' + ', '.join(ALTERNATIVE_SHAPES) + ' (default all)')
+    parser.add_argument('--outside', nargs='*', default=list(OUTSIDE_SHAPES), metavar='SHAPE',
+                        help='effects outside every family: ' + ', '.join(OUTSIDE_SHAPES) + ' (default both; '
+                        'none with an empty list)')
     parser.add_argument('--zero-points-only', action='store_true',
                         help='repeatability from the zero points alone (no per-point sample scatter)')
-    parser.add_argument('--jobs', type=int, default=2)
+    parser.add_argument('--jobs', type=int, default=2, metavar='N', help='worker processes (default 2)')
     args = parser.parse_args(argv)
     start = time.perf_counter()
     scatter = not args.zero_points_only
