@@ -135,7 +135,7 @@ def test_rounding_needs_a_positive_error():
 FS_N, SENSITIVITY, NOISE_PCT_FS = 100.0, 0.02, 0.02
 
 
-def _load_cell(seed, hysteresis=0.0, quadratic=0.0, pickup=0.0):
+def _load_cell(seed, hysteresis=0.0, quadratic=0.0, pickup=0.0, drift=0.0):
     rng = np.random.default_rng(seed)
     up = np.linspace(0.0, FS_N, 11)
     loads = np.concatenate([up, up[::-1][1:], up[1:], up[::-1][1:]])
@@ -146,6 +146,7 @@ def _load_cell(seed, hysteresis=0.0, quadratic=0.0, pickup=0.0):
     readings = (SENSITIVITY * loads + hysteresis * full * direction * np.sin(np.pi * loads / FS_N)
                 + quadratic * full * (loads / FS_N) ** 2
                 + pickup * full * np.sin(2 * np.pi * np.arange(len(loads)) / 3.3)
+                + drift * full * np.arange(len(loads)) / len(loads)
                 + rng.normal(size=len(loads)) * NOISE_PCT_FS / 100 * full)
     return readings, loads
 
@@ -155,6 +156,7 @@ def _load_cell(seed, hysteresis=0.0, quadratic=0.0, pickup=0.0):
     ('hysteresis', {'hysteresis': 0.003}, ('hysteresis',)),
     ('quadratic', {'quadratic': 0.005}, ('nonlinearity',)),
     ('both', {'hysteresis': 0.003, 'quadratic': 0.005}, ('hysteresis', 'nonlinearity')),
+    ('drift', {'drift': 0.002}, ('zero_drift',)),
 ])
 @pytest.mark.parametrize('seed', [0, 1, 2])
 def test_a_load_unload_calibration_names_its_effects_and_returns_to_the_floor(case, kwargs, names, seed):
