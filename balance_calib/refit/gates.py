@@ -252,7 +252,7 @@ def _fitted_sensitivity(fits) -> np.ndarray:
     return np.diag(linear_part(model))
 
 
-def _ratio_gate(name, config, fitted, reference, tolerance, against) -> Gate:
+def _ratio_gate(name, config, fitted, reference, tolerance, against, hint_default='') -> Gate:
     with np.errstate(divide='ignore', invalid='ignore'):
         ratio = fitted / reference
     bad = [i for i, r in enumerate(ratio) if not (abs(r - 1.0) <= tolerance)]
@@ -260,7 +260,7 @@ def _ratio_gate(name, config, fitted, reference, tolerance, against) -> Gate:
                'fitted_n_per_mv': dict(zip(config.components, fitted))}
     if bad:
         text = ', '.join(f'{config.components[i]} ×{ratio[i]:.3g}' for i in bad)
-        hint = ''
+        hint = hint_default
         if np.all(np.isfinite(ratio)) and np.allclose(ratio[bad], 1 / 9.80665, rtol=0.05):
             hint = '; loads recorded in kgf?'
         elif np.all(np.isfinite(ratio)) and np.allclose(ratio[bad], 9.80665, rtol=0.05):
@@ -275,7 +275,8 @@ def _ratio_gate(name, config, fitted, reference, tolerance, against) -> Gate:
 def _sensitivity_gate(config, fits, limits) -> Gate:
     reference, what = _nominal_sensitivity(config)
     return _ratio_gate('sensitivity', config, _fitted_sensitivity(fits), reference,
-                       limits.sensitivity_nominal_tolerance, f'{config.name}\'s nominal ({what}; wrong --balance?)')
+                       limits.sensitivity_nominal_tolerance, f'{config.name}\'s nominal ones ({what})',
+                       '; the wrong --balance, or loads or outputs in other units?')
 
 
 def _active_gate(config, fits, active, limits) -> Gate:
