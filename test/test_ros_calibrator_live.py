@@ -231,7 +231,8 @@ def test_two_namespaced_calibrators_keep_their_streams_apart(probe, tmp_path, ca
             wait_for(lambda: sources[side].publisher.get_subscription_count() >= 1, 30.0, f'/{side} calibrator')
             sub = [s for s in probe.node.subscriptions if s.topic_name == f'/{side}/balance/wrench'][0]
             wait_for(lambda: sub.get_publisher_count() >= 1, 30.0, f'/{side}/balance/wrench')
-        outputs = {'left': np.array([0.2, 0.1, 0.4, 0.0, -0.2, 0.1]), 'right': np.array([-0.3, 0.2, 0.1, 0.1, 0.3, 0.0])}
+        outputs = {'left': np.array([0.2, 0.1, 0.4, 0.0, -0.2, 0.1]),
+                   'right': np.array([-0.3, 0.2, 0.1, 0.1, 0.3, 0.0])}
 
         def twenty_each():        # keep sending until each side has 20 (the first may go before matching)
             for side in nodes:
