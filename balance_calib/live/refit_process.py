@@ -3,7 +3,7 @@
 A refit is seconds of numpy, plotting and bag reading; in the node's interpreter it stalls the
 stream (p99 latency 0.4 ms -> 200-300 ms measured). Here the same `run_refit` runs in a process
 started with multiprocessing's spawn method (a fresh interpreter: no forked rclpy state), at a lower
-CPU priority; progress lines and the result (the calibration as a plain dict) come back over a pipe.
+CPU priority, killed by the kernel if the node dies (PR_SET_PDEATHSIG); progress lines and the result (the calibration as a plain dict) come back over a pipe.
 A failure of any kind -- the pipeline's RefitError, a crash, a kill, a timeout -- is a RefitFailed
 with one line saying why; the caller keeps its calibration.
 """
@@ -37,7 +37,19 @@ class RefitProduct:
     calibration_path: Path | None
 
 
-def _child(connection, bags, balance, out_dir, model) -> None:
+def _die_with_parent() -> None:
+    """Linux: SIGKILL this process when the node that started it dies (no orphan refit writing on)."""
+    try:
+        import ctypes
+        ctypes.CDLL('libc.so.6', use_errno=True).prctl(1, int(signal.SIGKILL))     # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def _child(connection, bags, balance, out_dir, model, parent_pid) -> None:
+    _die_with_parent()
+    if os.getppid() != parent_pid:     # the node died before prctl took effect
+        return
     try:
         os.nice(10)          # the stream's process comes first on a shared machine
     except OSError:
@@ -62,7 +74,8 @@ def run_refit_in_process(bags, balance: str, out_dir: Path, model: str, *, progr
     """Run the refit pipeline in a spawned process; blocks the calling (worker) thread until it ends."""
     context = multiprocessing.get_context('spawn')
     receiver, sender = context.Pipe(duplex=False)
-    process = context.Process(target=_child, args=(sender, [str(b) for b in bags], balance, str(out_dir), model),
+    process = context.Process(target=_child, args=(sender, [str(b) for b in bags], balance, str(out_dir), model,
+                                                   os.getpid()),
                               name='balance_calib refit', daemon=True)
     process.start()
     sender.close()
