@@ -14,7 +14,7 @@ from balance_calib.benchmarks.refit_reliability import (Clean, campaign_events, 
 KINDS = {'clean', 'truncate', 'flip_crc', 'flip_nocrc', 'drop_raw', 'drop_marker', 'drop_gravity',
          'swap_marker_stamps', 'reorder_raw', 'duplicate', 'kgf', 'lbf', 'volts', 'clip', 'wrong_weight',
          'wrong_balance', 'negative_body', 'reversed_gravity', 'time_jump', 'split_pause', 'tiny',
-         'flip_summary', 'raw_clock_jump', 'lz4_flip_nocrc'}
+         'flip_summary', 'raw_clock_jump', 'lz4_flip_nocrc', 'clock_back', 'zero_stamps'}
 
 
 def test_hundreds_of_mutants_give_no_traceback_and_no_wrong_calibration(tmp_path):
@@ -26,7 +26,7 @@ def test_hundreds_of_mutants_give_no_traceback_and_no_wrong_calibration(tmp_path
     # what must be refused was (unit errors, wrong balance, bad body, unreadable files) and what is
     # only inconvenient (pauses, jumps, reordering, duplicates) was accepted, correct
     for kind in ('truncate', 'tiny', 'kgf', 'lbf', 'volts', 'wrong_balance', 'negative_body', 'reversed_gravity',
-                 'clip', 'swap_marker_stamps', 'drop_gravity', 'flip_crc'):
+                 'clip', 'swap_marker_stamps', 'drop_gravity', 'clock_back'):
         assert set(summary['by_kind'][kind]) == {'refused'}, (kind, summary['by_kind'][kind])
     for kind in ('clean', 'split_pause', 'time_jump', 'reorder_raw', 'duplicate', 'drop_raw'):
         assert set(summary['by_kind'][kind]) == {'accepted'}, (kind, summary['by_kind'][kind])

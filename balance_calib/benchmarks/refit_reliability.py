@@ -190,7 +190,7 @@ def mutants(clean: Clean, workdir: Path, seed: int, count: int) -> Iterator[Muta
     kinds = ['clean', 'truncate', 'flip_crc', 'flip_nocrc', 'drop_raw', 'drop_marker', 'drop_gravity',
              'swap_marker_stamps', 'reorder_raw', 'duplicate', 'kgf', 'lbf', 'volts', 'clip', 'wrong_weight',
              'wrong_balance', 'negative_body', 'reversed_gravity', 'time_jump', 'split_pause', 'tiny',
-             'flip_summary', 'raw_clock_jump', 'lz4_flip_nocrc']
+             'flip_summary', 'raw_clock_jump', 'lz4_flip_nocrc', 'clock_back', 'zero_stamps']
     for n in range(count):
         kind = kinds[n % len(kinds)]
         name = f'{balance}-s{seed}-{n:03d}-{kind}'
@@ -282,6 +282,17 @@ def mutants(clean: Clean, workdir: Path, seed: int, count: int) -> Iterator[Muta
                 at = int(rng.integers(len(raw_index) // 4, 3 * len(raw_index) // 4))
                 for i in raw_index[at:at + 50]:
                     events[i].stamp_ns += int(1e6 * 1e9)
+            elif kind == 'clock_back':
+                # the publisher's clock steps back (NTP): every later stamp 5-60 s earlier
+                at = int(rng.integers(len(events) // 4, 3 * len(events) // 4))
+                step = int(float(rng.uniform(5, 60)) * 1e9)
+                for e in events[at:]:
+                    e.stamp_ns -= step
+            elif kind == 'zero_stamps':
+                # some messages stamped 0 (an unset header)
+                chosen = rng.choice(len(events), size=int(rng.integers(1, 20)), replace=False)
+                for i in chosen:
+                    events[int(i)].stamp_ns = 0
             elif kind == 'split_pause':
                 at = loads_index[int(rng.integers(len(loads_index) // 4, 3 * len(loads_index) // 4))]
                 pause = int(float(rng.choice([600, 3600, 16 * 3600])) * 1e9)
