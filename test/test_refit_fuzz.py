@@ -22,6 +22,7 @@ def test_hundreds_of_mutants_give_no_traceback_and_no_wrong_calibration(tmp_path
     counts = summary['counts']
     assert summary['failures'] == [], summary['failures'][:5]
     assert counts['tried'] == 240 and counts['traceback'] == 0 and counts['silent_wrong'] == 0
+    assert counts['unnamed'] == 0                   # every refusal names the file
     assert set(summary['by_kind']) == KINDS
     # what must be refused was (unit errors, wrong balance, bad body, unreadable files) and what is
     # only inconvenient (pauses, jumps, reordering, duplicates) was accepted, correct

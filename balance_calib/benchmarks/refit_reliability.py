@@ -1,12 +1,13 @@
 """Refit reliability: damaged and mislabelled campaigns through the refit, counted.
 
-    python -m balance_calib.benchmarks.refit_reliability [--mutants 400] [--cli 8] [--memory]
+    python -m balance_calib.benchmarks.refit_reliability [--mutants 416] [--cli 8] [--memory]
 
 Small simulated campaigns (LMC6522 and B660H, Appendix A/B schedules, a few samples a point) are
 written as MCAP bags, then damaged or mislabelled in deterministic ways (seeded): truncations,
 flipped bytes in files with and without chunk CRCs, dropped / reordered / duplicated messages,
 loads in kgf or lbf, outputs in V, a clipped bridge, one wrong weight, a wrong --balance, a
-negative or reversed calibration body, time jumps, sessions split by pauses, tiny and foreign files.
+negative or reversed calibration body, time jumps forward and back, zero stamps, sessions split by
+pauses, tiny and foreign files.
 Each goes through the refit pipeline (in-process; a few through the `balance-calib refit` CLI) and
 is classed:
 
@@ -17,6 +18,7 @@ is classed:
     traceback    any other exception (CLI: anything else on stderr or another exit status)
     hang         no answer within the per-mutant time limit (CLI only: in-process runs are bounded
                  by the campaign's size)
+    unnamed      refused, but the one line names none of the files given
 
 With --memory, the peak resident memory of full refits (diagnosis on) of one campaign unsplit and
 split in two sessions 1 h and 16 h apart is measured, each in its own process. The fuzz test
@@ -338,6 +340,11 @@ def calibration_error_pct_fs(calibration, mutant: Mutant) -> np.ndarray:
     return np.sqrt(np.mean(error ** 2, axis=0))
 
 
+def _names_a_file(text: str, mutant: Mutant) -> bool:
+    names = [p.name for p in mutant.paths] + ([mutant.config_path.name] if mutant.config_path else [])
+    return any(name in text for name in names)
+
+
 def judge_in_process(mutant: Mutant, out_dir: Path) -> tuple[str, str]:
     """(verdict, detail) for one mutant through run_refit in this process."""
     from ..refit.pipeline import RefitError, run_refit
@@ -347,7 +354,7 @@ def judge_in_process(mutant: Mutant, out_dir: Path) -> tuple[str, str]:
         text = str(error)
         if '\n' in text or not text:
             return 'traceback', f'error not one line: {text!r}'
-        return 'refused', text
+        return ('refused' if _names_a_file(text, mutant) else 'unnamed'), text
     except Exception as error:  # what the fuzz exists to find
         import traceback
         return 'traceback', ''.join(traceback.format_exception_only(type(error), error)).strip()
@@ -370,7 +377,7 @@ def judge_cli(mutant: Mutant, out_dir: Path, timeout_s: float = 120.0) -> tuple[
     if done.returncode == 2 and len(lines) == 1 and lines[0].startswith('balance-calib refit: '):
         if (out_dir / 'calibration.yaml').exists():
             return 'traceback', 'refused but calibration.yaml written'
-        return 'refused', lines[0]
+        return ('refused' if _names_a_file(lines[0], mutant) else 'unnamed'), lines[0]
     if done.returncode != 0 or lines:
         return 'traceback', f'exit {done.returncode}: {done.stderr.strip()[-300:]}'
     error = calibration_error_pct_fs(load_calibration(out_dir / 'calibration.yaml'), mutant)
@@ -383,7 +390,7 @@ def run_mutants(total: int, cli: int, workdir: Path, *, seeds=(0,), balances=('l
                 on_result: Callable | None = None) -> dict:
     """Generate and judge `total` mutants, `cli` of them through the CLI. Returns the counts."""
     per = int(np.ceil(total / (len(seeds) * len(balances))))
-    counts = {'tried': 0, 'refused': 0, 'accepted': 0, 'silent_wrong': 0, 'traceback': 0, 'hang': 0}
+    counts = {'tried': 0, 'refused': 0, 'accepted': 0, 'silent_wrong': 0, 'traceback': 0, 'hang': 0, 'unnamed': 0}
     by_kind: dict[str, dict[str, int]] = {}
     failures = []
     n = 0
@@ -403,7 +410,7 @@ def run_mutants(total: int, cli: int, workdir: Path, *, seeds=(0,), balances=('l
                 counts[verdict] += 1
                 by_kind.setdefault(mutant.kind, {}).setdefault(verdict, 0)
                 by_kind[mutant.kind][verdict] += 1
-                if verdict in ('silent_wrong', 'traceback', 'hang'):
+                if verdict in ('silent_wrong', 'traceback', 'hang', 'unnamed'):
                     failures.append((mutant.name, verdict, detail))
                 if on_result:
                     on_result(mutant, verdict, detail, via_cli)
@@ -450,7 +457,7 @@ def split_campaign_memory(workdir: Path, pauses_s=(0.0, 3600.0, 16 * 3600.0), sa
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--mutants', type=int, default=400)
+    parser.add_argument('--mutants', type=int, default=416)
     parser.add_argument('--cli', type=int, default=8, help='how many of them through the CLI')
     parser.add_argument('--seeds', type=int, default=2)
     parser.add_argument('--memory', action='store_true', help='also the split-campaign peak memory')
@@ -460,13 +467,14 @@ def main(argv=None) -> None:
         started = time.monotonic()
 
         def show(mutant, verdict, detail, via_cli):
-            if args.verbose or verdict in ('silent_wrong', 'traceback', 'hang'):
+            if args.verbose or verdict in ('silent_wrong', 'traceback', 'hang', 'unnamed'):
                 print(f'{mutant.name:40s} {"cli" if via_cli else "   "} {verdict:12s} {detail[:150]}', flush=True)
 
         summary = run_mutants(args.mutants, args.cli, Path(tmp), seeds=tuple(range(args.seeds)), on_result=show)
         c = summary['counts']
         print(f'{c["tried"]} tried, {c["refused"]} refused cleanly, {c["accepted"]} accepted correctly, '
-              f'{c["silent_wrong"]} silent-wrong, {c["traceback"]} tracebacks, {c["hang"]} hangs '
+              f'{c["silent_wrong"]} silent-wrong, {c["traceback"]} tracebacks, {c["hang"]} hangs, '
+              f'{c["unnamed"]} errors naming no file '
               f'({args.cli} through the CLI; {time.monotonic() - started:.0f} s)')
         print('by kind (verdict: count):')
         for kind, verdicts in summary['by_kind'].items():
