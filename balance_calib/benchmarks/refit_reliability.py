@@ -426,7 +426,16 @@ from balance_calib.refit.pipeline import run_refit
 paths = sys.argv[3:]
 started = time.monotonic()
 result = run_refit(paths, sys.argv[1], Path(sys.argv[2]), plots=False)
-print(json.dumps({'peak_rss_mb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+def peak_mb():
+    # VmHWM is this program's own peak; ru_maxrss also counts the parent's pages before exec
+    try:
+        for line in open('/proc/self/status'):
+            if line.startswith('VmHWM:'):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+print(json.dumps({'peak_rss_mb': peak_mb(),
                   'seconds': time.monotonic() - started, 'sigma': result.report['sigma_pct_fs']['after'],
                   'sessions': result.report.get('sessions')}))
 '''
