@@ -9,7 +9,11 @@ Per sample (or a batch of samples as one array):
    in output space as TM-663 §5(4) does with its zero points;
 3. loads in balance calibration axes from the active model without its constants (§10.1) on those
    full outputs: what the balance carries (model weight included); flag loads beyond
-   `envelope_margin` x capacity (the model is extrapolating there);
+   `envelope_margin` x capacity (the model is extrapolating there). A direct (TM-663) model is a
+   polynomial of the outputs, evaluated here from a precomputed plan; an iterative (AIAA R-091)
+   model gives outputs from loads and is inverted per sample by its own vectorised Newton iteration
+   (`IterativeModel.loads_and_status`): a sample where Newton does not converge is not published
+   and is counted (`not_converged`), like a saturated one;
 4. subtract the tare load (`~/tare`: the mean loads of a wind-off window, N and N·m) in load
    space. The calibration is nonlinear, so model(V) - model(V0) != model(V - V0): a tare taken
    in output space would be off by up to several % FS with the model's weight on the balance;
@@ -87,21 +91,30 @@ class ActiveCalibration:
     # (6,) |raw output| above this (mV) is a saturated bridge (inf for channels the calibration lacks)
 
     @cached_property
+    def iterative(self) -> bool:
+        """The model is R-091's iterative form (outputs from loads, inverted by Newton per sample)."""
+        return getattr(self.model, 'form', 'direct') == 'iterative'
+
+    @cached_property
     def plan(self):
-        """What one sample needs, precomputed: input columns, component slots, powers, coefficients."""
-        names, plain, absolute, has_absolute = self.model._exponents
+        """What one sample needs, precomputed: input columns, component slots, powers, coefficients.
+        An iterative model has no polynomial of the outputs: columns and slots only (powers None)."""
         columns = np.array([BRIDGE_OUTPUTS.index(v) for v in self.model.inputs])
-        order = [self.model.inputs.index(v) for v in names if v in self.model.inputs]
         positions = np.array([COMPONENTS.index(c) for c in self.model.components])
+        if self.iterative:
+            return columns, positions, None, None, None
+        names, plain, absolute, has_absolute = self.model._exponents
+        order = [self.model.inputs.index(v) for v in names if v in self.model.inputs]
         return columns[order], positions, plain, absolute if has_absolute else None, \
             np.array(self.model.coefficients)
 
     @cached_property
     def one_sample_terms(self) -> tuple[tuple[int, ...], ...] | None:
         """Per term, the raw-output columns to multiply (with repetition), for one sample in plain
-        Python; None when a term has an absolute value or a power beyond 3 (then numpy's path)."""
+        Python; None when a term has an absolute value or a power beyond 3 (then numpy's path), or
+        for an iterative model."""
         columns, _, plain, absolute, _ = self.plan
-        if absolute is not None or plain.size == 0 or plain.max() > 3 or plain.min() < 0:
+        if plain is None or absolute is not None or plain.size == 0 or plain.max() > 3 or plain.min() < 0:
             return None
         return tuple(tuple(int(columns[v]) for v in range(plain.shape[1]) for _ in range(int(plain[t, v])))
                      for t in range(plain.shape[0]))
@@ -221,10 +234,12 @@ class WrenchBatch:
     fallback_reason: str = ''       # why the base model ran instead of the requested one ('' = it did not)
     loads_total: np.ndarray | None = None   # (N, 6) before the tare load: what the balance carries
     saturated: np.ndarray | None = None     # (N,) an output beyond the bridge's range (or a non-finite load)
+    not_converged: np.ndarray | None = None  # (N,) iterative model: Newton did not converge (not published)
 
     @property
     def nonfinite(self) -> np.ndarray:
-        return ~self.accepted & ~self.saturated
+        rejected = ~self.accepted & ~self.saturated
+        return rejected if self.not_converged is None else rejected & ~self.not_converged
 
 
 def model_loads(active: ActiveCalibration, outputs_mv, *, temperature_c=None,
@@ -247,10 +262,15 @@ def model_loads(active: ActiveCalibration, outputs_mv, *, temperature_c=None,
 
 
 def _plain_loads(active: ActiveCalibration, outputs: np.ndarray) -> np.ndarray:
-    """A model of the bridge outputs only, as one power-product and one matrix product (TM-663 eqs. (1)-(18))."""
+    """A model of the bridge outputs only: a direct model as one power-product and one matrix product
+    (TM-663 eqs. (1)-(18)); an iterative model by its vectorised Newton iteration (AIAA R-091), NaN rows
+    where it did not converge."""
     columns, positions, plain, absolute, coefficients = active.plan
     loads = np.zeros((outputs.shape[0], 6))
-    loads[:, positions] = power_products(outputs[:, columns], plain, absolute) @ coefficients.T
+    if plain is None:
+        loads[:, positions] = active.model.loads_and_status(outputs[:, columns])[0]
+    else:
+        loads[:, positions] = power_products(outputs[:, columns], plain, absolute) @ coefficients.T
     return loads
 
 
@@ -282,15 +302,20 @@ def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tare_
             direction = None if load_direction is None else np.broadcast_to(load_direction, outputs.shape)[accepted]
             totals[accepted], name, reason = _loads_with_zero(active, zeroed[accepted], temps, direction, zero_mv,
                                                               zero_temperature_c, zero_direction)
+    not_converged = np.zeros(len(outputs), dtype=bool)
     with np.errstate(invalid='ignore', over='ignore'):
         overflow = accepted & ~np.isfinite(totals).all(axis=1)    # finite outputs, loads beyond float range
         if overflow.any():
-            saturated, accepted = saturated | overflow, accepted & ~overflow
+            if active.iterative:          # finite outputs without loads: Newton did not converge there
+                not_converged = overflow
+            else:
+                saturated = saturated | overflow
+            accepted = accepted & ~overflow
             totals[overflow] = np.nan
         outside = accepted & np.any(np.abs(totals) > active.envelope, axis=1)
     loads = totals if tare_load is None else totals - np.asarray(tare_load, dtype=float)
     wrench = active.installation.to_tunnel(loads)          # TM-663 §10.2
-    return WrenchBatch(accepted, loads, wrench, outside, name, reason, totals, saturated)
+    return WrenchBatch(accepted, loads, wrench, outside, name, reason, totals, saturated, not_converged)
 
 
 def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv, tare_load) -> WrenchBatch:
@@ -301,6 +326,7 @@ def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv, t
     rejected = not all(map(math.isfinite, values))
     saturated = not rejected and any(abs(v) > r for v, r in zip(values, active.output_range_list))
     loads = np.full((1, 6), np.nan)
+    not_converged = False
     if not (rejected or saturated):
         columns, positions, plain, absolute, coefficients = active.plan
         terms = active.one_sample_terms
@@ -312,15 +338,22 @@ def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv, t
                 loads[0, positions] = coefficients @ design
             else:
                 zeroed = row if zero_mv is None else row - zero_mv
-                loads[0, positions] = coefficients @ power_products(zeroed[columns][None, :], plain, absolute)[0]
-            saturated = not all(map(math.isfinite, loads[0].tolist()))     # beyond float range
-        if saturated:
+                if plain is None:        # AIAA R-091: the model's own Newton iteration
+                    loads[0, positions] = active.model.loads_and_status(zeroed[columns][None, :])[0][0]
+                else:
+                    loads[0, positions] = coefficients @ power_products(zeroed[columns][None, :], plain, absolute)[0]
+            failed = not all(map(math.isfinite, loads[0].tolist()))     # beyond float range / no convergence
+        if failed:
             loads[:] = np.nan
-    accepted = not (rejected or saturated)
+            if plain is None:
+                not_converged = True
+            else:
+                saturated = True
+    accepted = not (rejected or saturated or not_converged)
     outside = accepted and bool((np.abs(loads[0]) > active.envelope).any())
     tared = loads if tare_load is None or not accepted else loads - tare_load
     return WrenchBatch(np.array([accepted]), tared, active.installation.to_tunnel(tared), np.array([outside]),
-                       active.model_name, '', loads, np.array([saturated]))
+                       active.model_name, '', loads, np.array([saturated]), np.array([not_converged]))
 
 
 def _loads_with_zero(active, zeroed, temperature_c, load_direction, zero_mv, zero_temperature_c, zero_direction):
@@ -504,27 +537,33 @@ class InputCounters:
     rejected_nonfinite: int = 0
     saturated: int = 0
     out_of_envelope: int = 0
+    not_converged: int = 0          # iterative model: samples where Newton did not converge
     period_received: int = 0
     period_rejected: int = 0
     period_saturated: int = 0
     period_out_of_envelope: int = 0
+    period_not_converged: int = 0
 
     def count(self, batch: WrenchBatch) -> None:
         n, ok = len(batch.accepted), int(np.count_nonzero(batch.accepted))
         saturated = 0 if batch.saturated is None else int(np.count_nonzero(batch.saturated))
+        failed = 0 if batch.not_converged is None else int(np.count_nonzero(batch.not_converged))
         out = int(np.count_nonzero(batch.out_of_envelope))
         self.received += n
         self.period_received += n
         self.published += ok
-        self.rejected_nonfinite += n - ok - saturated
-        self.period_rejected += n - ok - saturated
+        self.rejected_nonfinite += n - ok - saturated - failed
+        self.period_rejected += n - ok - saturated - failed
         self.saturated += saturated
         self.period_saturated += saturated
+        self.not_converged += failed
+        self.period_not_converged += failed
         self.out_of_envelope += out
         self.period_out_of_envelope += out
 
     def start_period(self) -> None:
         self.period_received = self.period_rejected = self.period_out_of_envelope = self.period_saturated = 0
+        self.period_not_converged = 0
 
 
 @dataclass(frozen=True)
@@ -577,6 +616,10 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         level = ERROR
         problems.append(f'{c.period_saturated} samples saturated (an output beyond '
                         f'{", ".join(f"{v:.3g}" for v in active.output_range_mv)} mV): not published')
+    if c.period_not_converged:
+        level = ERROR
+        problems.append(f'{c.period_not_converged} samples where the {active.model_name} model\'s Newton '
+                        f'iteration (AIAA R-091) did not converge: not published')
     if c.period_out_of_envelope:
         level = max(level, WARN) if level != STALE else level
         problems.append(f'{c.period_out_of_envelope} samples outside the calibrated envelope')
@@ -592,6 +635,7 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('wrenches_published', str(c.published)),
         ('rejected_nonfinite', str(c.rejected_nonfinite)),
         ('saturated', str(c.saturated)),
+        ('newton_not_converged', str(c.not_converged)),
         ('out_of_envelope', str(c.out_of_envelope)),
         ('envelope', ', '.join(f'{k}={v:.4g}' for k, v in zip(COMPONENTS, active.envelope))),
         *((what.replace(' ', '_'), str(total)) for what, total, _ in state.input_problems),

@@ -14,7 +14,8 @@ import numpy as np
 
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
 from .calibrator_core import (ActiveCalibration, InputCounters, LiveState, LoadHistory, StatusReport, TareResult,
-                              TareWindow, WrenchBatch, compute_wrench, diagnostics, evaluate_window, six_axis_loads)
+                              TareWindow, WrenchBatch, _extra_variables, compute_wrench, diagnostics, evaluate_window,
+                              six_axis_loads)
 from .tare_store import TareState, now_iso
 
 
@@ -213,19 +214,26 @@ class Published:
     uncertainty: np.ndarray | None = None     # (M, 6) standard uncertainty, tunnel axes; None = not available
 
 
-def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, tare_sigma) -> np.ndarray | None:
+def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, tare_sigma, *, model=None,
+                       extra=None, loads_balance=None) -> np.ndarray | None:
     """Standard uncertainty (k = 1) of each published load (M, 6), N / N·m, tunnel axes: the calibration's
     coefficient covariance and residual σ (model/uncertainty.py) at these outputs, and the tare's own
-    scatter. None when the calibration has no covariance (the memo's matrices) or the model needs inputs
-    besides the bridge outputs."""
+    scatter. `model`: the one that gave the loads (default the active model; the base model after a
+    fallback); `extra`: its variables besides the outputs (dT, dir_*) for these samples, as for its
+    loads(); `loads_balance` (M, 6): the loads it gave, balance axes, so that an iterative model is not
+    solved twice. None when the model has no covariance (the memo's matrices) or needs an input it
+    was not given."""
     from ..model.uncertainty import has_uncertainty, load_standard_uncertainty
-    model = active.model
-    if model.extra_variables or not has_uncertainty(model):
+    model = active.model if model is None else model
+    if (model.extra_variables and extra is None) or not has_uncertainty(model):
         return None
     columns = [BRIDGE_OUTPUTS.index(v) for v in model.inputs]
-    per_component = load_standard_uncertainty(model, zeroed_outputs[:, columns], tare_sigma=None if tare_sigma is None
-                                              else np.asarray(tare_sigma)[[COMPONENTS.index(c)
-                                                                           for c in model.components]])
+    positions = [COMPONENTS.index(c) for c in model.components]
+    iterative = getattr(model, 'form', 'direct') == 'iterative'
+    per_component = load_standard_uncertainty(
+        model, zeroed_outputs[:, columns], extra,
+        tare_sigma=None if tare_sigma is None else np.asarray(tare_sigma)[positions],
+        loads=None if loads_balance is None or not iterative else np.asarray(loads_balance)[:, positions])
     six = np.zeros((len(zeroed_outputs), 6))
     six[:, [COMPONENTS.index(c) for c in model.components]] = per_component
     return np.abs(active.installation.to_tunnel(six))       # a signed permutation: magnitudes carry over
@@ -296,7 +304,16 @@ class LiveCalibrator:
         if self.settings.publish_uncertainty and len(indices):
             accepted_outputs = outputs if all_accepted else outputs[indices]
             zeroed = accepted_outputs if tare.zero_mv is None else accepted_outputs - tare.zero_mv
-            uncertainty = wrench_uncertainty(active, zeroed, tare.tare_sigma)
+            model = active.model if batch.model_used == active.model_name else active.base_model
+            extra = None
+            if model.extra_variables:       # the same variables the loads were computed with
+                extra = _extra_variables(
+                    model, len(indices),
+                    None if temperature_c is None or batch.fallback_reason else np.asarray(temperature_c, float),
+                    active.calibration.reference_temperature_c, None if direction is None else direction[indices])
+                extra = None if isinstance(extra, str) else extra
+            uncertainty = wrench_uncertainty(active, zeroed, tare.tare_sigma, model=model, extra=extra,
+                                             loads_balance=loads_total)
         return Published(indices, wrench, batch, uncertainty)
 
     # --- ~/tare, ~/zero, ~/clear_tare ------------------------------------------------------------
@@ -345,8 +362,6 @@ class LiveCalibrator:
         from ..model.uncertainty import has_uncertainty
         if not self.settings.publish_uncertainty:
             return 'off (publish_uncertainty false)'
-        if self.active.model.extra_variables:
-            return 'not available: the model needs inputs besides the bridge outputs'
         if not has_uncertainty(self.active.model):
             return 'not available: the calibration carries no coefficient covariance (e.g. the memo matrices)'
         return 'published'

@@ -112,8 +112,12 @@ class TermEvaluator:
         self.max_plain = int(self.factor_plain.max(initial=0))
         self.max_absolute = int(self.factor_absolute.max(initial=0))
         variable_of = self.factor_variable[self.index]                    # (K, p), -1 where padding
-        self.columns = [[(v, np.flatnonzero(variable_of[k] == v)) for v in range(len(variables))
-                         if (variable_of[k] == v).any()] for k in range(self.k)]
+        # a term has at most one factor per variable: dg_j/dx_v is the derivative of factor slot[v, j]
+        # times the other factors, or 0 where v is not in term j (slot K: a row of zeros)
+        self.slot = np.full((len(variables), len(terms)), self.k, dtype=int)
+        for k in range(self.k):
+            used = variable_of[k] >= 0
+            self.slot[variable_of[k][used], np.flatnonzero(used)] = k
 
     @cached_property
     def _flat(self):
@@ -158,14 +162,15 @@ class TermEvaluator:
         design = gathered[0]
         for g in gathered[1:]:
             design = design * g
-        derivatives = np.zeros((len(self.variables), values.shape[0], self.n_terms))
+        n = values.shape[0]
+        parts = np.zeros((self.k + 1, n, self.n_terms))
         for k in range(self.k):
             part = d_table[:, self.index[k]]
             for other in range(self.k):
                 if other != k:
                     part = part * gathered[other]
-            for v, columns in self.columns[k]:
-                derivatives[v][:, columns] += part[:, columns]
+            parts[k] = part
+        derivatives = parts[self.slot[:, None, :], np.arange(n)[None, :, None], np.arange(self.n_terms)[None, None, :]]
         return design, derivatives
 
 
@@ -233,6 +238,11 @@ class IterativeModel:
         return matrix
 
     @cached_property
+    def linear_inverse(self) -> np.ndarray:
+        """(n_components, n_inputs) inverse of the linear part: Newton's starting point."""
+        return np.linalg.inv(self.linear_matrix)
+
+    @cached_property
     def load_scale(self) -> np.ndarray:
         """(n_components,) a typical load, for the convergence test: capacities if known, else 1."""
         capacity = self.metadata.get('capacity') if isinstance(self.metadata, Mapping) else None
@@ -262,44 +272,62 @@ class IterativeModel:
         """
         single = np.ndim(bridge_outputs_mv) == 1
         outputs = np.atleast_2d(np.asarray(bridge_outputs_mv, dtype=float))
-        if outputs.shape[1] != len(self.inputs):
-            raise ValueError(f'expected {len(self.inputs)} columns ({", ".join(self.inputs)}), got {outputs.shape[1]}')
-        try:
-            loads = np.linalg.solve(self.linear_matrix, outputs.T).T
-        except np.linalg.LinAlgError:
-            raise InverseDidNotConverge(f'model {self.name}: the linear part is singular') from None
-        finite = np.all(np.isfinite(outputs), axis=1)
-        loads[~finite] = 0.0
-        scale = self.tolerance * self.load_scale
-        # Newton with the Jacobian refreshed every few steps (a chord method in between): the
-        # Jacobian at the linear estimate already holds the balance's curvature, so the chord
-        # steps converge in a few design evaluations each.
-        inverse = None
-        converged = ~finite
-        coefficients_t = self.coefficients.T
-        outputs_used = np.where(finite[:, None], outputs, 0.0)
-        for iteration in range(self.max_iterations):
-            if iteration % 6 == 0:
-                predicted, jac = self.output_jacobian(loads)
-                try:
-                    inverse = np.linalg.inv(jac)
-                except np.linalg.LinAlgError:
-                    inverse = np.linalg.pinv(jac)
-            else:
-                predicted = self.evaluator.design(loads) @ coefficients_t
-            step = np.einsum('nmk,nk->nm', inverse, outputs_used - predicted)
-            loads = loads + step
-            converged = (np.abs(step) <= scale).all(axis=1)      # NaN steps never converge
-            if converged.all():
-                break
+        loads, converged = self.loads_and_status(outputs)
         if not converged.all():
             bad = np.flatnonzero(~converged)
             raise InverseDidNotConverge(
                 f'model {self.name}: Newton iteration for the loads did not converge in {self.max_iterations} steps '
                 f'for {bad.size} of {len(outputs)} sample(s), first at sample {bad[0]} (outputs '
                 f'{np.round(outputs[bad[0]], 6).tolist()}); outside the calibrated range?')
-        loads[~finite] = np.nan
         return loads[0] if single else loads
+
+    def loads_and_status(self, bridge_outputs_mv) -> tuple[np.ndarray, np.ndarray]:
+        """(loads (N, n_components), converged (N,) bool) by Newton iteration, vectorised over samples,
+        without raising: a sample whose iteration did not converge gets a NaN row and converged False
+        (the live calibrator publishes nothing for it and counts it). Non-finite outputs: NaN rows,
+        converged True (nothing to iterate; the caller rejects them)."""
+        outputs = np.atleast_2d(np.asarray(bridge_outputs_mv, dtype=float))
+        if outputs.shape[1] != len(self.inputs):
+            raise ValueError(f'expected {len(self.inputs)} columns ({", ".join(self.inputs)}), got {outputs.shape[1]}')
+        finite = np.all(np.isfinite(outputs), axis=1)
+        outputs_used = np.where(finite[:, None], outputs, 0.0)
+        try:
+            loads = outputs_used @ self.linear_inverse.T
+        except np.linalg.LinAlgError:
+            raise InverseDidNotConverge(f'model {self.name}: the linear part is singular') from None
+        scale = self.tolerance * self.load_scale
+        # Newton with the Jacobian refreshed every few steps (a chord method in between): the
+        # Jacobian at the linear estimate already holds the balance's curvature, so the chord
+        # steps converge in a few design evaluations each. Per sample: a sample stops iterating
+        # once its own step is below the tolerance, so its loads do not depend on the other
+        # samples of the batch (one sample alone gives the same numbers as within a batch).
+        converged = np.zeros(len(outputs), dtype=bool)
+        todo = np.arange(len(outputs))
+        current, target, inverse = loads, outputs_used, None
+        coefficients_t = self.coefficients.T
+        with np.errstate(invalid='ignore', over='ignore', divide='ignore'):
+            for iteration in range(self.max_iterations):
+                if iteration % 6 == 0:
+                    predicted, jac = self.output_jacobian(current)
+                    try:
+                        inverse = np.linalg.inv(jac)
+                    except np.linalg.LinAlgError:
+                        inverse = np.linalg.pinv(jac)
+                else:
+                    predicted = self.evaluator.design(current) @ coefficients_t
+                step = np.einsum('nmk,nk->nm', inverse, target - predicted)
+                current = current + step
+                done = (np.abs(step) <= scale).all(axis=1)      # NaN steps never converge
+                if done.all():
+                    loads[todo], converged[todo], todo = current, True, todo[:0]
+                    break
+                if done.any():
+                    loads[todo[done]], converged[todo[done]] = current[done], True
+                    keep = ~done
+                    todo, current, target, inverse = todo[keep], current[keep], target[keep], inverse[keep]
+        loads[todo] = np.nan
+        loads[~finite | ~converged] = np.nan
+        return loads, converged | ~finite
 
     def jacobian(self, bridge_outputs_mv, extra=None) -> np.ndarray:
         """d loads / d outputs (N, n_components, n_inputs): the inverse of d outputs / d loads."""

@@ -60,12 +60,14 @@ def require_covariance(calibration_or_model, model: str = 'adopted') -> None:
 
 
 def load_standard_uncertainty(calibration_or_model, outputs_mv, extra: Mapping[str, np.ndarray] | None = None,
-                              *, model: str = 'adopted', tare_sigma=None) -> np.ndarray:
+                              *, model: str = 'adopted', tare_sigma=None, loads=None) -> np.ndarray:
     """(N, n_components) standard uncertainty (k = 1) of each load, N / N·m, model component order.
 
     outputs_mv (N, n_inputs) as passed to model.loads; extra likewise. tare_sigma: optional
     (n_components,) standard uncertainty of a live load tare, added in quadrature. NaN rows where
-    the model has no stored covariance or the outputs are not finite.
+    the model has no stored covariance or the outputs are not finite. loads: optional (N, n_components)
+    the model's loads at these outputs if the caller has them already (an iterative model then skips
+    its Newton solve).
     """
     chosen = _resolve(calibration_or_model, model)
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
@@ -78,7 +80,7 @@ def load_standard_uncertainty(calibration_or_model, outputs_mv, extra: Mapping[s
     covariance, sigma = pieces
     good = outputs[finite]
     if getattr(chosen, 'form', 'direct') == 'iterative':
-        loads = np.atleast_2d(chosen.loads(good))
+        loads = np.atleast_2d(chosen.loads(good) if loads is None else np.asarray(loads, dtype=float)[finite])
         _, jac = chosen.output_jacobian(loads)
         design = chosen.design(loads)
         h = np.einsum('ij,jk,ik->i', design, covariance, design)
