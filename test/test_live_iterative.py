@@ -237,3 +237,36 @@ def test_table_fitted_iterative_calibration_drives_the_calibrator_over_dds(tmp_p
     finally:
         calibrator.stop()
         probe.close()
+
+
+def test_uncertainty_of_a_model_with_a_temperature_input_uses_that_input():
+    """The uncertainty publisher no longer skips models with extra inputs: it evaluates them with the same
+    dT as the loads; when the model falls back to its base (no temperature) the base's (none here) is used."""
+    from balance_calib.calibration_file import Calibration
+    from balance_calib.config import CONFIG_DIR
+    from balance_calib.model.balance_model import BalanceModel
+    from balance_calib.model.uncertainty import with_fitted_covariance
+
+    memo = load_calibration(CONFIG_DIR / 'lmc6522.yaml')
+    linear = memo.model('linear')
+    coefficients = np.hstack([linear.coefficients, np.zeros((6, 1))])
+    coefficients[2, -1] = 10.0                                             # 10 N/K on F_Z
+    augmented = BalanceModel('linear+temperature', linear.terms + parse_terms(['dT']), coefficients)
+    rng = np.random.default_rng(41)
+    fit_outputs = rng.uniform(-1.5, 1.5, (200, 6))
+    fit_extra = {'dT': rng.uniform(-5, 5, 200)}
+    augmented = with_fitted_covariance(augmented, fit_outputs, rng.normal(0, 1.0, (200, 6)), fit_extra)
+    calibration = Calibration('LMC6522', {'linear': linear, 'linear+temperature': augmented}, 'linear+temperature',
+                              'linear', memo.capacity, memo.rated_output_mv, reference_temperature_c=20.0)
+    active = activate(calibration)
+    raw = rng.uniform(-1, 1, (5, 6))
+    live = LiveCalibrator(active, LiveSettings(publish_uncertainty=True))
+    published = live.process(raw, 1000 * (1 + np.arange(5)), now_s=0.0, temperature_c=26.0)
+    assert published.batch.model_used == 'linear+temperature'
+    expected = load_standard_uncertainty(active.model, raw, {'dT': np.full(5, 6.0)})
+    np.testing.assert_allclose(published.uncertainty, np.abs(active.installation.to_tunnel(expected)), rtol=1e-12)
+    # dT enters the design row: the same outputs at another temperature give another uncertainty
+    other = load_standard_uncertainty(active.model, raw, {'dT': np.full(5, -4.0)})
+    assert np.abs(other - expected).max() > 1e-6 * expected.max()
+    fallback = live.process(raw, 1000 * (6 + np.arange(5)), now_s=0.0, temperature_c=None)
+    assert fallback.batch.model_used == 'linear' and fallback.uncertainty is None
