@@ -270,3 +270,20 @@ def test_uncertainty_of_a_model_with_a_temperature_input_uses_that_input():
     assert np.abs(other - expected).max() > 1e-6 * expected.max()
     fallback = live.process(raw, 1000 * (6 + np.arange(5)), now_s=0.0, temperature_c=None)
     assert fallback.batch.model_used == 'linear' and fallback.uncertainty is None
+
+
+def test_tare_window_without_a_load_is_refused_and_a_zero_without_a_solution_is_described_as_nan(noise_free):
+    from balance_calib.live.calibrator_core import TareWindow, describe_zero, evaluate_window
+    _, calibration, _ = noise_free
+    folding_cal, folding = _folding_calibration(calibration)
+    active = activate(folding_cal)
+    rated = np.asarray(calibration.rated_output_mv, float)
+    window = TareWindow(10)
+    rows = np.tile(folding.outputs(0.1 * CAPACITY[None, :])[0], (10, 1))
+    rows[3, 2] = 0.9 * rated[2]                        # beyond the fold: no load for this sample
+    window.add(rows)
+    result = evaluate_window(window, active, max_ratio=4.0)
+    assert not result.ok and '1 of the window\'s 10 samples give no load' in result.message
+    zero = np.zeros(6)
+    zero[2] = 0.9 * rated[2]
+    assert 'FZ=+nan' in describe_zero(zero, active)

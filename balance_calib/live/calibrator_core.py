@@ -39,6 +39,7 @@ import numpy as np
 
 from ..calibration_file import Calibration, ConfigError
 from ..model.balance_model import BalanceModel
+from ..model.inverse import InverseDidNotConverge
 from ..model.terms import power_products
 from ..tunnel_axes import Installation, parse_installation
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
@@ -484,6 +485,11 @@ def evaluate_window(window: TareWindow, active: ActiveCalibration, *, max_ratio:
     batch = compute_wrench(active, outputs, zero_mv=zero_mv, temperature_c=window.temperature_c,
                            load_direction=load_direction, zero_temperature_c=zero_temperature_c,
                            zero_direction=zero_direction)
+    failed = int(np.count_nonzero(~np.isfinite(batch.loads_total).all(axis=1)))
+    if failed:          # an iterative model's Newton iteration did not converge (or outputs saturated)
+        return TareResult(False, f'tare refused: {failed} of the window\'s {n} samples give no load '
+                                 f'(the {batch.model_used} model\'s Newton iteration did not converge or a bridge '
+                                 f'saturated)')
     components = active.calibration.components
     columns = [COMPONENTS.index(c) for c in components]
     loads = batch.loads_total[:, columns]
@@ -518,8 +524,11 @@ def describe_tare(tare_load, active: ActiveCalibration) -> str:
 def describe_zero(zero_mv, active: ActiveCalibration) -> str:
     """The zero subtracted, per bridge output in mV, and the load it stands for in tunnel axes."""
     zero = np.asarray(zero_mv, dtype=float)
-    equivalent = six_axis_loads(active.base_model, zero[None, :])[0] if not active.base_model.extra_variables \
-        else np.full(6, np.nan)
+    try:
+        equivalent = six_axis_loads(active.base_model, zero[None, :])[0] if not active.base_model.extra_variables \
+            else np.full(6, np.nan)
+    except InverseDidNotConverge:      # an iterative model without a solution there: no number
+        equivalent = np.full(6, np.nan)
     outputs = ', '.join(f'{c}={v:+.5f} mV' for c, v in zip(active.calibration.bridge_outputs,
                                                            zero[[BRIDGE_OUTPUTS.index(b) for b in
                                                                  active.calibration.bridge_outputs]]))
