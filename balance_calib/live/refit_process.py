@@ -46,7 +46,7 @@ def _die_with_parent() -> None:
         pass
 
 
-def _child(connection, bags, balance, out_dir, model, parent_pid) -> None:
+def _child(connection, bags, balance, out_dir, model, parent_pid, active=None) -> None:
     _die_with_parent()
     if os.getppid() != parent_pid:     # the node died before prctl took effect
         return
@@ -56,7 +56,7 @@ def _child(connection, bags, balance, out_dir, model, parent_pid) -> None:
         pass
     try:
         from balance_calib.refit.pipeline import run_refit
-        result = run_refit(list(bags), balance, out_dir, model=model, diagnose=True,
+        result = run_refit(list(bags), balance, out_dir, model=model, diagnose=True, active_calibration=active,
                            progress=lambda line: connection.send(('progress', str(line))))
         path = getattr(result, 'calibration_path', None)
         connection.send(('ok', result.calibration.to_dict(), str(getattr(result, 'summary', '') or 'done'),
@@ -70,12 +70,17 @@ def _child(connection, bags, balance, out_dir, model, parent_pid) -> None:
 
 
 def run_refit_in_process(bags, balance: str, out_dir: Path, model: str, *, progress: Callable[[str], None],
-                         timeout_s: float, started: Callable[[int], None] | None = None) -> RefitProduct:
-    """Run the refit pipeline in a spawned process; blocks the calling (worker) thread until it ends."""
+                         timeout_s: float, started: Callable[[int], None] | None = None,
+                         active_calibration: str | None = None) -> RefitProduct:
+    """Run the refit pipeline in a spawned process; blocks the calling (worker) thread until it ends.
+
+    active_calibration: the calibration file in use; the refit's acceptance gates refuse a new one
+    whose sensitivities moved far from it (refit/gates.py).
+    """
     context = multiprocessing.get_context('spawn')
     receiver, sender = context.Pipe(duplex=False)
     process = context.Process(target=_child, args=(sender, [str(b) for b in bags], balance, str(out_dir), model,
-                                                   os.getpid()),
+                                                   os.getpid(), active_calibration),
                               name='balance_calib refit', daemon=True)
     process.start()
     sender.close()
@@ -179,8 +184,9 @@ def run_refit_job(job: RefitJob, refit_function, progress: Callable[[str], None]
             calibration, summary = result.calibration, getattr(result, 'summary', '') or 'done'
             path = getattr(result, 'calibration_path', None)
         else:
+            active_file = None if is_balance_config(job.calibration_file) else str(job.calibration_file)
             product = run_refit_in_process(job.bags, job.balance, job.out_dir, job.base, progress=progress,
-                                           timeout_s=job.timeout_s)
+                                           timeout_s=job.timeout_s, active_calibration=active_file)
             calibration, summary, path = product.calibration, product.summary, product.calibration_path
         if not isinstance(calibration, Calibration):
             raise TypeError(f'the refit returned {type(calibration).__name__}, not a Calibration')

@@ -1,0 +1,39 @@
+"""~/refit's job hands the calibration in use to the refit's acceptance gates (refit/gates.py), so a
+refit whose sensitivities moved far from it (wrong balance, a unit error) is refused in the node too;
+a balance config (nothing fitted yet) is compared only with the balance's nominal sensitivities."""
+from pathlib import Path
+
+import pytest
+
+from balance_calib.calibration_file import save_calibration
+from balance_calib.config import CONFIG_DIR
+from balance_calib.live import refit_process
+from balance_calib.live.refit_process import make_refit_job, run_refit_job
+from balance_calib.tunnel_axes import UPRIGHT
+from test_live_stream import MEMO
+
+
+def _job(tmp_path, calibration_file):
+    bag = tmp_path / 'bag'
+    bag.mkdir()
+    return make_refit_job([bag], 'lmc6522', tmp_path / 'reports', 'cubic', UPRIGHT, 1.1, 1.0, 60.0,
+                          calibration_file)
+
+
+@pytest.mark.parametrize('kind', ['calibration', 'balance_config'])
+def test_the_refit_process_is_given_the_active_calibration_file(tmp_path, monkeypatch, kind):
+    if kind == 'calibration':
+        calibration_file = tmp_path / 'calibration.yaml'
+        save_calibration(calibration_file, MEMO)
+    else:
+        calibration_file = Path(CONFIG_DIR) / 'lmc6522.yaml'
+    seen = {}
+
+    def fake_process(bags, balance, out_dir, model, *, progress, timeout_s, active_calibration=None, **kwargs):
+        seen['active'] = active_calibration
+        raise refit_process.RefitFailed('stopped by the test')
+
+    monkeypatch.setattr(refit_process, 'run_refit_in_process', fake_process)
+    reply = run_refit_job(_job(tmp_path, calibration_file), None, progress=lambda line: None)
+    assert reply == 'stopped by the test'
+    assert seen['active'] == (str(calibration_file) if kind == 'calibration' else None)
