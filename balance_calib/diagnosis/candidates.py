@@ -162,16 +162,23 @@ def refer_to_zero_points(values, times_s, is_zero_point, orientation) -> np.ndar
     return referred[:, 0] if column else referred
 
 
+# A load change below this fraction of capacity is no reversal (see load_directions).
+DIRECTION_THRESHOLD = 1e-3
+
+
 def load_directions(loads, times_s, capacity) -> np.ndarray:
     """(N, n) +1 where the load on a component last rose, -1 where it last fell, in time order.
 
     Starts rising, as the simulated balance and the live LoadHistory do; a change smaller than
-    1e-9 of capacity (the same load hung again) keeps the previous direction.
+    DIRECTION_THRESHOLD of capacity keeps the previous direction: the same load hung again, or the
+    estimated body's tare moving by a hair when the body is turned over (1.6e-4 N·m of M_X on
+    LMC6522, 1e-6 of capacity, flipped dir_MX at every orientation change and made its loop terms
+    fit differently in the two halves of the campaign).
     """
     loads = np.atleast_2d(np.asarray(loads, dtype=float))
     order = np.argsort(np.asarray(times_s, dtype=float), kind='stable')
     steps = np.diff(loads[order], axis=0)
-    sign = np.where(np.abs(steps) > 1e-9 * np.asarray(capacity, float), np.sign(steps), 0.0)
+    sign = np.where(np.abs(steps) > DIRECTION_THRESHOLD * np.asarray(capacity, float), np.sign(steps), 0.0)
     sign = np.vstack([np.ones((1, loads.shape[1])), sign])
     rows = np.arange(len(sign))[:, None] * np.ones((1, loads.shape[1]), dtype=int)
     last = np.maximum.accumulate(np.where(sign != 0, rows, 0), axis=0)     # forward fill
