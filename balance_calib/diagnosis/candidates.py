@@ -162,7 +162,9 @@ def refer_to_zero_points(values, times_s, is_zero_point, orientation) -> np.ndar
     return referred[:, 0] if column else referred
 
 
-# A load change below this fraction of capacity is no reversal (see load_directions).
+# A load change below this fraction of capacity is no reversal (see load_directions). The live
+# LoadHistory (live/calibrator_core.py) uses 0.005 from its last reversal point; 0.005 here left the
+# simulated M_Y loops partly unexplained (their small steps do reverse the simulated gauge).
 DIRECTION_THRESHOLD = 1e-3
 
 
