@@ -112,12 +112,10 @@ class TermEvaluator:
         self.max_plain = int(self.factor_plain.max(initial=0))
         self.max_absolute = int(self.factor_absolute.max(initial=0))
         variable_of = self.factor_variable[self.index]                    # (K, p), -1 where padding
-        # a term has at most one factor per variable: dg_j/dx_v is the derivative of factor slot[v, j]
-        # times the other factors, or 0 where v is not in term j (slot K: a row of zeros)
-        self.slot = np.full((len(variables), len(terms)), self.k, dtype=int)
-        for k in range(self.k):
-            used = variable_of[k] >= 0
-            self.slot[variable_of[k][used], np.flatnonzero(used)] = k
+        # a term has at most one factor per variable: dg_j/dx_v is the derivative of the factor in slot k
+        # of term j times the other factors, where v is that factor's variable (0 for other variables)
+        self.targets = [(variable_of[k][variable_of[k] >= 0], np.flatnonzero(variable_of[k] >= 0))
+                        for k in range(self.k)]
 
     @cached_property
     def _flat(self):
@@ -162,15 +160,14 @@ class TermEvaluator:
         design = gathered[0]
         for g in gathered[1:]:
             design = design * g
-        n = values.shape[0]
-        parts = np.zeros((self.k + 1, n, self.n_terms))
+        derivatives = np.zeros((len(self.variables), values.shape[0], self.n_terms))
         for k in range(self.k):
             part = d_table[:, self.index[k]]
             for other in range(self.k):
                 if other != k:
                     part = part * gathered[other]
-            parts[k] = part
-        derivatives = parts[self.slot[:, None, :], np.arange(n)[None, :, None], np.arange(self.n_terms)[None, None, :]]
+            variable, term = self.targets[k]
+            derivatives[variable, :, term] = part[:, term].T
         return design, derivatives
 
 
