@@ -119,30 +119,36 @@ class TermEvaluator:
 
     @cached_property
     def _flat(self):
-        """Flat column indices into the (N, n_vars x (h + 1)) power tables, h the highest power."""
+        """Flat column indices into the (N, 2 x n_vars x h) power table (x powers, then |x| powers), h - 1
+        the highest power: each factor's x^a and |x|^b columns, then those of x^(a-1) and |x|^(b-1)."""
         h = max(self.max_plain, self.max_absolute) + 1
         var = np.maximum(self.factor_variable, 0)
         a, b = self.factor_plain, self.factor_absolute
-        return (h, var * h + a, var * h + b, var * h + np.maximum(a - 1, 0), var * h + np.maximum(b - 1, 0),
+        offset = len(self.variables) * h
+        return (h, np.concatenate([var * h + a, offset + var * h + b]),
+                np.concatenate([var * h + np.maximum(a - 1, 0), offset + var * h + np.maximum(b - 1, 0)]),
                 var, a.astype(float), b.astype(float))
 
     def _tables(self, values: np.ndarray, derivative: bool):
-        h, plain_at, abs_at, plain_down, abs_down, var, a, b = self._flat
-        n = values.shape[0]
-        px = np.empty((n, values.shape[1], h))                        # 1, x, x², ... per variable
-        pa = np.empty_like(px)                                         # 1, |x|, |x|², ...
-        px[:, :, 0] = pa[:, :, 0] = 1.0
-        magnitude = np.abs(values)
-        for k in range(1, h):
-            np.multiply(px[:, :, k - 1], values, out=px[:, :, k])
-            np.multiply(pa[:, :, k - 1], magnitude, out=pa[:, :, k])
-        px, pa = px.reshape(n, -1), pa.reshape(n, -1)
-        x_part, a_part = px[:, plain_at], pa[:, abs_at]
+        h, at, down_at, var, a, b = self._flat
+        n, m = values.shape
+        powers = np.empty((n, 2, m, h))              # [1, x, x², ...] and [1, |x|, |x|², ...] per variable
+        powers[..., 0] = 1.0
+        if h > 1:
+            powers[:, 0, :, 1] = values
+            np.abs(values, out=powers[:, 1, :, 1])
+        for k in range(2, h):
+            np.multiply(powers[..., k - 1], powers[..., 1], out=powers[..., k])
+        flat = powers.reshape(n, -1)                 # x powers in the first m·h columns, |x| powers after
+        f = len(var)
+        parts = flat[:, at]
+        x_part, a_part = parts[:, :f], parts[:, f:]
         table = x_part * a_part
         table[:, 0] = 1.0
         if not derivative:
             return table, None
-        d_table = a * px[:, plain_down] * a_part + b * x_part * pa[:, abs_down] * np.sign(values)[:, var]
+        down = flat[:, down_at]
+        d_table = a * down[:, :f] * a_part + b * x_part * down[:, f:] * np.sign(values)[:, var]
         d_table[:, 0] = 0.0
         return table, d_table
 
@@ -240,6 +246,11 @@ class IterativeModel:
         return np.linalg.inv(self.linear_matrix)
 
     @cached_property
+    def step_tolerance(self) -> np.ndarray:
+        """(n_components,) Newton has converged for a sample once every load step is below this."""
+        return self.tolerance * self.load_scale
+
+    @cached_property
     def load_scale(self) -> np.ndarray:
         """(n_components,) a typical load, for the convergence test: capacities if known, else 1."""
         capacity = self.metadata.get('capacity') if isinstance(self.metadata, Mapping) else None
@@ -292,7 +303,7 @@ class IterativeModel:
             loads = outputs_used @ self.linear_inverse.T
         except np.linalg.LinAlgError:
             raise InverseDidNotConverge(f'model {self.name}: the linear part is singular') from None
-        scale = self.tolerance * self.load_scale
+        scale = self.step_tolerance
         # Newton with the Jacobian refreshed every few steps (a chord method in between): the
         # Jacobian at the linear estimate already holds the balance's curvature, so the chord
         # steps converge in a few design evaluations each. Per sample: a sample stops iterating
@@ -312,7 +323,7 @@ class IterativeModel:
                         inverse = np.linalg.pinv(jac)
                 else:
                     predicted = self.evaluator.design(current) @ coefficients_t
-                step = np.einsum('nmk,nk->nm', inverse, target - predicted)
+                step = (inverse @ (target - predicted)[:, :, None])[:, :, 0]
                 current = current + step
                 done = (np.abs(step) <= scale).all(axis=1)      # NaN steps never converge
                 if done.all():
@@ -322,8 +333,11 @@ class IterativeModel:
                     loads[todo[done]], converged[todo[done]] = current[done], True
                     keep = ~done
                     todo, current, target, inverse = todo[keep], current[keep], target[keep], inverse[keep]
-        loads[todo] = np.nan
-        loads[~finite | ~converged] = np.nan
+        if todo.size:
+            loads[todo] = np.nan
+        if finite.all():
+            return loads, converged
+        loads[~finite] = np.nan
         return loads, converged | ~finite
 
     def jacobian(self, bridge_outputs_mv, extra=None) -> np.ndarray:
