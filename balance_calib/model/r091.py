@@ -268,9 +268,13 @@ class IterativeModel:
 
     def output_jacobian(self, loads) -> tuple[np.ndarray, np.ndarray]:
         """(outputs (N, n_in), d outputs / d loads (N, n_in, n_components))."""
-        design, derivatives = self.evaluator.design_and_derivatives(np.atleast_2d(np.asarray(loads, float)))
-        jac = np.moveaxis(derivatives @ self.coefficients.T, 0, -1)          # (N, n_in, n_components)
+        design, jac = self.design_and_output_jacobian(loads)
         return design @ self.coefficients.T, jac
+
+    def design_and_output_jacobian(self, loads) -> tuple[np.ndarray, np.ndarray]:
+        """(g(loads) (N, n_terms), d outputs / d loads (N, n_in, n_components))."""
+        design, derivatives = self.evaluator.design_and_derivatives(np.atleast_2d(np.asarray(loads, float)))
+        return design, np.moveaxis(derivatives @ self.coefficients.T, 0, -1)
 
     # --- inverse: outputs -> loads (the BalanceModel interface) ---------------------------------
     def loads(self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None) -> np.ndarray:

@@ -81,8 +81,7 @@ def load_standard_uncertainty(calibration_or_model, outputs_mv, extra: Mapping[s
     good = outputs[finite]
     if getattr(chosen, 'form', 'direct') == 'iterative':
         loads = np.atleast_2d(chosen.loads(good) if loads is None else np.asarray(loads, dtype=float)[finite])
-        _, jac = chosen.output_jacobian(loads)
-        design = chosen.design(loads)
+        design, jac = chosen.design_and_output_jacobian(loads)
         h = np.einsum('ij,jk,ik->i', design, covariance, design)
         variance_out = sigma[None, :] ** 2 * (1.0 + h)[:, None]
         inverse = np.linalg.inv(jac)
