@@ -306,7 +306,12 @@ class BridgePublisher(Node):
             raw = self._outputs.get(tl.RAW) or self._outputs.get('/balance/raw')
             # the physical wind-on run's attitude and q∞ are as necessary as the raw samples
             gated = [raw] + [self._outputs[k] for k in (ATTITUDE, DYNAMIC_PRESSURE) if k in self._outputs]
-            if wanted > 0 and raw is not None and min(p.get_subscription_count() for p in gated) < wanted:
+            # a campaign's gravity and applied-load events are published once each: a recorder whose
+            # subscriptions to them match after /balance/raw's would lose the first orientation
+            events = [self._outputs[k] for k in (tl.GRAVITY, tl.APPLIED_LOAD)
+                      if k in self._outputs and self.mode == 'calibration']
+            if wanted > 0 and raw is not None and (min(p.get_subscription_count() for p in gated) < wanted
+                                                   or any(p.get_subscription_count() < 1 for p in events)):
                 if not self._waiting_logged:
                     self.get_logger().info(f'waiting for {wanted} subscriber(s) on /balance/raw'
                                            + (' and the attitude and dynamic pressure' if len(gated) > 1 else ''))
