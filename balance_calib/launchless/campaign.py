@@ -87,7 +87,10 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
     processes = []
     try:
         calibrator = NodeProcess('balance_calibrator', domain, logs, {'balance': balance, 'calibration_bags': [str(bag)],
-                                                     'report_dir': str(report_dir), 'tare_samples': 100})
+                                                     'report_dir': str(report_dir), 'tare_samples': 100,
+                                                     # a calibration applies the rated loads plus the loading
+                                                     # hardware's by-products (up to 100.1 %): no interlock then
+                                                     'overload_fraction': 1.2})
         processes.append(calibrator)
         recorder = NodeProcess('balance_recorder', domain, logs, {'output': str(bag)})
         processes.append(recorder)
