@@ -3,7 +3,8 @@
 interfaces.md: a load point's samples are the /balance/raw messages stamped from its applied_load
 message up to the next applied_load message; an all-NaN applied_load means "between points" and
 the samples after it belong to no point. Gravity is the last /calibration/gravity before the
-point. Each point is averaged per bridge after rejecting outliers (median ± k·MAD).
+point. Each point is averaged per bridge after rejecting outliers (median ± k·MAD, the larger of the
+point's own MAD and the campaign's typical one).
 
 Everything is cut by the data's structure, never by arrays spanning wall time: markers are taken
 in stamp order (a marker whose stamp goes back against the recorder's order is counted for the
@@ -11,10 +12,23 @@ acceptance gates), the last point ends one typical point period after its marker
 clock jump joins no point), and pauses between sessions (a lunch break, a night) are shortened on
 the points' time axis to one typical point spacing, so a campaign split over days refits like the
 unsplit one and nothing downstream grows with the length of a pause.
+
+Each point also keeps its own scatter, the repeatability yardstick of the residual diagnosis
+(diagnosis/leftovers.py): per bridge, the variance of the point's mean output (mV²) and the number
+of samples averaged. The estimator is the mean square successive difference of the samples kept,
+in time order (von Neumann): s² = Σ (v[j+1] - v[j])² / (2 (n - 1)), variance of the mean s² / n.
+A point's samples are not always stationary: the output settles or creeps after the weights are
+hung, the zero drifts; a trend of δ per sample adds only δ²/2 to this estimate, whereas it adds
+the trend's whole spread (Δ²/12 over the point) to the variance about the point mean and would
+make the yardstick too lenient for exactly the effects the diagnosis should flag. For white
+noise both estimate σ²; this one has fewer effective degrees of freedom (about 2 (n - 1)² /
+(3n - 4) instead of n - 1 per point), which over hundreds of points hardly moves the F-test.
+It sees noise within a point only: scatter slower than a point (the loading hardware, drift)
+shows in the zero points, which the diagnosis compares with it. Memory: two (P, n) arrays.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -39,6 +53,11 @@ class CutSummary:
     samples_outside_points: int = 0      # raw samples in no point (between points, beyond a point's end)
     pauses_s: tuple[float, ...] = ()     # pauses between sessions that were shortened, seconds
     clipped: tuple[tuple[str, float, int, int], ...] = ()  # (bridge, mV, samples, points) flat-topped
+    # per point (same order as the LoadPoints returned): variance of the mean output per bridge,
+    # mV² (successive differences, see the module's docstring; NaN with < 2 samples), samples averaged
+    point_labels: np.ndarray | None = field(default=None, compare=False, repr=False)          # (P,)
+    point_variance_mv2: np.ndarray | None = field(default=None, compare=False, repr=False)    # (P, n)
+    point_samples: np.ndarray | None = field(default=None, compare=False, repr=False)         # (P,)
 
 
 # A pause longer than this many typical point spacings separates two sessions.
@@ -69,6 +88,16 @@ def shorten_pauses(times_s: np.ndarray) -> tuple[np.ndarray, tuple[float, ...]]:
     new = np.empty_like(times)
     new[order] = times[order[0]] + np.concatenate([[0.0], np.cumsum(shortened)])
     return new, tuple(float(x) for x in steps[long])
+
+
+def successive_difference_variance(samples: np.ndarray) -> np.ndarray:
+    """(n_bridges,) variance of one sample from the mean square successive difference, mV².
+
+    samples (n, n_bridges) in time order, n >= 2: Σ (v[j+1] - v[j])² / (2 (n - 1)). Unbiased for
+    white noise; a slow trend within the point adds only (its step per sample)² / 2.
+    """
+    steps = np.diff(np.asarray(samples, dtype=float), axis=0)
+    return np.sum(steps ** 2, axis=0) / (2.0 * len(steps))
 
 
 def _flat_tops(values: np.ndarray, point_of_sample: np.ndarray, bridges) -> tuple:
@@ -177,6 +206,8 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
         t_stamps = temperature.stamps_ns[t_order].astype(float)
         t_values = np.asarray(temperature.values, float)[t_order]
     means = np.full((len(point_index), values.shape[1]), np.nan)
+    mean_variance = np.full((len(point_index), values.shape[1]), np.nan)
+    counts = np.zeros(len(point_index), dtype=int)
     times = np.full(len(point_index), np.nan)
     temps = np.full(len(point_index), np.nan)
     # no bridge gives 1000x its rated output; without a config, no amplifier gives 1e6 mV
@@ -184,6 +215,22 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
                     else np.full(values.shape[1], 1e6))
     used = outliers = nans = empty = 0
     inside_values, inside_points = [], []
+    # robust scale (MAD) of each point's samples per bridge; the outlier limit is k x the larger of
+    # the point's own and the campaign's median one: with few samples a point's MAD alone is often
+    # small by chance, and rejecting ordinary noise (5 % of the samples at 8 a point over six
+    # bridges) truncates the points' scatter and biases the repeatability low. A spike is far
+    # beyond either.
+    medians = np.full((len(point_index), values.shape[1]), np.nan)
+    scales = np.full((len(point_index), values.shape[1]), np.nan)
+    for p, (a, b) in enumerate(zip(starts, ends)):
+        block = values[a:b]
+        block = block[np.all(np.isfinite(block) & (np.abs(block) <= plausible_mv), axis=1)]
+        if len(block):
+            medians[p] = np.median(block, axis=0)
+            if len(block) >= 5:
+                scales[p] = np.median(np.abs(block - medians[p]), axis=0) * 1.4826
+    typical_scale = (np.nanmedian(scales, axis=0) if np.any(np.isfinite(scales))
+                     else np.zeros(values.shape[1]))
     for p, (a, b) in enumerate(zip(starts, ends)):
         block = values[a:b]
         # a finite but absurd output (a flipped exponent bit) is as unusable as a NaN
@@ -196,15 +243,17 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
         if len(block) == 0:
             empty += 1
             continue
-        median = np.median(block, axis=0)
-        mad = np.median(np.abs(block - median), axis=0) * 1.4826
-        keep = np.all(np.abs(block - median) <= outlier_mad * np.maximum(mad, 1e-12), axis=1) \
+        limit = outlier_mad * np.maximum(np.fmax(scales[p], typical_scale), 1e-12)
+        keep = np.all(np.abs(block - medians[p]) <= limit, axis=1) \
             if len(block) >= 5 else np.ones(len(block), bool)
         if not np.any(keep):  # no sample near the median of all bridges at once: keep them all
             keep = np.ones(len(block), bool)
         outliers += int(np.count_nonzero(~keep))
         used += int(np.count_nonzero(keep))
         means[p] = block[keep].mean(axis=0)
+        counts[p] = int(np.count_nonzero(keep))
+        if counts[p] >= 2:
+            mean_variance[p] = successive_difference_variance(block[keep]) / counts[p]
         times[p] = block_stamps[keep].mean() / 1e9
         if len(temperature):
             temps[p] = float(np.mean(np.interp(block_stamps[keep].astype(float), t_stamps, t_values)))
@@ -224,4 +273,5 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
                               markers_out_of_order=len(backwards),
                               first_marker_out_of_order=int(backwards[0] + 1) if len(backwards) else -1,
                               duplicate_marker_stamps=duplicates, samples_outside_points=outside,
-                              pauses_s=pauses, clipped=clipped)
+                              pauses_s=pauses, clipped=clipped, point_labels=points.label.copy(),
+                              point_variance_mv2=mean_variance[keep_points], point_samples=counts[keep_points])

@@ -128,7 +128,7 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
 
     diagnosis = None
     if diagnose:
-        diagnosis = _run_diagnosis(reduction, config, base_model, fits[base_model], say)
+        diagnosis = _run_diagnosis(reduction, config, base_model, fits[base_model], say, cut)
         if diagnosis is not None:
             # σ and outliers of the model that will be adopted (effects found included)
             extra = fit_gates(config, points, diagnosis.sigma_pct_fs['after'], diagnosis.residuals_after,
@@ -179,14 +179,36 @@ def _where(sources: Sequence[str]) -> str:
 
 
 
-def _run_diagnosis(reduction, config, base_model, base_fit, say):
+def point_scatter_for(points: LoadPoints, cut: CutSummary | None) -> dict:
+    """diagnose()'s point_variance_mv2 (P, n) and point_samples (P,) in the order of `points`.
+
+    The cut keeps each point's own scatter (load_points.py); the points are matched by label, so
+    a reordering or a subset between the cut and the diagnosis cannot pair a point with another's
+    scatter. Empty (repeatability from the zero points) without a cut or when a point is missing.
+    """
+    if cut is None or cut.point_variance_mv2 is None or cut.point_labels is None:
+        return {}
+    labels = np.asarray(cut.point_labels)
+    at = {label: i for i, label in enumerate(labels.tolist())}
+    if len(at) != len(labels):
+        return {}
+    index = [at.get(label, -1) for label in np.asarray(points.label).tolist()]
+    if min(index, default=-1) < 0:
+        return {}
+    return {'point_variance_mv2': np.asarray(cut.point_variance_mv2, float)[index],
+            'point_samples': np.asarray(cut.point_samples)[index]}
+
+
+def _run_diagnosis(reduction, config, base_model, base_fit, say, cut=None):
     try:
         from ..diagnosis import diagnose as diagnose_residuals
     except ImportError:
         say('diagnosis not available: residuals not examined')
         return None
-    say('examining the residuals for effects the base model lacks...')
-    return diagnose_residuals(reduction, config, base_model=base_model)
+    scatter = point_scatter_for(reduction.points, cut)
+    say('examining the residuals for effects the base model lacks (repeatability from '
+        + ('the points\' own samples)...' if scatter else 'consecutive zero points)...'))
+    return diagnose_residuals(reduction, config, base_model=base_model, **scatter)
 
 
 def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str | Path, *,
