@@ -31,8 +31,9 @@ def test_trigger_prints_the_reply_and_exits_by_success(tmp_path):
         assert failed.stdout.startswith('success: false\nmessage: tare failed: only 0 of 20')
         probe = Probe(domain)
         wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
+        # a long wind-off hold: ~/tare refuses a window taken while the α sweep moves the loads
         publisher = NodeProcess('bridge_publisher', domain, tmp_path, {'mode': 'wind_on', 'loop': True,
-                                                                        'rate_hz': 100.0})
+                                                                        'rate_hz': 100.0, 'wind_off_s': 60.0})
         try:
             # the tare waits only tare_timeout_s = 1 s: let the publisher start streaming first
             wait_for(lambda: len(wrenches) > 0, 30.0, 'samples through the calibrator')
