@@ -10,6 +10,8 @@
 #   launchless_scripts/NAME               every script sources it first; inside a script it also
 #                                         turns on `set -euo pipefail`, so the script stops at the
 #                                         first failing command.
+# It installs requirements-run.txt; with BALANCE_CALIB_REQUIREMENTS=test (launchless_scripts/test
+# and colcon_check set it) requirements-test.txt, which adds pytest, hypothesis and colcon.
 # A failed setup returns non-zero (sourced) or exits (scripts) with one line saying what failed.
 
 _balance_calib_setup_venv() (
@@ -22,14 +24,24 @@ _balance_calib_setup_venv() (
     exit 1
   fi
   stamp="$venv/.requirements.sha256"
-  want="$(cat "$BALANCE_CALIB_ROOT/requirements.txt" "$BALANCE_CALIB_ROOT/setup.py" | sha256sum | cut -d' ' -f1)"
-  if [ ! -x "$venv/bin/python" ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
-    echo "[balance_calib] setting up $venv from requirements.txt (first use or requirements changed)..." >&2
+  # Two pinned sets: requirements-run.txt (what the nodes, balance-calib and the demo import) and
+  # requirements-test.txt (run + pytest, hypothesis, mcap-ros2-support, colcon). The test set
+  # contains the run set, so a venv set up for the tests also serves the demo.
+  wanted="${BALANCE_CALIB_REQUIREMENTS:-run}"
+  case "$wanted" in
+    run|test) ;;
+    *) echo "[balance_calib] BALANCE_CALIB_REQUIREMENTS=$wanted: expected run or test" >&2; exit 1 ;;
+  esac
+  hash="$(cat "$BALANCE_CALIB_ROOT/requirements-run.txt" "$BALANCE_CALIB_ROOT/requirements-test.txt" \
+               "$BALANCE_CALIB_ROOT/setup.py" | sha256sum | cut -d' ' -f1)"
+  have="$(cat "$stamp" 2>/dev/null || true)"
+  if [ ! -x "$venv/bin/python" ] || { [ "$have" != "$wanted:$hash" ] && [ "$have" != "test:$hash" ]; }; then
+    echo "[balance_calib] setting up $venv from requirements-$wanted.txt (first use or requirements changed)..." >&2
     "$python_bin" -c 'import sys; assert sys.version_info[:2] == (3, 11), "balance_calib needs Python 3.11 (ROS 2 Jazzy wheels)"'
     [ -x "$venv/bin/python" ] || "$python_bin" -m venv "$venv"
-    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$BALANCE_CALIB_ROOT/requirements.txt"
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$BALANCE_CALIB_ROOT/requirements-$wanted.txt"
     "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e "$BALANCE_CALIB_ROOT"
-    echo "$want" > "$stamp"
+    echo "$wanted:$hash" > "$stamp"
   fi
 )
 
