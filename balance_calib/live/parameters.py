@@ -55,6 +55,10 @@ PARAMETERS: dict[str, Spec] = {
                              0.0, 3600.0),
     'publish_uncertainty': Spec(True, 'publish balance/wrench_uncertainty (k = 1, N and N·m, tunnel axes) when the '
                                       'calibration carries its coefficient covariance'),
+    'input_units': Spec('mV', 'unit of the bridge outputs on balance/raw: mV | mV/V | microV/V (ratiometric '
+                              'outputs are multiplied by excitation_v); the wire format of the interface is mV'),
+    'excitation_v': Spec(0.0, 'bridge excitation voltage, V, for ratiometric input_units (0 = not given)',
+                         0.0, 100.0),
     'lowpass_hz': Spec(0.0, 'first-order low-pass cut-off on the published wrench, Hz (0 = off); reset by '
                             '~/tare and ~/zero', 0.0, 100_000.0),
 }
@@ -83,6 +87,24 @@ def check_parameter(name: str, value) -> None:
         return
     if name == 'calibration_file' and value:
         check_regular_file(value, 'calibration_file')
+    if name == 'input_units' and value not in INPUT_UNITS:
+        raise ValueError(f'parameter input_units must be one of {", ".join(INPUT_UNITS)}, not {value!r}')
+
+
+INPUT_UNITS = ('mV', 'mV/V', 'microV/V')
+
+
+def input_scale_mv(input_units: str, excitation_v: float) -> float:
+    """mV per unit of balance/raw: 1 for mV; for ratiometric outputs the excitation (units.ratiometric_to_mv).
+
+    ValueError naming the parameters when a ratiometric unit has no positive excitation_v."""
+    if input_units == 'mV':
+        return 1.0
+    from ..units import ratiometric_to_mv
+    if not excitation_v > 0.0:
+        raise ValueError(f'parameter input_units = {input_units} needs excitation_v > 0 (the bridge supply, V), '
+                         f'not {excitation_v:g}')
+    return float(ratiometric_to_mv(1.0, input_units, excitation_v))
 
 
 def check_regular_file(path, what: str, max_bytes: int = MAX_CALIBRATION_BYTES) -> None:

@@ -49,7 +49,8 @@ from std_srvs.srv import Trigger
 from balance_calib.calibration_file import ConfigError
 from balance_calib.config import resolve_config_path
 from balance_calib.live.calibrator_core import ActiveCalibration, activate, parse_reliability
-from balance_calib.live.parameters import PARAMETERS, STRING_ARRAY, check_parameter, load_calibration_checked
+from balance_calib.live.parameters import (PARAMETERS, STRING_ARRAY, check_parameter, input_scale_mv,
+                                           load_calibration_checked)
 from balance_calib.live.raw_codec import WrenchEncoder, decode_wrenches
 from balance_calib.live.refit_process import RefitJob, is_balance_config, make_refit_job, run_refit_job
 from balance_calib.live.stream import LiveCalibrator, LiveSettings
@@ -91,6 +92,7 @@ class BalanceCalibrator(Node):
                 self.declare_parameter(name, default, _descriptor(name, spec))
                 if spec.default != STRING_ARRAY:
                     check_parameter(name, self.get_parameter(name).value)
+            self._input_scale = input_scale_mv(self._param('input_units'), self._param('excitation_v'))
         except (ParameterException, ValueError) as err:
             raise ConfigError(f'invalid parameter: {err}') from None
         self._refit_function = refit_function
@@ -237,6 +239,8 @@ class BalanceCalibrator(Node):
             outputs = np.array([[d.wrench.force.x, d.wrench.force.y, d.wrench.force.z, d.wrench.torque.x,
                                  d.wrench.torque.y, d.wrench.torque.z] for d in decoded])
             frame_ids = [d.header.frame_id for d in decoded]
+        if self._input_scale != 1.0:          # ratiometric bridge outputs (input_units) to mV
+            outputs = outputs * self._input_scale
         now_s = time.monotonic()
         self._last_sample_s = now_s
         try:
@@ -367,6 +371,9 @@ class BalanceCalibrator(Node):
                 check_parameter(name, value)
             if 'balance' in changes:
                 resolve_config_path(changes['balance'])
+            if {'input_units', 'excitation_v'} & set(changes):
+                input_scale_mv(changes.get('input_units', self._param('input_units')),
+                               changes.get('excitation_v', self._param('excitation_v')))
             if CALIBRATION_PARAMETERS & set(changes):
                 path = changes.get('calibration_file', None)
                 path = self._live.active.source if path is None else (path or str(default_calibration_file()))
@@ -378,6 +385,7 @@ class BalanceCalibrator(Node):
     def _apply_parameters(self, parameters) -> None:
         names = {p.name for p in parameters}
         self._stale_after_s = self._param('stale_after_s')
+        self._input_scale = input_scale_mv(self._param('input_units'), self._param('excitation_v'))
         self._live.set_settings(self._settings())
         if 'frame_id' in names:
             self._encoder = WrenchEncoder(self._param('frame_id'))
