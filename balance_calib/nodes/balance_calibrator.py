@@ -394,9 +394,13 @@ class BalanceCalibrator(Node):
             self._diagnostics_timer = self.create_timer(self._param('diagnostics_period_s'), self._on_diagnostics)
         pending, self._pending = self._pending, None
         if pending is not None:
+            before = self._live.active
             self._live.set_active(pending)
-            self.get_logger().info(f'now {pending.model_name} model from {pending.source}, '
-                                   f'{pending.installation.name} installation')
+            # rclpy applies a request of several parameters one by one: say it once, when it changed
+            if (before.model_name, before.source, before.installation.name) != \
+                    (pending.model_name, pending.source, pending.installation.name):
+                self.get_logger().info(f'now {pending.model_name} model from {pending.source}, '
+                                       f'{pending.installation.name} installation')
         if 'tare_file' in names or 'calibration_file' in names:
             self._tare_file = self._tare_path(self._live.active)
 
