@@ -19,6 +19,7 @@ import numpy as np
 import yaml
 
 from .config import ConfigError, balance_config_from_dict
+from .plain_data import plain_data as _plain
 from .model.balance_model import BalanceModel
 from .units import BRIDGE_OUTPUTS, COMPONENTS
 
@@ -86,18 +87,6 @@ class Calibration:
             'models': {name: {k: v for k, v in m.to_dict().items() if k not in ('components', 'inputs')}
                        for name, m in self.models.items()},
         }
-
-
-def _plain(value):
-    if isinstance(value, Mapping):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    return value
 
 
 def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -> Calibration:

@@ -22,24 +22,11 @@ from balance_calib.nodes.balance_calibrator import BalanceCalibrator
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
 from ros_harness import RELIABLE, NodeProcess, Probe, new_domain_id, wait_for
 from test_live_stream import CAPACITY, MEMO, model_weight_tunnel, show_run
-from test_ros_calibrator import RawSource, connected, start_calibrator, wrench_values
+from test_ros_calibrator import (RawSource, calibration_file, connected, probe,  # noqa: F401 (fixtures)
+                                 start_calibrator, wrench_values)
 
 pytestmark = pytest.mark.ros
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-@pytest.fixture
-def probe():
-    probe = Probe(new_domain_id())
-    yield probe
-    probe.close()
-
-
-@pytest.fixture
-def calibration_file(tmp_path):
-    path = tmp_path / 'calibration.yaml'
-    save_calibration(path, MEMO)
-    return path
 
 
 class Stamped(RawSource):

@@ -21,6 +21,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from .inverse import InverseDidNotConverge
+from ..plain_data import plain_data as _plain
 from .terms import Term, parse_terms, term_exponents
 from .tm663 import tm663_terms
 
@@ -389,13 +390,3 @@ class IterativeModel:
             raise ValueError(f'{where}: {err}') from None
 
 
-def _plain(value):
-    if isinstance(value, Mapping):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    return value
