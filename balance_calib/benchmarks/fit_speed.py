@@ -11,16 +11,8 @@ from __future__ import annotations
 
 import argparse
 import platform
-import time
 
-
-def _best_of(function, repeat: int) -> float:
-    best = float('inf')
-    for _ in range(repeat):
-        start = time.perf_counter()
-        function()
-        best = min(best, time.perf_counter() - start)
-    return best
+from .timing import best_of as _best_of
 
 
 def main(argv=None) -> None:

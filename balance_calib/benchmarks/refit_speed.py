@@ -14,17 +14,9 @@ import argparse
 import os
 import platform
 import tempfile
-import time
 from pathlib import Path
 
-
-def _best_of(function, repeat: int) -> float:
-    best = float('inf')
-    for _ in range(repeat):
-        start = time.perf_counter()
-        function()
-        best = min(best, time.perf_counter() - start)
-    return best
+from .timing import best_of as _best_of
 
 
 def main(argv=None) -> None:

@@ -22,12 +22,11 @@ import shutil
 import stat
 import sys
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
 
-from .processes import NodeProcess
+from .processes import NodeProcess, wait_until as _wait
 
 MODEL = 'euler_replica_lmc6522'
 COEFFICIENTS = ('CAF', 'CY', 'CN', 'Cl', 'Cm', 'Cn', 'CD', 'CL')
@@ -45,14 +44,6 @@ def aero_executable(scratch: Path) -> str:
                       f'sys.exit(main())\n')
     script.chmod(script.stat().st_mode | stat.S_IXUSR)
     return str(script)
-
-
-def _wait(predicate, timeout: float, what: str):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            raise TimeoutError(f'timed out after {timeout:g} s waiting for {what}')
-        time.sleep(0.05)
 
 
 def _six(msg):

@@ -26,15 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .processes import NodeProcess
-
-
-def _wait(predicate, timeout: float, what: str):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            raise TimeoutError(f'timed out after {timeout:g} s waiting for {what}')
-        time.sleep(0.05)
+from .processes import NodeProcess, wait_until as _wait
 
 
 @dataclass

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import time
 from pathlib import Path
 
 
@@ -64,3 +65,12 @@ class NodeProcess:
         self._stdout.close()
         self._stderr.close()
         return self.process.returncode
+
+
+def wait_until(predicate, timeout: float, what: str):
+    """Poll predicate every 50 ms; TimeoutError naming `what` after timeout s."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f'timed out after {timeout:g} s waiting for {what}')
+        time.sleep(0.05)
