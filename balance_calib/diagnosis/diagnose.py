@@ -61,6 +61,7 @@ class DiagnosisSettings:
     alpha_lack_of_fit: float = 0.001     # per component: residual beyond the repeatability
     min_explained: float = 0.75          # effects on a component with structure left over must
                                          # explain this fraction of its excess variance, or none is adopted
+    alpha_slow_structure: float = 0.001  # per campaign: directed leftover tests (leftovers.slow_structure_bases)
     alpha_constancy: float = 1e-4        # Chow test of a static family's coefficients (first vs second half)
     equal_score: float = 0.8             # a runner-up within this fraction of the winner's score that the
                                          # winner absorbs: "cannot be separated" (a warning)

@@ -7,9 +7,17 @@ var(ΔL) = 2 s², ΔL the output difference through the linear part of the fit. 
 whitened residual variance is beyond s² (F-test with the residual's and the ν pairs' degrees of
 freedom, level alpha_lack_of_fit / 6) has structure left over.
 
+Beside that omnibus test, directed tests (slow_structure_bases) look for the component's own load
+shape (x, x², x|x|) changing with time, with the gravity vector, or with both: structure a
+calibration that holds throughout the campaign and in every orientation cannot have, concentrated
+in three to six columns where the omnibus test spreads it over hundreds of degrees of freedom
+(partial F-tests on the whitened fit, level alpha_slow_structure per campaign, Bonferroni over the
+components and bases, and it must remove at least min_effect_pct_fs).
+
 Such structure is reported as `unexplained`, with what it follows most strongly (`tracks`). When
 the effects found on that component explain less than `min_explained` of its excess variance
-(base-model variance minus s²), or fit it with coefficients that differ between the first and the
+(base-model variance minus s²; for a directed finding, of the structure along its basis together
+with what they removed), or fit it with coefficients that differ between the first and the
 second half of the campaign (a Chow test), none of them is adopted there: they fit part of
 something else, and adopting them would put the wrong physics into the live model.
 
@@ -25,7 +33,7 @@ from typing import Mapping
 import numpy as np
 import scipy.stats
 
-from .statistics import fit_columns, sigma_pct_fs
+from .statistics import fit_columns, partial_f, sigma_pct_fs
 
 # A component whose repeatability is this many times the median of the others is warned about.
 REPEATABILITY_WARNING_RATIO = 4.0   # LMC6522's own F_X (Table 17) is ~3x its other components
@@ -157,6 +165,57 @@ def _best_tracker(residual, trackers, alpha=0.01):
     return best
 
 
+def slow_structure_bases(times, gravity, loads_k) -> dict[str, np.ndarray]:
+    """The directed leftover tests' bases for one component: its own load shape -- gain x, even
+    curvature x², odd curvature x|x| (x = applied load / its largest magnitude) -- changing with the
+    campaign's two slow covariates, time and the gravity vector in balance axes (each component that
+    varies), and with their product (main effects and interaction). A calibration that is the same
+    throughout the campaign and in every orientation leaves none of them in the residual; the omnibus
+    lack-of-fit test spreads such structure over all its degrees of freedom, these concentrate it in
+    three. Built from the applied loads, which carry no noise (a test column, never adopted)."""
+    t = np.asarray(times, float)
+    t = (t - t.mean()) / max(float(np.ptp(t)), 1e-9)
+    x = np.asarray(loads_k, float) / max(float(np.max(np.abs(loads_k))), 1e-12)
+    shape = np.column_stack([x, x ** 2, x * np.abs(x)])
+    bases = {'time': t[:, None] * shape}
+    g = np.asarray(gravity, float)
+    varying = [g[:, i] for i in range(g.shape[1]) if np.ptp(g[:, i]) > 1e-6]
+    if varying:         # the body's weight loads the mounting linearly in the gravity vector
+        by_gravity = np.hstack([gi[:, None] * shape for gi in varying])
+        bases['gravity direction'] = by_gravity
+        bases['time × gravity direction'] = t[:, None] * by_gravity
+    return bases
+
+
+def _directed_reduction(problem, k, terms, basis) -> tuple[float, float, int, int]:
+    """(rss before, rss after, columns added, dof after) of the whitened fit of component k with the basis added."""
+    design = problem.white_columns(list(terms))
+    current = fit_columns(design, problem.loads_white[:, k])
+    trial = fit_columns(np.hstack([design, problem.whiten(basis)]), problem.loads_white[:, k])
+    return current.rss, trial.rss, trial.rank - current.rank, trial.dof
+
+
+def directed_lack_of_fit(problem, k, terms, base_terms, bases, alpha, n_tests):
+    """The most significant slow structure left on component k: (name, p adjusted, explained) or None
+    when none passes alpha. explained: the share the adopted terms beyond the base model took of all
+    the structure the base fit leaves in their span and the basis's together (whitened RSS),
+    (RSS_base - RSS_adopted) / (RSS_base - RSS_adopted+basis) -- the omnibus rule's "fraction of the
+    excess explained" (examine_leftovers), with the excess measured along the basis."""
+    best = None
+    for name, basis in bases.items():
+        before, after, q, dof = _directed_reduction(problem, k, terms, basis)
+        if q <= 0 or dof <= 0:
+            continue
+        _, p = partial_f(before, after, q, dof)
+        p = min(1.0, p * n_tests)
+        if p < alpha and (best is None or p < best[1]):
+            base_rss = fit_columns(problem.white_columns(list(base_terms)), problem.loads_white[:, k]).rss
+            structure = base_rss - after
+            explained = (base_rss - before) / structure if structure > 0 else 0.0
+            best = (name, p, explained)
+    return best
+
+
 def within_point_variance(linear, point_variance_mv2, point_samples, loaded):
     """(6,) variance of a point mean in load units from the points' own sample scatter, and its dof.
 
@@ -245,6 +304,7 @@ def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, 
     ratios, p_values, dropped, unexplained = {}, {}, {}, []
     alpha = settings.alpha_lack_of_fit / n_components
     late = (times > np.median(times)).astype(float)
+    alpha_slow = getattr(settings, 'alpha_slow_structure', 0.0)
     for k, c in enumerate(components):
         fit = fits[k]
         found = per_component[k]
@@ -255,12 +315,24 @@ def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, 
         excess = np.sqrt(max(variance - s2[k], 0.0)) / capacity[k] * 100.0
         ratios[c], p_values[c] = float(ratio), p
         lack_of_fit = p < alpha and excess >= settings.min_effect_pct_fs
-        if not (lack_of_fit or unstable):
+        directed, bases = None, {}
+        if alpha_slow > 0:
+            bases = slow_structure_bases(times, points.gravity, loads[:, k])
+            directed = directed_lack_of_fit(problem, k, comp_terms[k], base_terms, bases, alpha_slow,
+                                            n_components * len(bases))
+            if directed is not None:
+                size = fit_columns(np.hstack([problem.columns(comp_terms[k]), bases[directed[0]]]), loads[:, k])
+                if np.sqrt(max(fit.ols.rss - size.rss, 0.0) / len(loads)) / capacity[k] * 100.0 \
+                        < settings.min_effect_pct_fs:
+                    directed = None
+        if not (lack_of_fit or unstable or directed):
             continue
         partly, explained_note = (), ''
         if found:
             base_excess = max(base_fits[k].gls.rss / base_fits[k].gls.dof - s2[k], 0.0)
             explained = 1.0 - max(variance - s2[k], 0.0) / base_excess if base_excess > 0 else 0.0
+            if directed is not None:        # the excess along the directed basis (directed_lack_of_fit)
+                explained = min(explained, directed[2]) if lack_of_fit else directed[2]
             if unstable or explained < settings.min_explained:
                 partly = tuple(e['candidate'].family for e in found)
                 terms = set()
@@ -287,11 +359,20 @@ def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, 
         if name != 'nothing found':
             track_values = np.full(len(residual), np.nan)
             track_values[loaded] = trackers[name][:, 0]
+        directed_note = ''
+        if directed is not None:
+            directed_note = (f'; the load shape of {c} (x, x², x|x|) changes with {directed[0]} '
+                             f'(directed test p = {directed[1]:.1g})')
+            if name == 'nothing found':
+                name, r = f'load {c} × {directed[0]}', float('nan')
+                column = bases[directed[0]][:, 0]
+                track_values = np.where(loaded, column / max(float(np.max(np.abs(column))), 1e-12), np.nan)
         sigma = sigma_pct_fs(residual, capacity[k])
         evidence = (f'{c}: residual σ {np.sqrt(ratio):.1f}× the repeatability ({repeatability[c]:.3f} % FS from '
                     f'{source[c]}; lack of fit p = {p:.1g})'
-                    + (f'; follows {name} (r = {r:.2f})' if name != 'nothing found' else '; follows nothing examined')
-                    + explained_note)
+                    + (f'; follows {name}' + (f' (r = {r:.2f})' if r == r else '') if name != 'nothing found'
+                       else '; follows nothing examined')
+                    + directed_note + explained_note)
         unexplained.append(Unexplained((c,), evidence, name, {c: sigma}, float(ratio), p, r, partly,
                                        track_values, residual))
     return Leftovers(repeatability, int(nu.min()), ratios, p_values, tuple(unexplained), warnings, dropped, roll)
