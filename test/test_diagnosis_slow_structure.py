@@ -100,3 +100,8 @@ def test_gravity_time_curvature_on_a_force_is_unexplained_and_nothing_is_adopted
     assert [u.components for u in result.unexplained] == [(component,)], [u.evidence for u in result.unexplained]
     assert 'directed test' in result.unexplained[0].evidence
     assert result.adopted.term_names == result.base_fit.term_names
+    if component == 'FX':       # the omnibus test and every plain tracker miss it: the basis is what it follows
+        entry = result.unexplained[0]
+        assert entry.tracks == 'load FX × time × gravity direction'
+        shown = np.isfinite(entry.tracks_values)
+        assert np.corrcoef(entry.tracks_values[shown], entry.residual[shown])[0, 1] > 0.3

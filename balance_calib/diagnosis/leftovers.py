@@ -365,8 +365,11 @@ def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, 
                              f'(directed test p = {directed[1]:.1g})')
             if name == 'nothing found':
                 name, r = f'load {c} × {directed[0]}', float('nan')
-                column = bases[directed[0]][:, 0]
-                track_values = np.where(loaded, column / max(float(np.max(np.abs(column))), 1e-12), np.nan)
+                # the structure itself: the residual's least-squares projection on the basis
+                basis = bases[directed[0]]
+                coefficients, *_ = np.linalg.lstsq(basis[loaded], residual[loaded], rcond=None)
+                column = basis @ coefficients
+                track_values = np.where(loaded, column / max(float(np.max(np.abs(column[loaded]))), 1e-300), np.nan)
         sigma = sigma_pct_fs(residual, capacity[k])
         evidence = (f'{c}: residual σ {np.sqrt(ratio):.1f}× the repeatability ({repeatability[c]:.3f} % FS from '
                     f'{source[c]}; lack of fit p = {p:.1g})'
