@@ -10,6 +10,7 @@ The same map applies to the bridge outputs (F_XV = -F_X̄V, ...), so eqs. (50)-(
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -31,7 +32,12 @@ class Installation:
     def to_tunnel(self, balance_values) -> np.ndarray:
         """Balance-axis loads (or outputs) (..., 6) -> tunnel axes."""
         values = np.asarray(balance_values, dtype=float)
-        return values[..., list(self.permutation)] * np.asarray(self.signs)
+        permutation, signs = self._arrays
+        return values[..., permutation] * signs
+
+    @cached_property
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.array(self.permutation, dtype=np.intp), np.array(self.signs, dtype=float)
 
     def from_tunnel(self, tunnel_values) -> np.ndarray:
         """Tunnel-axis loads (or outputs) -> balance axes (the inverse map)."""

@@ -322,3 +322,35 @@ def test_published_uncertainty_is_the_calibrations_own_with_the_tare_scatter_add
                                rtol=1e-12)
     assert LiveCalibrator(activate(MEMO, 'cubic', UPRIGHT)).process(outputs, np.arange(1, 41), now_s=0.0) \
         .uncertainty is None                                                 # the memo's matrices: no covariance
+
+
+def test_lone_samples_after_a_zero_and_a_tare_equal_the_batch_path_wrench_and_uncertainty():
+    """At 1 kHz every sample comes alone and takes the one-sample path (design row reused for the
+    uncertainty); it must give the batch path's numbers, flags and counts, with zero and tare applied."""
+    calibration = calibration_with_covariance()
+    active = activate(calibration, 'cubic', INVERTED)
+    zero, wind_off, wind_on, _ = show_run(INVERTED, samples_per_condition=3, seed=4)
+    samples = wind_on.reshape(-1, 6)
+    samples[5, 2] = 50.0 * MEMO.rated_output_mv[2]          # saturated: not published on either path
+    samples[9, 0] = np.nan                                  # not finite: not published either
+    samples[11, 2] = 1.4 * MEMO.rated_output_mv[2]          # beyond the envelope: published, flagged
+    lives = []
+    for _ in range(2):
+        live = LiveCalibrator(active)
+        assert take(live, 'zero', zero).ok and take(live, 'tare', wind_off, 10**9).ok
+        lives.append(live)
+    batch_live, lone_live = lives
+    stamps = 2 * 10**9 + np.arange(len(samples)) * 10**6
+    batch = batch_live.process(samples, stamps, now_s=0.0)
+    lone = [lone_live.process(samples[k:k + 1], stamps[k:k + 1], now_s=0.0) for k in range(len(samples))]
+    published = [k for k in range(len(samples)) if len(lone[k].indices)]
+    assert published == batch.indices.tolist() and 5 not in published and 9 not in published
+    np.testing.assert_allclose(np.vstack([lone[k].wrench for k in published]), batch.wrench, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(np.vstack([lone[k].uncertainty for k in published]), batch.uncertainty, rtol=1e-12)
+    assert [bool(lone[k].batch.out_of_envelope[0]) for k in range(len(samples))] == \
+        batch.batch.out_of_envelope.tolist() and batch.batch.out_of_envelope[11]
+    assert lone[0].batch.design_row is not None                  # the one-sample path was taken
+    for name in ('received', 'published', 'rejected_nonfinite', 'saturated', 'out_of_envelope'):
+        assert getattr(lone_live.counters, name) == getattr(batch_live.counters, name), name
+    assert lone_live.overload.active == batch_live.overload.active
+    np.testing.assert_allclose(lone_live.overload.peak_fraction, batch_live.overload.peak_fraction, rtol=1e-12)

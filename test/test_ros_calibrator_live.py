@@ -51,7 +51,7 @@ class Stamped(RawSource):
 def window(probe, node, source, service, outputs):
     """Call ~/tare or ~/zero, wait for its window to open, feed it, return the reply."""
     reply = probe.call_async(Trigger, f'/balance_calibrator/{service}')
-    wait_for(lambda: node._live.window is not None, 10.0, f'the {service} window to open')
+    wait_for(lambda: node.session.live.window is not None, 10.0, f'the {service} window to open')
     for row in outputs:
         source.send(row)
     wait_for(reply.done, 20.0, f'the {service} reply')
@@ -93,15 +93,15 @@ def test_tare_refused_on_a_ramp_accepted_when_steady_restored_after_a_restart_an
     ramp = wind_off + np.linspace(0.0, 0.3, len(wind_off))[:, None] * np.array([0, 0, 1.0, 0, 0, 0])
     refused = window(probe, node, source, 'tare', ramp)
     assert not refused.success and 'not steady' in refused.message and 'FZ moved by' in refused.message
-    assert node._live.tare.tare_load is None
+    assert node.session.live.tare.tare_load is None
     accepted = window(probe, node, source, 'tare', wind_off)
     assert accepted.success and 'saved to' in accepted.message
-    tare_load = node._live.tare.tare_load.copy()
+    tare_load = node.session.live.tare.tare_load.copy()
     probe.executor.remove_node(node)
     node.destroy_node()
 
     restarted = start_calibrator(probe, tmp_path, calibration_file)
-    np.testing.assert_array_equal(restarted._live.tare.tare_load, tare_load)
+    np.testing.assert_array_equal(restarted.session.live.tare.tare_load, tare_load)
     before = len(wrenches)
 
     def a_wrench_after_the_restart():      # the wind-off load again (until the new node is matched)
@@ -113,7 +113,7 @@ def test_tare_refused_on_a_ramp_accepted_when_steady_restored_after_a_restart_an
     cleared = probe.call(Trigger, '/balance_calibrator/clear_tare')
     assert cleared.success and 'tare load removed' in cleared.message
     assert f'FZ={UPRIGHT.to_tunnel(tare_load)[2]:+.3f}' in cleared.message
-    assert restarted._live.tare.tare_load is None
+    assert restarted.session.live.tare.tare_load is None
 
 
 def test_overload_is_raised_latched_and_cleared_and_diagnostics_name_the_component(
@@ -130,7 +130,7 @@ def test_overload_is_raised_latched_and_cleared_and_diagnostics_name_the_compone
     source.send(safe)
     source.send(over)
     late = []          # a subscriber that joins after the event still gets the latched state
-    wait_for(lambda: node._live.overload.active, 10.0, 'the overload')
+    wait_for(lambda: node.session.live.overload.active, 10.0, 'the overload')
     probe.node.create_subscription(Bool, '/balance/overload', late.append, LATCHED)
     wait_for(lambda: late and late[-1].data, 10.0, 'the latched overload=true')
 
@@ -203,7 +203,7 @@ def test_bad_parameters_at_runtime_are_refused_and_the_node_keeps_streaming(prob
     connected(node, source)
     source.send((0.1,) * 6)
     wait_for(lambda: len(wrenches) >= 1, 10.0, 'a wrench after the refused parameters')
-    assert node._live.settings.stale_after_s == 1.0 and node._live.active.envelope[0] == pytest.approx(1.1 * 980)
+    assert node.session.live.settings.stale_after_s == 1.0 and node.session.live.active.envelope[0] == pytest.approx(1.1 * 980)
 
 
 def test_two_namespaced_calibrators_keep_their_streams_apart(probe, tmp_path, calibration_file):
@@ -249,7 +249,7 @@ def test_refit_in_its_own_process_replies_the_pipelines_reason_and_keeps_the_cal
     reply = probe.call(Trigger, '/balance_calibrator/refit', timeout_s=120.0)
     assert not reply.success and 'stays in force' in reply.message
     assert str(empty_bag) in reply.message or 'campaign' in reply.message      # the pipeline names the bag
-    assert calibration_file.read_bytes() == before and node._live.active.source == str(calibration_file)
+    assert calibration_file.read_bytes() == before and node.session.live.active.source == str(calibration_file)
 
 
 def test_a_refit_process_killed_mid_way_is_a_failure_with_the_reason(tmp_path):
@@ -268,8 +268,8 @@ def test_input_qos_is_set_through_rclpys_standard_qos_overrides(probe, tmp_path,
     node = start_calibrator(probe, tmp_path, calibration_file, **{
         'qos_overrides./balance/raw.subscription.reliability': 'best_effort',
         'qos_overrides./balance/raw.subscription.depth': 7})
-    assert node._raw_sub.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
-    assert node._raw_sub.qos_profile.depth == 7
+    assert node._raw_input.subscription.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT
+    assert node._raw_input.subscription.qos_profile.depth == 7
     assert node._wrench_pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE     # untouched: the default
 
 
@@ -290,7 +290,7 @@ def test_wrench_uncertainty_is_published_beside_each_wrench(probe, tmp_path):
         source.send(row)
     wait_for(lambda: len(uncertainties) == 2 and len(wrenches) == 2, 10.0, 'two wrenches and their uncertainties')
     assert [m.header.stamp for m in uncertainties] == [m.header.stamp for m in wrenches]
-    expected = wrench_uncertainty(node._live.active, outputs, None)
+    expected = wrench_uncertainty(node.session.live.active, outputs, None)
     np.testing.assert_allclose(wrench_values(uncertainties), expected, rtol=1e-12)
     assert np.all(expected > 0) and np.all(expected < 0.01 * CAPACITY.max())
 

@@ -4,15 +4,18 @@
     python -m balance_calib.benchmarks.live_throughput --refit BAG [--seconds 5]
 
 The harness measures the node, not itself: the source publishes pre-serialized samples (a byte
-template with the stamp patched in) and the sink takes bytes (`raw=True`) and reads only the stamp,
-so the harness's own ceiling -- source straight to sink, no node between -- is printed first. Then,
+template with the stamp patched in) and the sink -- its own process, the calibrator's reader --
+takes bytes and reads only the stamp, so the harness's own ceiling -- source straight to sink, no
+node between -- is printed first. Then,
 each as a subprocess between the same source and sink (reliable, depth 1000 both ways):
 
 - bare relay: Python messages, the default executor, what users write (relay_node.py);
-- raw relay: bytes in, bytes out, the calibrator's executor (`--node raw-relay` of this module):
-  rclpy's own ceiling for a node;
-- balance_calibrator: the memo's cubic matrix with a coefficient covariance (so balance/wrench_uncertainty
-  is published too, one more message per sample), diagnostics at 1 Hz.
+- raw relay: bytes in, bytes out, the calibrator's reader (nodes/_raw_input.py: a thread waiting on
+  the subscription alone, batches of what is waiting; `--node raw-relay` of this module): rclpy's own
+  ceiling for a node;
+- balance_calibrator: the memo's cubic matrix with a coefficient covariance, diagnostics at 1 Hz; the
+  sink subscribes to balance/wrench_uncertainty too (the calibrator computes and publishes it only
+  for subscribers), so one more message per sample is computed, published and counted.
 
 Per rate: messages back / sent and latency p50/p99 (receive time minus the sample's stamp). Per node:
 the highest rate with zero loss, and at 1 kHz the process CPU time per sample (/proc/PID/stat
@@ -24,6 +27,7 @@ and while ~/refit fits BAG (in its own process), p50/p99/max, and that no sample
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import platform
 import signal
@@ -35,6 +39,7 @@ import time
 import numpy as np
 
 QOS_DEPTH = 1000
+UNCERTAINTY_TOPIC = '/balance/wrench_uncertainty'
 CDR_LE = b'\x00\x01\x00\x00'
 
 
@@ -58,38 +63,35 @@ def _cpu_seconds(pid: int) -> float:
 
 
 class Harness:
-    """Source (pre-serialized) and sink (bytes, stamp only) in this process, on their own executor thread."""
+    """Source (pre-serialized, this process) and sink (bytes, stamp only, its own process).
+
+    The sink is `--node sink` of this module: a RawInput thread (the calibrator's reader) that takes
+    what is waiting as bytes and notes receive time minus stamp; it answers `reset`, `stats` and
+    `publishers` on stdin/stdout. In its own process it neither competes with the source for the GIL
+    nor is counted in the node's CPU."""
 
     def __init__(self, node, sink_topic: str):
-        from rclpy.executors import SingleThreadedExecutor
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
         from geometry_msgs.msg import WrenchStamped
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
         qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         self.node = node
         self.publisher = node.create_publisher(WrenchStamped, '/balance/raw', qos)
-        self.latencies_ns: list[int] = []
-        self.lock = threading.Lock()
-        self.subscription = node.create_subscription(WrenchStamped, sink_topic, self._on_bytes, qos, raw=True)
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(node)
-        self.spinning = True
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
+        self.sink = subprocess.Popen([sys.executable, '-m', 'balance_calib.benchmarks.live_throughput',
+                                      '--node', 'sink', '--topic', sink_topic],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, bufsize=1)
         self.template = _raw_template()
 
-    def _spin(self):
-        while self.spinning:
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def _on_bytes(self, data: bytes):
-        now = time.time_ns()
-        stamp = int.from_bytes(data[4:8], 'little', signed=True) * 1_000_000_000 + int.from_bytes(data[8:12], 'little')
-        with self.lock:
-            self.latencies_ns.append(now - stamp)
+    def ask(self, command: str) -> str:
+        self.sink.stdin.write(command + '\n')
+        self.sink.stdin.flush()
+        line = self.sink.stdout.readline()
+        if not line:
+            raise RuntimeError(f'the benchmark sink exited (code {self.sink.poll()})')
+        return line.strip()
 
     def wait_connected(self, timeout_s: float = 30.0) -> None:
         deadline = time.monotonic() + timeout_s
-        while (self.publisher.get_subscription_count() == 0 or self.subscription.get_publisher_count() == 0) \
+        while (self.publisher.get_subscription_count() == 0 or int(self.ask('publishers')) == 0) \
                 and time.monotonic() < deadline:
             time.sleep(0.05)
         for _ in range(100):      # warm-up: discovery on the writer side and first allocations, not measured
@@ -105,8 +107,7 @@ class Harness:
         self.publisher.publish(bytes(message))
 
     def run(self, rate: float, seconds: float, pid: int | None) -> dict:
-        with self.lock:
-            self.latencies_ns.clear()
+        self.ask('reset')
         total = int(rate * seconds)
         cpu_before = _cpu_seconds(pid) if pid else 0.0
         start = time.monotonic()
@@ -117,24 +118,79 @@ class Harness:
             self.send()
         achieved = total / (time.monotonic() - start)
         settle = time.monotonic() + 3.0
-        while time.monotonic() < settle:
-            with self.lock:
-                if len(self.latencies_ns) >= total:
-                    break
+        while time.monotonic() < settle and json.loads(self.ask('stats'))['received'] < total:
             time.sleep(0.02)
         cpu = (_cpu_seconds(pid) - cpu_before) if pid else float('nan')
-        with self.lock:
-            latencies = np.array(self.latencies_ns, dtype=float) / 1e6
-        return {'rate': rate, 'achieved': achieved, 'sent': total, 'received': len(latencies),
-                'p50_ms': float(np.percentile(latencies, 50)) if len(latencies) else float('nan'),
-                'p99_ms': float(np.percentile(latencies, 99)) if len(latencies) else float('nan'),
+        stats = json.loads(self.ask('stats'))
+        return {'rate': rate, 'achieved': achieved, 'sent': total, **stats,
                 'cpu_us_per_sample': cpu / total * 1e6}
 
     def close(self):
-        self.spinning = False
-        self.thread.join(timeout=2)
-        self.executor.remove_node(self.node)
+        try:
+            self.sink.stdin.close()
+            self.sink.wait(timeout=10)
+        except (OSError, subprocess.TimeoutExpired):
+            self.sink.kill()
         self.node.destroy_node()
+
+
+def sink_main(topic: str) -> None:
+    """The harness's sink: bytes in, stamp read, latency noted; commands on stdin (see Harness)."""
+    import rclpy
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from balance_calib.nodes._raw_input import RawInput
+    latencies_ns: list[int] = []
+    lock = threading.Lock()
+
+    def on_batch(batch):
+        now = time.time_ns()
+        stamps = [int.from_bytes(d[4:8], 'little', signed=True) * 1_000_000_000 + int.from_bytes(d[8:12], 'little')
+                  for d in batch]
+        with lock:
+            latencies_ns.extend(now - s for s in stamps)
+
+    rclpy.init()
+    node = rclpy.create_node('benchmark_sink')
+    qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+    reader = RawInput(node, WrenchStamped, topic, qos, on_batch)
+    reader.start()
+    # the calibrator publishes balance/wrench_uncertainty only to subscribers: be one, and count them
+    uncertainty_count = [0]
+
+    def count_uncertainty(batch):
+        with lock:
+            uncertainty_count[0] += len(batch)
+    uncertainty = RawInput(node, WrenchStamped, UNCERTAINTY_TOPIC, qos, count_uncertainty, thread_name='uncertainty')
+    uncertainty.start()
+    try:
+        for line in sys.stdin:
+            command = line.strip()
+            if command == 'reset':
+                with lock:
+                    latencies_ns.clear()
+                    uncertainty_count[0] = 0
+                answer = 'ok'
+            elif command == 'publishers':
+                answer = str(reader.subscription.get_publisher_count())
+            elif command == 'stats':
+                with lock:
+                    latencies = np.array(latencies_ns, dtype=float) / 1e6
+                    uncertainties = uncertainty_count[0]
+                answer = json.dumps({
+                    'received': len(latencies), 'uncertainty_received': uncertainties,
+                    'p50_ms': float(np.percentile(latencies, 50)) if len(latencies) else float('nan'),
+                    'p99_ms': float(np.percentile(latencies, 99)) if len(latencies) else float('nan'),
+                    'max_ms': float(latencies.max()) if len(latencies) else float('nan')})
+            else:
+                answer = f'unknown command {command!r}'
+            print(answer, flush=True)
+    finally:
+        reader.close()
+        uncertainty.close()
+        node.destroy_node()
+        rclpy.try_shutdown()
 
 
 def calibration_with_covariance(directory: str) -> str:
@@ -164,21 +220,32 @@ def _node_commands(calibration_file: str):
 
 
 def raw_relay_main() -> None:
-    """bytes in, bytes out, the calibrator's executor (rclpy.spin: SingleThreadedExecutor)."""
+    """bytes in, bytes out, the calibrator's reader (nodes/_raw_input.py: own thread, batches): rclpy's
+    ceiling for a node that does nothing."""
     import rclpy
     from geometry_msgs.msg import WrenchStamped
     from rclpy.executors import ExternalShutdownException
     from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from balance_calib.nodes._raw_input import RawInput
     rclpy.init()
     node = rclpy.create_node('raw_relay')
     qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
     publisher = node.create_publisher(WrenchStamped, '/balance/wrench', qos)
-    node.create_subscription(WrenchStamped, '/balance/raw', publisher.publish, qos, raw=True)
+
+    def relay(batch):
+        publish = publisher.publish
+        for data in batch:
+            publish(data)
+
+    reader = RawInput(node, WrenchStamped, '/balance/raw', qos, relay)
+    reader.start()
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        reader.close()
         node.destroy_node()
         rclpy.try_shutdown()
 
@@ -203,7 +270,7 @@ def _machine_line() -> str:
             f'(shared machine: other work was running)')
 
 
-def throughput(rates, seconds) -> None:
+def throughput(rates, seconds, only=None, calibrator_args=()) -> None:
     import tempfile
 
     import rclpy
@@ -213,6 +280,10 @@ def throughput(rates, seconds) -> None:
     rclpy.init()
     try:
         for label, command in _node_commands(calibration_file):
+            if only and label not in only:
+                continue
+            if command and command[0] == 'balance_calibrator':
+                command = command + [a for item in calibrator_args for a in ('-p', item)]
             print(f'{label}:', flush=True)
             process = None if command is None else _start(command, env)
             harness = Harness(rclpy.create_node(f'benchmark_{label.replace(" ", "_")}'),
@@ -223,8 +294,10 @@ def throughput(rates, seconds) -> None:
                 for rate in rates:
                     result = harness.run(rate, seconds, None if process is None else process.pid)
                     summary[label].append(result)
+                    also = f' (+{result["uncertainty_received"]} uncertainty)' \
+                        if result['uncertainty_received'] else ''
                     print(f'  {rate:6.0f} Hz (sent at {result["achieved"]:6.0f}): {result["received"]}/'
-                          f'{result["sent"]} back, p50 {result["p50_ms"]:.3f} ms, p99 {result["p99_ms"]:.3f} ms, '
+                          f'{result["sent"]} back{also}, p50 {result["p50_ms"]:.3f} ms, p99 {result["p99_ms"]:.3f} ms, '
                           f'CPU {result["cpu_us_per_sample"]:.1f} µs/sample', flush=True)
                     if result['received'] < 0.5 * result['sent']:
                         break                  # far beyond this node's rate: the next steps say nothing new
@@ -276,11 +349,15 @@ def refit_latency(bag: str, seconds: float) -> None:
     process = _start(command, dict(os.environ))
     harness = Harness(rclpy.create_node('benchmark_refit'), '/balance/wrench')
     client = harness.node.create_client(Trigger, '/balance_calibrator/refit')
+    from rclpy.executors import SingleThreadedExecutor
+    executor = SingleThreadedExecutor()       # only the service client: the sink is its own process
+    executor.add_node(harness.node)
+    spinning = threading.Thread(target=executor.spin, daemon=True)
+    spinning.start()
     try:
         harness.wait_connected()
         quiet = harness.run(1000.0, seconds, process.pid)
-        with harness.lock:
-            harness.latencies_ns.clear()
+        harness.ask('reset')
         future = client.call_async(Trigger.Request())
         sent, start = 0, time.monotonic()
         while not future.done() or sent < 1000:
@@ -291,20 +368,20 @@ def refit_latency(bag: str, seconds: float) -> None:
             sent += 1
         refit_s = time.monotonic() - start
         settle = time.monotonic() + 3.0
-        while time.monotonic() < settle and len(harness.latencies_ns) < sent:
+        while time.monotonic() < settle and json.loads(harness.ask('stats'))['received'] < sent:
             time.sleep(0.02)
-        with harness.lock:
-            during = np.array(harness.latencies_ns, dtype=float) / 1e6
+        during = json.loads(harness.ask('stats'))
     finally:
+        executor.shutdown(timeout_sec=1.0)
         harness.close()
         _stop(process)
         rclpy.try_shutdown()
     print(_machine_line())
     print(f'quiet, 1 kHz {seconds:g} s: {quiet["received"]}/{quiet["sent"]} back, p50 {quiet["p50_ms"]:.3f} ms, '
           f'p99 {quiet["p99_ms"]:.3f} ms')
-    print(f'during ~/refit ({refit_s:.1f} s, reply: {future.result().message[:100]}...): {len(during)}/{sent} back, '
-          f'p50 {np.percentile(during, 50):.3f} ms, p99 {np.percentile(during, 99):.3f} ms, max {during.max():.1f} ms')
-    print(f'p99 during / quiet: {np.percentile(during, 99) / quiet["p99_ms"]:.2f} (target <= 2)')
+    print(f'during ~/refit ({refit_s:.1f} s, reply: {future.result().message[:100]}...): {during["received"]}/{sent} '
+          f'back, p50 {during["p50_ms"]:.3f} ms, p99 {during["p99_ms"]:.3f} ms, max {during["max_ms"]:.1f} ms')
+    print(f'p99 during / quiet: {during["p99_ms"] / quiet["p99_ms"]:.2f} (target <= 2)')
 
 
 def main(argv=None) -> None:
@@ -313,16 +390,25 @@ def main(argv=None) -> None:
     parser.add_argument('--seconds', type=float, default=2.0)
     parser.add_argument('--domain', type=int, default=int(os.environ.get('ROS_DOMAIN_ID', '77')))
     parser.add_argument('--refit', metavar='BAG', help='measure latency quiet and during ~/refit of BAG')
-    parser.add_argument('--node', choices=['raw-relay'], help=argparse.SUPPRESS)
+    parser.add_argument('--only', help='comma-separated subset of: harness ceiling, bare relay, raw relay, '
+                                       'balance_calibrator')
+    parser.add_argument('--calibrator-parameter', action='append', default=[], metavar='NAME:=VALUE',
+                        help='extra balance_calibrator parameter (repeatable), e.g. publish_uncertainty:=false')
+    parser.add_argument('--node', choices=['raw-relay', 'sink'], help=argparse.SUPPRESS)
+    parser.add_argument('--topic', default='/balance/wrench', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.node == 'raw-relay':
         raw_relay_main()
+        return
+    if args.node == 'sink':
+        sink_main(args.topic)
         return
     os.environ.update(ROS_DOMAIN_ID=str(args.domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     if args.refit:
         refit_latency(args.refit, args.seconds)
     else:
-        throughput([float(r) for r in args.rates.split(',')], args.seconds)
+        throughput([float(r) for r in args.rates.split(',')], args.seconds,
+                   [o.strip() for o in args.only.split(',')] if args.only else None, args.calibrator_parameter)
 
 
 if __name__ == '__main__':

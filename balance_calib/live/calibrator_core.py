@@ -121,6 +121,28 @@ class ActiveCalibration:
                      for t in range(plain.shape[0]))
 
     @cached_property
+    def one_sample_index(self) -> np.ndarray | None:
+        """one_sample_terms as an (n_terms, width) index into the six outputs followed by a 1.0 (index 6):
+        the design row of one sample is then one fancy index and one product."""
+        terms = self.one_sample_terms
+        if terms is None:
+            return None
+        width = max(len(t) for t in terms)
+        return np.array([t + (6,) * (width - len(t)) for t in terms], dtype=np.intp)
+
+    @cached_property
+    def coefficients_six(self) -> np.ndarray:
+        """(6, n_terms) the model's coefficients in FX..MZ rows (zero rows for components it lacks)."""
+        _, positions, _, _, coefficients = self.plan
+        six = np.zeros((6, coefficients.shape[1]))
+        six[positions] = coefficients
+        return six
+
+    @cached_property
+    def envelope_list(self) -> list[float]:
+        return np.asarray(self.envelope, dtype=float).tolist()
+
+    @cached_property
     def output_range_list(self) -> list[float]:
         return self.output_range_mv.tolist()
 
@@ -236,6 +258,8 @@ class WrenchBatch:
     loads_total: np.ndarray | None = None   # (N, 6) before the tare load: what the balance carries
     saturated: np.ndarray | None = None     # (N,) an output beyond the bridge's range (or a non-finite load)
     not_converged: np.ndarray | None = None  # (N,) iterative model: Newton did not converge (not published)
+    design_row: np.ndarray | None = None    # (n_terms,) a lone sample's design row (model term order), for its
+    #                                         uncertainty; None for batches and other paths
 
     @property
     def nonfinite(self) -> np.ndarray:
@@ -326,17 +350,23 @@ def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv, t
     values = row.tolist()
     rejected = not all(map(math.isfinite, values))
     saturated = not rejected and any(abs(v) > r for v, r in zip(values, active.output_range_list))
+    index = active.one_sample_index
+    if index is not None and not (rejected or saturated) and max(map(abs, values)) < 1e30:
+        fast = _one_polynomial_sample(active, row, zero_mv, tare_load, index)
+        if fast is not None:
+            return fast
     loads = np.full((1, 6), np.nan)
     not_converged = False
+    design_row = None
     if not (rejected or saturated):
         columns, positions, plain, absolute, coefficients = active.plan
-        terms = active.one_sample_terms
         with np.errstate(invalid='ignore', over='ignore'):
             loads[0] = 0.0
-            if terms is not None:        # TM-663 eqs. (1)-(18): products of at most three outputs
-                v = values if zero_mv is None else [a - b for a, b in zip(values, zero_mv.tolist())]
-                design = [math.prod([v[k] for k in term]) for term in terms]
-                loads[0, positions] = coefficients @ design
+            if index is not None:        # TM-663 eqs. (1)-(18): products of at most three outputs
+                padded = np.ones(7)
+                padded[:6] = row if zero_mv is None else row - zero_mv
+                design_row = padded[index].prod(axis=1)
+                loads[0, positions] = coefficients @ design_row
             else:
                 zeroed = row if zero_mv is None else row - zero_mv
                 if plain is None:        # AIAA R-091: the model's own Newton iteration
@@ -354,7 +384,25 @@ def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv, t
     outside = accepted and bool((np.abs(loads[0]) > active.envelope).any())
     tared = loads if tare_load is None or not accepted else loads - tare_load
     return WrenchBatch(np.array([accepted]), tared, active.installation.to_tunnel(tared), np.array([outside]),
-                       active.model_name, '', loads, np.array([saturated]), np.array([not_converged]))
+                       active.model_name, '', loads, np.array([saturated]), np.array([not_converged]),
+                       design_row if accepted else None)
+
+
+def _one_polynomial_sample(active: ActiveCalibration, row: np.ndarray, zero_mv, tare_load, index) -> WrenchBatch | None:
+    """The common case of the live path: one finite, unsaturated sample of a polynomial model of at most
+    third degree (TM-663 eqs. (1)-(18)); outputs below 1e30 mV, so no product can overflow. None if
+    the loads are not finite all the same (the general path then says why)."""
+    padded = np.ones(7)
+    padded[:6] = row if zero_mv is None else row - zero_mv
+    design_row = padded[index].prod(axis=1)
+    loads = (active.coefficients_six @ design_row)[None, :]
+    values = loads[0].tolist()
+    if not all(map(math.isfinite, values)):
+        return None
+    outside = any(abs(v) > e for v, e in zip(values, active.envelope_list))
+    tared = loads if tare_load is None else loads - tare_load
+    return WrenchBatch(np.array([True]), tared, active.installation.to_tunnel(tared), np.array([outside]),
+                       active.model_name, '', loads, np.array([False]), np.array([False]), design_row)
 
 
 def _loads_with_zero(active, zeroed, temperature_c, load_direction, zero_mv, zero_temperature_c, zero_direction):
@@ -554,6 +602,14 @@ class InputCounters:
     period_not_converged: int = 0
 
     def count(self, batch: WrenchBatch) -> None:
+        if len(batch.accepted) == 1 and batch.accepted[0]:       # the live path at low rates
+            self.received += 1
+            self.period_received += 1
+            self.published += 1
+            if batch.out_of_envelope[0]:
+                self.out_of_envelope += 1
+                self.period_out_of_envelope += 1
+            return
         n, ok = len(batch.accepted), int(np.count_nonzero(batch.accepted))
         saturated = 0 if batch.saturated is None else int(np.count_nonzero(batch.saturated))
         failed = 0 if batch.not_converged is None else int(np.count_nonzero(batch.not_converged))

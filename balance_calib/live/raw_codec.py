@@ -60,6 +60,14 @@ def decode_wrenches(messages: list[bytes]) -> tuple[np.ndarray, np.ndarray, list
             [f for p in parts for f in p[2]])
 
 
+def wrench_arrays(messages) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """decode_wrenches' result from deserialized WrenchStamped messages (rclpy's, for other layouts)."""
+    stamps = np.array([m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in messages], np.int64)
+    values = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z, m.wrench.torque.x,
+                        m.wrench.torque.y, m.wrench.torque.z] for m in messages], float).reshape(-1, 6)
+    return stamps, values, [m.header.frame_id for m in messages]
+
+
 class WrenchEncoder:
     """Serializes WrenchStamped batches with one frame_id (the node's `frame_id` parameter)."""
 

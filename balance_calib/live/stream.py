@@ -135,7 +135,7 @@ class OverloadMonitor:
     again once the samples have stayed inside for clear_s."""
 
     def __init__(self, capacity: np.ndarray, fraction: float, clear_s: float):
-        self.capacity = np.asarray(capacity, dtype=float)
+        self.capacity = capacity
         self.fraction = fraction
         self.clear_s = clear_s
         self.active = False
@@ -144,8 +144,24 @@ class OverloadMonitor:
         self.peak_fraction = np.zeros(6)
         self.events = 0
 
+    @property
+    def capacity(self) -> np.ndarray:
+        return self._capacity
+
+    @capacity.setter
+    def capacity(self, value) -> None:
+        self._capacity = np.asarray(value, dtype=float)
+        self.capacity_list = self._capacity.tolist()
+
     def update(self, loads_total: np.ndarray, saturated: np.ndarray, now_s: float) -> bool:
         """Feed a batch (loads of the accepted samples (N, 6), saturated flags); True if the state changed."""
+        if len(loads_total) == 1 and len(saturated) == 1 and not self.active and not saturated[0]:   # lone sample
+            ratios = [abs(v) / c for v, c in zip(loads_total[0].tolist(), self.capacity_list)]
+            peak = self.peak_fraction
+            if any(r > p for r, p in zip(ratios, peak.tolist())):
+                np.maximum(peak, ratios, out=peak)
+            if not any(r > self.fraction for r in ratios):
+                return False
         if len(loads_total):
             ratio = np.abs(loads_total).max(axis=0) / self.capacity
             np.maximum(self.peak_fraction, ratio, out=self.peak_fraction)
@@ -215,16 +231,25 @@ class Published:
 
 
 def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, tare_sigma, *, model=None,
-                       extra=None, loads_balance=None) -> np.ndarray | None:
+                       extra=None, loads_balance=None, design=None) -> np.ndarray | None:
     """Standard uncertainty (k = 1) of each published load (M, 6), N / N·m, tunnel axes: the calibration's
     coefficient covariance and residual σ (model/uncertainty.py) at these outputs, and the tare's own
     scatter. `model`: the one that gave the loads (default the active model; the base model after a
     fallback); `extra`: its variables besides the outputs (dT, dir_*) for these samples, as for its
     loads(); `loads_balance` (M, 6): the loads it gave, balance axes, so that an iterative model is not
-    solved twice. None when the model has no covariance (the memo's matrices) or needs an input it
+    solved twice; `design` (M, n_terms): its design rows, if computed already. None when the model has no covariance (the memo's matrices) or needs an input it
     was not given."""
-    from ..model.uncertainty import has_uncertainty, load_standard_uncertainty
+    from ..model.uncertainty import design_row_uncertainty, has_uncertainty, load_standard_uncertainty
     model = active.model if model is None else model
+    if design is not None and len(zeroed_outputs) == 1 and getattr(model, 'form', 'direct') == 'direct' \
+            and not model.extra_variables:           # a lone sample: its design row is known already
+        _, positions, _, _, _ = active.plan
+        row = design_row_uncertainty(model, design, None if tare_sigma is None else np.asarray(tare_sigma)[positions])
+        if row is None:
+            return None
+        six = np.zeros((1, 6))
+        six[0, positions] = row
+        return np.abs(active.installation.to_tunnel(six))
     if (model.extra_variables and extra is None) or not has_uncertainty(model):
         return None
     columns = [BRIDGE_OUTPUTS.index(v) for v in model.inputs]
@@ -233,7 +258,8 @@ def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, ta
     per_component = load_standard_uncertainty(
         model, zeroed_outputs[:, columns], extra,
         tare_sigma=None if tare_sigma is None else np.asarray(tare_sigma)[positions],
-        loads=None if loads_balance is None or not iterative else np.asarray(loads_balance)[:, positions])
+        loads=None if loads_balance is None or not iterative else np.asarray(loads_balance)[:, positions],
+        design=design)
     six = np.zeros((len(zeroed_outputs), 6))
     six[:, [COMPONENTS.index(c) for c in model.components]] = per_component
     return np.abs(active.installation.to_tunnel(six))       # a signed permutation: magnitudes carry over
@@ -256,6 +282,7 @@ class LiveCalibrator:
         self.window: TareWindow | None = None
         self.fallback_reason = ''
         self.overload_changed = False
+        self.uncertainty_wanted = True
 
     # --- configuration --------------------------------------------------------------------------
     def set_active(self, active: ActiveCalibration) -> None:
@@ -273,8 +300,10 @@ class LiveCalibrator:
 
     # --- the stream -----------------------------------------------------------------------------
     def process(self, outputs_mv: np.ndarray, stamps_ns: np.ndarray, frame_ids=None, *, now_s: float,
-                temperature_c: float | None = None) -> Published:
-        """A batch of raw samples (N, 6) mV in arrival order -> what to publish."""
+                temperature_c: float | None = None, uncertainty_wanted: bool = True) -> Published:
+        """A batch of raw samples (N, 6) mV in arrival order -> what to publish. uncertainty_wanted: False
+        when nobody subscribes to it (the node asks its publisher): not computed then."""
+        self.uncertainty_wanted = uncertainty_wanted
         outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
         self.inputs.update(stamps_ns, frame_ids)
         active, tare = self.active, self.tare
@@ -301,7 +330,7 @@ class LiveCalibrator:
             interval = None if self.inputs.interval_ns is None else self.inputs.interval_ns * 1e-9
             wrench = self.lowpass.apply(wrench, interval)
         uncertainty = None
-        if self.settings.publish_uncertainty and len(indices):
+        if self.settings.publish_uncertainty and uncertainty_wanted and len(indices):
             accepted_outputs = outputs if all_accepted else outputs[indices]
             zeroed = accepted_outputs if tare.zero_mv is None else accepted_outputs - tare.zero_mv
             model = active.model if batch.model_used == active.model_name else active.base_model
@@ -313,7 +342,7 @@ class LiveCalibrator:
                     active.calibration.reference_temperature_c, None if direction is None else direction[indices])
                 extra = None if isinstance(extra, str) else extra
             uncertainty = wrench_uncertainty(active, zeroed, tare.tare_sigma, model=model, extra=extra,
-                                             loads_balance=loads_total)
+                                             loads_balance=loads_total, design=batch.design_row)
         return Published(indices, wrench, batch, uncertainty)
 
     # --- ~/tare, ~/zero, ~/clear_tare ------------------------------------------------------------
@@ -364,7 +393,7 @@ class LiveCalibrator:
             return 'off (publish_uncertainty false)'
         if not has_uncertainty(self.active.model):
             return 'not available: the calibration carries no coefficient covariance (e.g. the memo matrices)'
-        return 'published'
+        return 'published' if self.uncertainty_wanted else 'no subscriber: not computed until one subscribes'
 
     def report(self, *, period_s: float, last_sample_age_s: float | None, temperature_age_s: float | None,
                refit_running: bool, tare_source: str, node_name: str) -> list[StatusReport]:

@@ -60,14 +60,15 @@ def require_covariance(calibration_or_model, model: str = 'adopted') -> None:
 
 
 def load_standard_uncertainty(calibration_or_model, outputs_mv, extra: Mapping[str, np.ndarray] | None = None,
-                              *, model: str = 'adopted', tare_sigma=None, loads=None) -> np.ndarray:
+                              *, model: str = 'adopted', tare_sigma=None, loads=None, design=None) -> np.ndarray:
     """(N, n_components) standard uncertainty (k = 1) of each load, N / N·m, model component order.
 
     outputs_mv (N, n_inputs) as passed to model.loads; extra likewise. tare_sigma: optional
     (n_components,) standard uncertainty of a live load tare, added in quadrature. NaN rows where
     the model has no stored covariance or the outputs are not finite. loads: optional (N, n_components)
     the model's loads at these outputs if the caller has them already (an iterative model then skips
-    its Newton solve).
+    its Newton solve). design: optional (N, n_terms) design rows of a direct model at these outputs,
+    if the caller has them already (the live calibrator's lone sample).
     """
     chosen = _resolve(calibration_or_model, model)
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
@@ -89,13 +90,32 @@ def load_standard_uncertainty(calibration_or_model, outputs_mv, extra: Mapping[s
     else:
         sub_extra = None if extra is None else {
             k: (np.asarray(v)[finite] if np.ndim(v) and np.shape(v)[0] == n else v) for k, v in extra.items()}
-        design = chosen.design(good, sub_extra)
-        h = np.einsum('ij,jk,ik->i', design, covariance, design)
-        variance = sigma[None, :] ** 2 * (1.0 + h)[:, None]
+        design = chosen.design(good, sub_extra) if design is None else np.atleast_2d(design)[finite]
+        variance = _direct_variance(design, covariance, sigma)
     if tare_sigma is not None:
         variance = variance + np.asarray(tare_sigma, dtype=float)[None, :] ** 2
     result[finite] = np.sqrt(variance)
     return result
+
+
+def _direct_variance(design: np.ndarray, covariance: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """(N, n_components) u² = σ² (1 + x (XᵀX)⁻¹ xᵀ) for design rows x (N, n_terms) of a direct model."""
+    h = np.einsum('ij,jk,ik->i', design, covariance, design)
+    return sigma[None, :] ** 2 * (1.0 + h)[:, None]
+
+
+def design_row_uncertainty(model, design_row: np.ndarray, tare_sigma=None) -> np.ndarray | None:
+    """load_standard_uncertainty for one sample of a direct model whose design row (n_terms,) the caller
+    has (the live calibrator's lone sample): (n_components,), or None without a stored covariance."""
+    pieces = _pieces(model)
+    if pieces is None:
+        return None
+    covariance, sigma = pieces
+    h = float(design_row @ covariance @ design_row)
+    variance = sigma ** 2 * (1.0 + h)
+    if tare_sigma is not None:
+        variance = variance + np.asarray(tare_sigma, dtype=float) ** 2
+    return np.sqrt(variance)
 
 
 def with_fitted_covariance(model, bridge_outputs_mv, residuals, extra: Mapping[str, np.ndarray] | None = None):

@@ -1,0 +1,289 @@
+"""Everything balance_calibrator does between its topics, services and parameters, without rclpy.
+
+The node hands this class serialized samples, temperatures, service calls and parameter changes,
+and publishes what comes back; the math is calibrator_core, the state between samples stream.
+
+Threads: samples arrive in the node's reader thread (nodes/_raw_input.py), services, parameters and
+diagnostics in the executor's. One lock guards the LiveCalibrator, so a new calibration, zero or tare
+is swapped in between two batches of samples.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..calibration_file import ConfigError
+from ..config import resolve_config_path
+from .calibrator_core import ActiveCalibration, activate, parse_reliability
+from .parameters import input_scale_mv, load_calibration_checked
+from .raw_codec import WrenchEncoder, decode_wrenches
+from .refit_process import RefitJob, is_balance_config, make_refit_job
+from .stream import LiveCalibrator, LiveSettings
+from .tare_store import load_tare, save_tare, tare_file_for
+
+CALIBRATION_PARAMETERS = {'calibration_file', 'model', 'installation', 'envelope_margin', 'output_range_factor'}
+
+Log = Callable[[str, str], None]    # (level 'info' | 'warning' | 'error' | 'repeated_error' (throttled), line)
+
+
+def default_calibration_file() -> Path:
+    return resolve_config_path('lmc6522')
+
+
+def live_settings(value: Callable[[str], object]) -> LiveSettings:
+    return LiveSettings(float(value('stale_after_s')), float(value('overload_fraction')),
+                        float(value('overload_clear_s')), float(value('lowpass_hz')),
+                        float(value('tare_max_scatter')), bool(value('publish_uncertainty')))
+
+
+def activate_file(path: str, value: Callable[[str], object]) -> ActiveCalibration:
+    """The calibration `path` with the parameters `value(name)`; ConfigError/ValueError with a reason."""
+    calibration = load_calibration_checked(path, 10.0)
+    try:
+        return activate(calibration, value('model'), value('installation'), float(value('envelope_margin')),
+                        source=str(path), output_range_factor=float(value('output_range_factor')))
+    except ConfigError as err:
+        raise ConfigError(f'{path}: {err}') from None
+
+
+class Output:
+    """What one batch of samples gives the node to publish (serialized) and to say."""
+    __slots__ = ('wrench', 'uncertainty', 'overload')
+
+    def __init__(self, wrench: list, uncertainty: list, overload: bool | None):
+        self.wrench, self.uncertainty, self.overload = wrench, uncertainty, overload
+
+
+class CalibratorSession:
+    """value(name) -> current parameter value; log(level, line); fallback_decode(list[bytes]) -> the
+    same as decode_wrenches, for bytes the fast decoder does not know (rclpy's deserializer)."""
+
+    def __init__(self, value: Callable[[str], object], node_name: str, log: Log,
+                 fallback_decode: Callable | None = None):
+        self.value, self.node_name, self.log, self.fallback_decode = value, node_name, log, fallback_decode
+        path = value('calibration_file') or str(default_calibration_file())
+        try:
+            self.input_scale = input_scale_mv(value('input_units'), value('excitation_v'))
+            active = activate_file(path, value)
+            self.reliability = parse_reliability(value('input_reliability'))
+        except ValueError as err:
+            raise ConfigError(f'invalid parameter: {err}') from None
+        self.lock = threading.Lock()
+        self.live = LiveCalibrator(active, live_settings(value))
+        self.tare_file = self._tare_path(active)
+        self.encoder = WrenchEncoder(value('frame_id'))
+        self.stale_after_s = float(value('stale_after_s'))
+        self.last_sample_s: float | None = None          # time.monotonic() of the last raw sample
+        self.temperature_c: float | None = None
+        self.temperature_s: float | None = None
+        self.fallback_reason = ''
+        self.window_complete: Callable[[], None] | None = None     # called once the tare window is full
+        self.refit_running = False
+        self.period_start_s = time.monotonic()
+        self.pending: ActiveCalibration | None = None    # checked by validate(), applied by apply()
+        self._restore_tare()
+        self.log('info', f'{active.model_name} model of {active.calibration.balance} from {path}, '
+                         f'{active.installation.name} installation; requires '
+                         f'{", ".join(active.requires) or "bridge outputs only"}')
+
+    @property
+    def active(self) -> ActiveCalibration:
+        return self.live.active
+
+    # --- the stream -----------------------------------------------------------------------------
+    def on_temperature(self, temperature_c: float) -> None:
+        if np.isfinite(temperature_c):
+            self.temperature_c, self.temperature_s = float(temperature_c), time.monotonic()
+
+    def on_samples(self, messages: list[bytes], uncertainty_wanted: bool = True) -> Output | None:
+        """One batch of serialized balance/raw samples -> serialized wrenches (None: nothing can run);
+        the uncertainty only when wanted (someone subscribes to it)."""
+        try:
+            stamps_ns, outputs, frame_ids = decode_wrenches(messages)
+        except ValueError:
+            if self.fallback_decode is None:
+                raise
+            stamps_ns, outputs, frame_ids = self.fallback_decode(messages)
+        if self.input_scale != 1.0:          # ratiometric bridge outputs (input_units) to mV
+            outputs = outputs * self.input_scale
+        now_s = time.monotonic()
+        self.last_sample_s = now_s
+        fresh = self.temperature_s is not None and now_s - self.temperature_s <= self.stale_after_s
+        with self.lock:
+            live = self.live
+            try:
+                published = live.process(outputs, stamps_ns, frame_ids, now_s=now_s,
+                                         temperature_c=self.temperature_c if fresh else None,
+                                         uncertainty_wanted=uncertainty_wanted)
+            except ConfigError as err:       # neither the model nor its base can run: publish nothing
+                self.log('repeated_error', str(err))
+                return None
+            overload = self._say_changes(published.batch.fallback_reason)
+            if self.window_complete is not None and live.window is not None and live.window.complete:
+                done, self.window_complete = self.window_complete, None
+                done()
+            encoder = self.encoder
+        stamps = stamps_ns[published.indices]
+        return Output(encoder.encode(stamps, published.wrench),
+                      [] if published.uncertainty is None else encoder.encode(stamps, published.uncertainty),
+                      overload)
+
+    def _say_changes(self, fallback_reason: str) -> bool | None:
+        """Log overload and model fallback changes; the new overload state if it changed."""
+        live = self.live
+        if fallback_reason != self.fallback_reason:
+            if fallback_reason:
+                self.log('warning', f'{live.active.model_name} model cannot run ({fallback_reason}); '
+                                    f'using {live.active.base_name}')
+            else:
+                self.log('info', f'{live.active.model_name} model back in use')
+            self.fallback_reason = fallback_reason
+        if not live.overload_changed:
+            return None
+        if live.overload.active:
+            self.log('error', f'OVERLOAD: {", ".join(live.overload.components)} beyond '
+                              f'{live.overload.fraction:g} x rated load')
+        else:
+            self.log('info', f'overload cleared: loads inside the limit for {live.overload.clear_s:g} s')
+        return live.overload.active
+
+    # --- ~/tare, ~/zero, ~/clear_tare -----------------------------------------------------------
+    def start_window(self, kind: str, on_complete: Callable[[], None]) -> str | None:
+        """Collect tare_samples samples for `kind`; None when started, else why not."""
+        with self.lock:
+            if self.live.window is not None:
+                return f'{kind} failed: a {self.live.window.kind} is already collecting samples'
+            self.live.start_window(kind, int(self.value('tare_samples')))
+            self.window_complete = on_complete
+        return None
+
+    def finish_window(self, kind: str, arrived: bool, timeout_s: float) -> tuple[bool, str]:
+        """(success, reply) once the window is full (arrived) or the time is up."""
+        with self.lock:
+            self.window_complete = None
+            if not arrived:
+                window = self.live.cancel_window()
+                got = 0 if window is None else len(window.outputs_mv)
+                samples = int(self.value('tare_samples'))
+                return False, (f'{kind} failed: only {got} of {samples} valid samples arrived on balance/raw '
+                               f'within {timeout_s:g} s; the previous {kind} stays')
+            result = self.live.finish_window()
+        if not result.ok:
+            self.log('warning', result.message)
+            return False, result.message
+        message = result.message + '; ' + self._persist_tare()
+        self.log('info', message)
+        return True, message
+
+    def clear_tare(self) -> str:
+        with self.lock:
+            message = self.live.clear_tare()
+        message += '; ' + self._persist_tare()
+        self.log('info', message)
+        return message
+
+    def _tare_path(self, active: ActiveCalibration) -> Path | None:
+        if self.value('tare_file'):
+            return Path(self.value('tare_file')).expanduser()
+        return tare_file_for(active.source, self.node_name, is_balance_config(active.source))
+
+    def _restore_tare(self) -> None:
+        if self.tare_file is None:
+            return
+        try:
+            state = load_tare(self.tare_file, self.live.active.calibration.balance)
+        except ValueError as err:
+            self.log('warning', f'not restoring zero and tare: {err}')
+            return
+        if state is None:
+            return
+        self.live.tare = state
+        self.log('info', f'restored from {self.tare_file}: zero ' + (
+            'none' if state.zero_mv is None else f'taken {state.zero_taken_at or "at an unknown time"}')
+            + '; tare load ' + ('none' if state.tare_load is None else
+                                f'{self.live.active.installation.to_tunnel(state.tare_load).round(3).tolist()} '
+                                f'N, N·m (tunnel axes) taken {state.tare_taken_at or "at an unknown time"}'))
+
+    def _persist_tare(self) -> str:
+        if self.tare_file is None:
+            return ('not persisted: the calibration is a shipped balance config (set parameter tare_file to keep '
+                    'zero and tare across restarts)')
+        try:
+            save_tare(self.tare_file, self.live.tare)
+            return f'saved to {self.tare_file}'
+        except OSError as err:
+            self.log('error', f'cannot save zero and tare to {self.tare_file}: {err}')
+            return f'NOT saved ({self.tare_file}: {err.strerror or err}): it will not survive a restart'
+
+    # --- ~/refit --------------------------------------------------------------------------------
+    def keep_message(self) -> str:
+        active = self.live.active
+        return f'the calibration from {active.source} ({active.model_name}) stays in force'
+
+    def refit_job(self) -> RefitJob:
+        """The job ~/refit runs; ValueError/OSError naming the parameter that stops it."""
+        value, active = self.value, self.live.active
+        return make_refit_job(value('calibration_bags') or [], str(value('balance')), value('report_dir'),
+                              str(value('model')), active.installation, float(value('envelope_margin')),
+                              float(value('output_range_factor')), float(value('refit_timeout_s')), active.source)
+
+    def adopt(self, active: ActiveCalibration) -> None:
+        """A refit's calibration, between two batches of samples; zero and tare stay."""
+        with self.lock:
+            self.live.set_active(active)
+
+    # --- parameters -----------------------------------------------------------------------------
+    def validate(self, changes: dict) -> None:
+        """Check a parameter change before rclpy applies it; ConfigError/ValueError/TypeError says why."""
+        from .parameters import check_parameter
+        for name, item in changes.items():
+            check_parameter(name, item)
+        if 'balance' in changes:
+            resolve_config_path(changes['balance'])
+        value = (lambda n: changes.get(n, self.value(n)))
+        if {'input_units', 'excitation_v'} & set(changes):
+            input_scale_mv(value('input_units'), value('excitation_v'))
+        if CALIBRATION_PARAMETERS & set(changes):
+            path = changes.get('calibration_file', None)
+            path = self.live.active.source if path is None else (path or str(default_calibration_file()))
+            self.pending = activate_file(path, value)
+
+    def apply(self, names: set) -> bool:
+        """The parameters after a change; True if diagnostics_period_s changed (the node's timer)."""
+        value = self.value
+        self.stale_after_s = float(value('stale_after_s'))
+        self.input_scale = input_scale_mv(value('input_units'), value('excitation_v'))
+        pending, self.pending = self.pending, None
+        with self.lock:
+            self.live.set_settings(live_settings(value))
+            if 'frame_id' in names:
+                self.encoder = WrenchEncoder(value('frame_id'))
+            before = self.live.active
+            if pending is not None:
+                self.live.set_active(pending)
+        # rclpy applies a request of several parameters one by one: say it once, when it changed
+        if pending is not None and (before.model_name, before.source, before.installation.name) != \
+                (pending.model_name, pending.source, pending.installation.name):
+            self.log('info', f'now {pending.model_name} model from {pending.source}, '
+                             f'{pending.installation.name} installation')
+        if 'tare_file' in names or 'calibration_file' in names:
+            self.tare_file = self._tare_path(self.live.active)
+        return 'diagnostics_period_s' in names
+
+    # --- /diagnostics ---------------------------------------------------------------------------
+    def report(self):
+        now_s = time.monotonic()
+        with self.lock:
+            reports = self.live.report(
+                period_s=now_s - self.period_start_s,
+                last_sample_age_s=None if self.last_sample_s is None else now_s - self.last_sample_s,
+                temperature_age_s=None if self.temperature_s is None else now_s - self.temperature_s,
+                refit_running=self.refit_running,
+                tare_source='not persisted' if self.tare_file is None else str(self.tare_file),
+                node_name=self.node_name.lstrip('/'))
+        self.period_start_s = now_s
+        return reports
