@@ -183,6 +183,11 @@ def sink_main(topic: str) -> None:
                     'p50_ms': float(np.percentile(latencies, 50)) if len(latencies) else float('nan'),
                     'p99_ms': float(np.percentile(latencies, 99)) if len(latencies) else float('nan'),
                     'max_ms': float(latencies.max()) if len(latencies) else float('nan')})
+            elif command.startswith('dump '):         # latencies in arrival order, ms, one per line
+                with lock:
+                    latencies = np.array(latencies_ns, dtype=float) / 1e6
+                np.savetxt(command[5:], latencies, fmt='%.4f')
+                answer = 'ok'
             else:
                 answer = f'unknown command {command!r}'
             print(answer, flush=True)
@@ -371,6 +376,8 @@ def refit_latency(bag: str, seconds: float) -> None:
         while time.monotonic() < settle and json.loads(harness.ask('stats'))['received'] < sent:
             time.sleep(0.02)
         during = json.loads(harness.ask('stats'))
+        if os.environ.get('LIVE_THROUGHPUT_DUMP'):
+            harness.ask(f'dump {os.environ["LIVE_THROUGHPUT_DUMP"]}')
     finally:
         executor.shutdown(timeout_sec=1.0)
         harness.close()
