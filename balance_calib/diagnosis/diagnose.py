@@ -22,8 +22,9 @@ excitation. Per round, for every family and component:
 
 The best family is added (its terms only for its components), everything refitted, and the search
 repeats until no family passes. Then leftovers.py tests what remains against the repeatability of
-the points (lack of fit) and reports structure no family explains as `unexplained`, dropping the
-families that fitted only part of it. The adopted fit keeps every term; the live model drops the
+the points (lack of fit), and for a component's own load shape changing with time or with the
+gravity vector (directed tests), and reports structure no family explains as `unexplained`, dropping
+the families that fitted only part of it. The adopted fit keeps every term; the live model drops the
 nuisance ones (time basis, creep, excitation) and the terms the live calibrator cannot evaluate
 (loops keyed to the turning point or a bridge's play, the sign of the fitted load): it needs only
 outputs, dT and the load directions.
