@@ -37,3 +37,21 @@ def test_the_refit_process_is_given_the_active_calibration_file(tmp_path, monkey
     reply = run_refit_job(_job(tmp_path, calibration_file), None, progress=lambda line: None)
     assert reply == 'stopped by the test'
     assert seen['active'] == (str(calibration_file) if kind == 'calibration' else None)
+
+
+def test_a_balance_config_is_told_from_a_calibration_file_as_a_full_yaml_parse_would(tmp_path):
+    """is_balance_config reads top-level keys without parsing the file (80 ms of Python beside the live
+    stream); it must agree with the parse on every shipped config and on a written calibration."""
+    import yaml
+
+    from balance_calib.live.refit_process import is_balance_config
+    calibration = tmp_path / 'calibration.yaml'
+    save_calibration(calibration, MEMO)
+    files = sorted(CONFIG_DIR.glob('*.yaml')) + sorted(CONFIG_DIR.glob('models/*.yaml')) + [calibration]
+    for path in files:
+        data = yaml.safe_load(path.read_text())
+        assert is_balance_config(path) == (isinstance(data, dict) and 'matrices' in data and 'models' not in data), path
+    assert is_balance_config(CONFIG_DIR / 'lmc6522.yaml') and not is_balance_config(calibration)
+    nested = tmp_path / 'nested.yaml'
+    nested.write_text('models:\n  cubic:\n    matrices: []\nnote: |\n  matrices: in a block scalar\n')
+    assert not is_balance_config(nested) and not is_balance_config(tmp_path / 'missing.yaml')

@@ -247,8 +247,13 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
             raise RefitError(f'active calibration {active}: {err}') from None
     say(f'reading {len(paths)} bag(s)...')
 
+    said = ['']
+
     def bag_progress(done, total):
-        say(f'read {done}/{total} messages ({100 * done / max(total, 1):.0f} %)')
+        line = f'read {done}/{total} messages ({100 * done / max(total, 1):.0f} %)'
+        if line != said[0]:          # the reader may report its last count twice (end of data, end of bag)
+            said[0] = line
+            say(line)
 
     try:
         bag = read_bags(paths, required=('raw', 'applied_load', 'gravity'), progress=bag_progress,
