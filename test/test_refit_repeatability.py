@@ -125,3 +125,22 @@ def test_the_cut_rejects_spikes_but_not_ordinary_noise(tmp_path):
     assert np.array_equal(cut.point_labels, points.label) and cut.point_variance_mv2.shape == points.outputs_mv.shape
     counts = np.bincount(campaign.sample_point[spiked], minlength=len(points.label))
     assert np.array_equal(cut.point_samples, 8 - counts)
+
+
+def test_a_refusal_for_outliers_names_the_unexplained_structure_on_that_component(tmp_path):
+    """An effect outside every family at 2× the floor can push points beyond the outlier gate: the
+    refusal stays (nothing written), but the reason names the leftover the diagnosis could not explain
+    on that component beside a weight or marker error (it used to blame the weights alone)."""
+    from balance_calib.refit.pipeline import RefitError
+    config = load_balance_config('lmc6522')
+    parameter = calibrated_parameter('lmc6522', 'outside_gravity_time', 2.0, 'MX')
+    effects, _ = shape_effects('outside_gravity_time', parameter, 'MX')
+    campaign = simulate_campaign(config, settings=_settings(8, 3, noise_sigma_pct_fs=table17_noise(config)),
+                                 effects=effects)
+    bag = write_campaign_bag(campaign, tmp_path / 'bag')
+    with pytest.raises(RefitError) as refused:
+        run_refit([bag], 'lmc6522', tmp_path / 'out', plots=False)
+    reason = str(refused.value)
+    assert 'outliers' in reason and 'its MX load' in reason
+    assert 'left unexplained on MX' in reason and 'an effect the model lacks?' in reason
+    assert not (tmp_path / 'out').exists()

@@ -145,12 +145,14 @@ def data_gates(config: BalanceConfig, points, reduction, fits, cut=None, active=
 
 
 def fit_gates(config: BalanceConfig, points, sigma_pct_fs: Mapping[str, float], residuals: np.ndarray,
-              press: np.ndarray, limits: AcceptanceLimits | None = None, what: str = 'base model') -> list[Gate]:
+              press: np.ndarray, limits: AcceptanceLimits | None = None, what: str = 'base model',
+              unexplained: Mapping[str, str] | None = None) -> list[Gate]:
     """σ and outlier gates on the model to be adopted: its σ (% FS), residuals and leave-one-out
-    residuals (P, 6) N, N·m."""
+    residuals (P, 6) N, N·m. unexplained: component -> what the diagnosis's unexplained structure
+    there tracks (the outlier gate then names it as a cause besides a weight or marker error)."""
     limits = limits or acceptance_limits(config)
     return [_sigma_gate(config, sigma_pct_fs, limits, what),
-            _outlier_gate(config, points, residuals, press, limits, what)]
+            _outlier_gate(config, points, residuals, press, limits, what, unexplained or {})]
 
 
 def base_fit_arrays(reduction, base_fit) -> tuple[np.ndarray, np.ndarray]:
@@ -202,7 +204,7 @@ def _sigma_gate(config, sigma, limits, what) -> Gate:
                                f'{limits.sigma_limit_pct_fs[worst]:.3g} % FS)', details)
 
 
-def _outlier_gate(config, points, residuals, press, limits, what) -> Gate:
+def _outlier_gate(config, points, residuals, press, limits, what, unexplained=None) -> Gate:
     press_pct = press / config.capacity * 100.0
     # r / sqrt(1 - h): the same variance for every point whatever its leverage
     with np.errstate(divide='ignore', invalid='ignore'):
@@ -235,10 +237,16 @@ def _outlier_gate(config, points, residuals, press, limits, what) -> Gate:
     first = entries[0]
     more = f' and {len(rows) - 1} more (points {", ".join(str(e["point"]) for e in entries[1:6])}' \
            f'{"…" if len(rows) > 6 else ""})' if len(rows) > 1 else ''
+    cause = 'a weight, unit or marker error?'
+    tracks = (unexplained or {}).get(first['component'])
+    if tracks is not None:       # structure the diagnosis could not name, on the same component
+        cause = (f'a weight, unit or marker error, or the structure the diagnosis left unexplained on '
+                 f'{first["component"]} (it tracks {tracks}): an effect the model lacks?')
+        details['unexplained_tracks'] = tracks
     return Gate('outliers', False,
                 f'point {first["point"]} (I_g {first["orientation"]}): its {first["component"]} load '
                 f'disagrees with its outputs by {first["residual_pct_fs"]:+.3g} % FS '
-                f'({first["robust_sigmas"]:.0f} robust σ; a weight, unit or marker error?){more}', details)
+                f'({first["robust_sigmas"]:.0f} robust σ; {cause}){more}', details)
 
 
 def _nominal_sensitivity(config) -> tuple[np.ndarray, str]:
