@@ -21,7 +21,7 @@ from ..config import resolve_config_path
 from .calibrator_core import ActiveCalibration, activate, parse_reliability
 from .parameters import input_scale_mv, load_calibration_checked
 from .raw_codec import WrenchEncoder, decode_wrenches
-from .refit_process import RefitJob, is_balance_config, make_refit_job
+from .refit_process import RefitJob, is_balance_config, make_refit_job, run_refit_job
 from .stream import LiveCalibrator, LiveSettings
 from .tare_store import load_tare, save_tare, tare_file_for
 
@@ -231,10 +231,44 @@ class CalibratorSession:
                               str(value('model')), active.installation, float(value('envelope_margin')),
                               float(value('output_range_factor')), float(value('refit_timeout_s')), active.source)
 
-    def adopt(self, active: ActiveCalibration) -> None:
-        """A refit's calibration, between two batches of samples; zero and tare stay."""
+    def start_refit(self, refit_function, on_done: Callable[[object], None]) -> str | None:
+        """Start ~/refit in a worker thread (the pipeline in its own process unless refit_function, run_refit's
+        signature, is given); on_done(outcome) from that thread. None when started, else the refusal."""
+        keep = self.keep_message()
+        if self.refit_running:
+            return f'refit failed: a refit is already running; {keep}'
+        try:
+            job = self.refit_job()
+        except (OSError, ValueError) as err:
+            return f'refit failed: {err}; {keep}'
+        self.refit_running = True
+
+        def work():
+            try:
+                outcome = run_refit_job(job, refit_function, lambda line: self.log('info', f'refit: {line}'))
+            except Exception as err:    # any failure leaves the node and its calibration as they were
+                outcome = f'{type(err).__name__}: {err}'
+            on_done((job, outcome))
+        threading.Thread(target=work, name='refit', daemon=True).start()
+        return None
+
+    def finish_refit(self, done) -> tuple[bool, str, str | None]:
+        """start_refit's outcome -> (success, reply, the calibration file to switch to or None). A new
+        calibration is swapped in between two batches of samples; zero and tare stay."""
+        job, outcome = done
+        self.refit_running = False
+        if isinstance(outcome, str):
+            message = f'refit failed: {outcome}; {self.keep_message()}'
+            self.log('error', message)
+            return False, message, None
+        new_active, target, message = outcome
         with self.lock:
-            self.live.set_active(active)
+            self.live.set_active(new_active)
+        self.log('info', message)
+        if str(target) == str(job.calibration_file):
+            return True, message, None
+        self.pending = None
+        return True, message, str(target)
 
     # --- parameters -----------------------------------------------------------------------------
     def validate(self, changes: dict) -> None:

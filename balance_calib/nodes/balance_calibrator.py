@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import gc
 import sys
-import threading
 from functools import partial
 
 import rclpy
@@ -42,7 +41,6 @@ from std_srvs.srv import Trigger
 from balance_calib.calibration_file import ConfigError
 from balance_calib.live.parameters import PARAMETERS, STRING_ARRAY, check_parameter
 from balance_calib.live.raw_codec import wrench_arrays
-from balance_calib.live.refit_process import run_refit_job
 from balance_calib.live.session import CalibratorSession
 
 from ._parameters import declare_checked, value_getter
@@ -144,42 +142,15 @@ class BalanceCalibrator(Node):
         return response
 
     async def _on_refit(self, request, response):
-        session, keep = self.session, self.session.keep_message()
-        if session.refit_running:
-            response.success, response.message = False, f'refit failed: a refit is already running; {keep}'
-            return response
-        try:
-            job = session.refit_job()
-        except (OSError, ValueError) as err:
-            response.success, response.message = False, f'refit failed: {err}; {keep}'
-            return response
         done = self._wakeable_future()
-        session.refit_running = True
-        threading.Thread(target=self._refit_worker, args=(job, done), name='refit', daemon=True).start()
-        try:
-            outcome = await done
-        finally:
-            session.refit_running = False
-        if isinstance(outcome, str):
-            response.success, response.message = False, f'refit failed: {outcome}; {keep}'
-            self.get_logger().error(response.message)
+        refused = self.session.start_refit(self._refit_function, done.set_result)
+        if refused:
+            response.success, response.message = False, refused
             return response
-        new_active, target, message = outcome
-        session.adopt(new_active)
-        if str(target) != str(job.calibration_file):
-            session.pending = None
-            self.set_parameters([Parameter('calibration_file', value=str(target))])
-        response.success, response.message = True, message
-        self.get_logger().info(message)
+        response.success, response.message, new_file = self.session.finish_refit(await done)
+        if new_file is not None:         # a balance config stays as it is: the node now reads the new file
+            self.set_parameters([Parameter('calibration_file', value=new_file)])
         return response
-
-    def _refit_worker(self, job, done: Future) -> None:
-        """Runs in its own thread: completes `done` with (active, file, message) or a reason (str)."""
-        try:
-            outcome = run_refit_job(job, self._refit_function, lambda line: self.get_logger().info(f'refit: {line}'))
-        except Exception as err:    # any failure leaves the node and its calibration as they were
-            outcome = f'{type(err).__name__}: {err}'
-        done.set_result(outcome)
 
     def _validate_parameters(self, parameters) -> SetParametersResult:
         try:
