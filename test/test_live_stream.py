@@ -354,3 +354,24 @@ def test_lone_samples_after_a_zero_and_a_tare_equal_the_batch_path_wrench_and_un
         assert getattr(lone_live.counters, name) == getattr(batch_live.counters, name), name
     assert lone_live.overload.active == batch_live.overload.active
     np.testing.assert_allclose(lone_live.overload.peak_fraction, batch_live.overload.peak_fraction, rtol=1e-12)
+
+
+def test_a_deferred_uncertainty_is_that_of_its_own_batch_even_after_a_new_tare():
+    """The node publishes the wrenches first and computes their uncertainty after: it must be the
+    batch's own (its calibration, zero and tare), whatever the service thread changed meanwhile."""
+    active = activate(calibration_with_covariance(), 'cubic', UPRIGHT)
+    zero, wind_off, wind_on, _ = show_run(UPRIGHT, samples_per_condition=2, seed=6)
+    live, reference = LiveCalibrator(active), LiveCalibrator(active)
+    for calibrator in (live, reference):
+        assert take(calibrator, 'zero', zero).ok and take(calibrator, 'tare', wind_off, 10**9).ok
+    samples = wind_on.reshape(-1, 6)
+    stamps = 2 * 10**9 + np.arange(len(samples)) * 10**6
+    deferred = live.process(samples, stamps, now_s=0.0, defer_uncertainty=True)
+    lone = live.process(samples[:1], stamps[:1] + 10**8, now_s=0.0, defer_uncertainty=True)
+    assert deferred.uncertainty is None and lone.uncertainty is None
+    assert live.clear_tare().startswith('clear_tare: tare load removed')     # meanwhile, in the service thread
+    now = reference.process(samples, stamps, now_s=0.0)
+    np.testing.assert_allclose(deferred.uncertainty_later(), now.uncertainty, rtol=1e-12)
+    np.testing.assert_allclose(lone.uncertainty_later(), now.uncertainty[:1], rtol=1e-12)
+    without_tare = live.process(samples, stamps + 10**9, now_s=0.0).uncertainty
+    assert np.all(without_tare < now.uncertainty)           # the tare's own scatter is no longer added

@@ -51,11 +51,17 @@ def activate_file(path: str, value: Callable[[str], object]) -> ActiveCalibratio
 
 
 class Output:
-    """What one batch of samples gives the node to publish (serialized) and to say."""
-    __slots__ = ('wrench', 'uncertainty', 'overload')
+    """What one batch of samples gives the node to publish (serialized): the wrenches, the overload state
+    if it changed, and uncertainty() -> the uncertainties, computed when asked (after the wrenches went out)."""
+    __slots__ = ('wrench', 'overload', '_later', '_stamps', '_encoder')
 
-    def __init__(self, wrench: list, uncertainty: list, overload: bool | None):
-        self.wrench, self.uncertainty, self.overload = wrench, uncertainty, overload
+    def __init__(self, wrench: list, overload: bool | None, later=None, stamps=None, encoder=None):
+        self.wrench, self.overload = wrench, overload
+        self._later, self._stamps, self._encoder = later, stamps, encoder
+
+    def uncertainty(self) -> list:
+        values = None if self._later is None else self._later()
+        return [] if values is None else self._encoder.encode(self._stamps, values)
 
 
 class CalibratorSession:
@@ -101,7 +107,7 @@ class CalibratorSession:
 
     def on_samples(self, messages: list[bytes], uncertainty_wanted: bool = True) -> Output | None:
         """One batch of serialized balance/raw samples -> serialized wrenches (None: nothing can run);
-        the uncertainty only when wanted (someone subscribes to it)."""
+        the uncertainty only when wanted (someone subscribes to it), computed by Output.uncertainty()."""
         try:
             stamps_ns, outputs, frame_ids = decode_wrenches(messages)
         except ValueError:
@@ -118,7 +124,7 @@ class CalibratorSession:
             try:
                 published = live.process(outputs, stamps_ns, frame_ids, now_s=now_s,
                                          temperature_c=self.temperature_c if fresh else None,
-                                         uncertainty_wanted=uncertainty_wanted)
+                                         uncertainty_wanted=uncertainty_wanted, defer_uncertainty=True)
             except ConfigError as err:       # neither the model nor its base can run: publish nothing
                 self.log('repeated_error', str(err))
                 return None
@@ -128,9 +134,7 @@ class CalibratorSession:
                 done()
             encoder = self.encoder
         stamps = stamps_ns[published.indices]
-        return Output(encoder.encode(stamps, published.wrench),
-                      [] if published.uncertainty is None else encoder.encode(stamps, published.uncertainty),
-                      overload)
+        return Output(encoder.encode(stamps, published.wrench), overload, published.uncertainty_later, stamps, encoder)
 
     def _say_changes(self, fallback_reason: str) -> bool | None:
         """Log overload and model fallback changes; the new overload state if it changed."""

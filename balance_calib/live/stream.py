@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+from typing import Callable
+
 import numpy as np
 
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
@@ -228,6 +230,7 @@ class Published:
     wrench: np.ndarray
     batch: WrenchBatch
     uncertainty: np.ndarray | None = None     # (M, 6) standard uncertainty, tunnel axes; None = not available
+    uncertainty_later: Callable[[], np.ndarray | None] | None = None   # with defer_uncertainty: computes it
 
 
 def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, tare_sigma, *, model=None,
@@ -300,9 +303,11 @@ class LiveCalibrator:
 
     # --- the stream -----------------------------------------------------------------------------
     def process(self, outputs_mv: np.ndarray, stamps_ns: np.ndarray, frame_ids=None, *, now_s: float,
-                temperature_c: float | None = None, uncertainty_wanted: bool = True) -> Published:
+                temperature_c: float | None = None, uncertainty_wanted: bool = True,
+                defer_uncertainty: bool = False) -> Published:
         """A batch of raw samples (N, 6) mV in arrival order -> what to publish. uncertainty_wanted: False
-        when nobody subscribes to it (the node asks its publisher): not computed then."""
+        when nobody subscribes to it (the node asks its publisher): not computed then. defer_uncertainty:
+        leave it to Published.uncertainty_later(), so that the wrench goes out first."""
         self.uncertainty_wanted = uncertainty_wanted
         outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
         self.inputs.update(stamps_ns, frame_ids)
@@ -329,8 +334,10 @@ class LiveCalibrator:
         if self.lowpass.cutoff_hz > 0:
             interval = None if self.inputs.interval_ns is None else self.inputs.interval_ns * 1e-9
             wrench = self.lowpass.apply(wrench, interval)
-        uncertainty = None
-        if self.settings.publish_uncertainty and uncertainty_wanted and len(indices):
+        if not (self.settings.publish_uncertainty and uncertainty_wanted and len(indices)):
+            return Published(indices, wrench, batch)
+
+        def uncertainty():      # of this batch, with this calibration and tare (immutable: safe to run later)
             accepted_outputs = outputs if all_accepted else outputs[indices]
             zeroed = accepted_outputs if tare.zero_mv is None else accepted_outputs - tare.zero_mv
             model = active.model if batch.model_used == active.model_name else active.base_model
@@ -341,9 +348,11 @@ class LiveCalibrator:
                     None if temperature_c is None or batch.fallback_reason else np.asarray(temperature_c, float),
                     active.calibration.reference_temperature_c, None if direction is None else direction[indices])
                 extra = None if isinstance(extra, str) else extra
-            uncertainty = wrench_uncertainty(active, zeroed, tare.tare_sigma, model=model, extra=extra,
-                                             loads_balance=loads_total, design=batch.design_row)
-        return Published(indices, wrench, batch, uncertainty)
+            return wrench_uncertainty(active, zeroed, tare.tare_sigma, model=model, extra=extra,
+                                      loads_balance=loads_total, design=batch.design_row)
+        if defer_uncertainty:
+            return Published(indices, wrench, batch, uncertainty_later=uncertainty)
+        return Published(indices, wrench, batch, uncertainty())
 
     # --- ~/tare, ~/zero, ~/clear_tare ------------------------------------------------------------
     def start_window(self, kind: str, samples: int) -> TareWindow:

@@ -110,12 +110,14 @@ class BalanceCalibrator(Node):
         out = self.session.on_samples(messages, self._uncertainty_pub.get_subscription_count() > 0)
         if out is None:
             return
-        if out.overload is not None:
+        if out.overload is not None:         # an interlock hears it first
             self._overload_pub.publish(Bool(data=out.overload))
-        for publisher, batch in ((self._wrench_pub, out.wrench), (self._uncertainty_pub, out.uncertainty)):
-            publish = publisher.publish
-            for data in batch:
-                publish(data)
+        publish = self._wrench_pub.publish
+        for data in out.wrench:
+            publish(data)
+        publish = self._uncertainty_pub.publish
+        for data in out.uncertainty():       # computed after the wrenches went out
+            publish(data)
 
     def _wakeable_future(self) -> Future:
         """A future whose completion (from any thread) wakes the executor to resume its awaiter."""
