@@ -66,9 +66,9 @@ class Harness:
     """Source (pre-serialized, this process) and sink (bytes, stamp only, its own process).
 
     The sink is `--node sink` of this module: a RawInput thread (the calibrator's reader) that takes
-    what is waiting as bytes and notes receive time minus stamp; it answers `reset`, `stats` and
-    `publishers` on stdin/stdout. In its own process it neither competes with the source for the GIL
-    nor is counted in the node's CPU."""
+    what is waiting as bytes and notes receive time minus stamp; it answers `reset`, `count`, `stats`
+    (JSON), `publishers` and `dump FILE` on stdin/stdout. In its own process it neither competes with
+    the source for the GIL nor is counted in the node's CPU."""
 
     def __init__(self, node, sink_topic: str):
         from geometry_msgs.msg import WrenchStamped
@@ -118,7 +118,7 @@ class Harness:
             self.send()
         achieved = total / (time.monotonic() - start)
         settle = time.monotonic() + 3.0
-        while time.monotonic() < settle and json.loads(self.ask('stats'))['received'] < total:
+        while time.monotonic() < settle and int(self.ask('count')) < total:
             time.sleep(0.02)
         cpu = (_cpu_seconds(pid) - cpu_before) if pid else float('nan')
         stats = json.loads(self.ask('stats'))
@@ -172,6 +172,9 @@ def sink_main(topic: str) -> None:
                     latencies_ns.clear()
                     uncertainty_count[0] = 0
                 answer = 'ok'
+            elif command == 'count':            # cheap: polled while the last samples arrive
+                with lock:
+                    answer = str(len(latencies_ns))
             elif command == 'publishers':
                 answer = str(reader.subscription.get_publisher_count())
             elif command == 'stats':
@@ -373,7 +376,7 @@ def refit_latency(bag: str, seconds: float) -> None:
             sent += 1
         refit_s = time.monotonic() - start
         settle = time.monotonic() + 3.0
-        while time.monotonic() < settle and json.loads(harness.ask('stats'))['received'] < sent:
+        while time.monotonic() < settle and int(harness.ask('count')) < sent:
             time.sleep(0.02)
         during = json.loads(harness.ask('stats'))
         if os.environ.get('LIVE_THROUGHPUT_DUMP'):

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .processes import NodeProcess, wait_until as _wait
+from .processes import NodeProcess, close_graph, wait_until as _wait
 
 MODEL = 'euler_replica_lmc6522'
 COEFFICIENTS = ('CAF', 'CY', 'CN', 'Cl', 'Cm', 'Cn', 'CD', 'CL')
@@ -106,11 +106,7 @@ def run_story(out_dir: Path, *, q_pa: float = 50000.0, installation: str = 'upri
         if recorder.stop() != 0:
             raise RuntimeError(f'balance_recorder did not close cleanly; see {recorder.stderr_path}')
     finally:
-        for process in reversed(processes):
-            process.stop()
-        executor.shutdown(timeout_sec=2.0)
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        close_graph(processes, executor, node, context)
 
     reduction = reduce_bags([bag], 'lmc6522', MODEL, compare=['linear', 'quadratic', 'cubic'], estimate_weight=True,
                             installation=installation)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .processes import NodeProcess, wait_until as _wait
+from .processes import NodeProcess, close_graph, wait_until as _wait
 
 
 @dataclass
@@ -152,11 +152,7 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
                 + ', '.join(f'{c} {w:.3f}' for c, w in zip(('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'), worst)))
         return result
     finally:
-        for process in reversed(processes):
-            process.stop()
-        executor.shutdown(timeout_sec=2)
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        close_graph(processes, executor, node, context)
         spinner.join(timeout=5)
 
 

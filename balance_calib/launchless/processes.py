@@ -74,3 +74,13 @@ def wait_until(predicate, timeout: float, what: str):
         if time.monotonic() > deadline:
             raise TimeoutError(f'timed out after {timeout:g} s waiting for {what}')
         time.sleep(0.05)
+
+
+def close_graph(processes, executor, node, context) -> None:
+    """The end of a launchless story: its node processes (last started first), then its in-process node."""
+    import rclpy
+    for process in reversed(processes):
+        process.stop()
+    executor.shutdown(timeout_sec=2.0)
+    node.destroy_node()
+    rclpy.try_shutdown(context=context)

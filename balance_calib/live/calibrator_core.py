@@ -357,22 +357,15 @@ def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv, t
             return fast
     loads = np.full((1, 6), np.nan)
     not_converged = False
-    design_row = None
-    if not (rejected or saturated):
+    if not (rejected or saturated):      # other polynomials, an iterative model, or the fast path's leftovers
         columns, positions, plain, absolute, coefficients = active.plan
         with np.errstate(invalid='ignore', over='ignore'):
             loads[0] = 0.0
-            if index is not None:        # TM-663 eqs. (1)-(18): products of at most three outputs
-                padded = np.ones(7)
-                padded[:6] = row if zero_mv is None else row - zero_mv
-                design_row = padded[index].prod(axis=1)
-                loads[0, positions] = coefficients @ design_row
+            zeroed = row if zero_mv is None else row - zero_mv
+            if plain is None:        # AIAA R-091: the model's own Newton iteration
+                loads[0, positions] = active.model.loads_and_status(zeroed[columns][None, :])[0][0]
             else:
-                zeroed = row if zero_mv is None else row - zero_mv
-                if plain is None:        # AIAA R-091: the model's own Newton iteration
-                    loads[0, positions] = active.model.loads_and_status(zeroed[columns][None, :])[0][0]
-                else:
-                    loads[0, positions] = coefficients @ power_products(zeroed[columns][None, :], plain, absolute)[0]
+                loads[0, positions] = coefficients @ power_products(zeroed[columns][None, :], plain, absolute)[0]
             failed = not all(map(math.isfinite, loads[0].tolist()))     # beyond float range / no convergence
         if failed:
             loads[:] = np.nan
@@ -384,8 +377,7 @@ def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv, t
     outside = accepted and bool((np.abs(loads[0]) > active.envelope).any())
     tared = loads if tare_load is None or not accepted else loads - tare_load
     return WrenchBatch(np.array([accepted]), tared, active.installation.to_tunnel(tared), np.array([outside]),
-                       active.model_name, '', loads, np.array([saturated]), np.array([not_converged]),
-                       design_row if accepted else None)
+                       active.model_name, '', loads, np.array([saturated]), np.array([not_converged]))
 
 
 def _one_polynomial_sample(active: ActiveCalibration, row: np.ndarray, zero_mv, tare_load, index) -> WrenchBatch | None:

@@ -19,7 +19,7 @@ import numpy as np
 from ..calibration_file import ConfigError
 from ..config import resolve_config_path
 from .calibrator_core import ActiveCalibration, activate, parse_reliability
-from .parameters import input_scale_mv, load_calibration_checked
+from .parameters import check_parameter, input_scale_mv, load_calibration_checked
 from .raw_codec import WrenchEncoder, decode_wrenches
 from .refit_process import RefitJob, is_balance_config, make_refit_job, run_refit_job
 from .stream import LiveCalibrator, LiveSettings
@@ -277,7 +277,6 @@ class CalibratorSession:
     # --- parameters -----------------------------------------------------------------------------
     def validate(self, changes: dict) -> None:
         """Check a parameter change before rclpy applies it; ConfigError/ValueError/TypeError says why."""
-        from .parameters import check_parameter
         for name, item in changes.items():
             check_parameter(name, item)
         if 'balance' in changes:

@@ -244,27 +244,23 @@ def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, ta
     was not given."""
     from ..model.uncertainty import design_row_uncertainty, has_uncertainty, load_standard_uncertainty
     model = active.model if model is None else model
-    if design is not None and len(zeroed_outputs) == 1 and getattr(model, 'form', 'direct') == 'direct' \
-            and not model.extra_variables:           # a lone sample: its design row is known already
-        _, positions, _, _, _ = active.plan
-        row = design_row_uncertainty(model, design, None if tare_sigma is None else np.asarray(tare_sigma)[positions])
-        if row is None:
-            return None
-        six = np.zeros((1, 6))
-        six[0, positions] = row
-        return np.abs(active.installation.to_tunnel(six))
-    if (model.extra_variables and extra is None) or not has_uncertainty(model):
-        return None
-    columns = [BRIDGE_OUTPUTS.index(v) for v in model.inputs]
     positions = [COMPONENTS.index(c) for c in model.components]
+    tare = None if tare_sigma is None else np.asarray(tare_sigma)[positions]
     iterative = getattr(model, 'form', 'direct') == 'iterative'
-    per_component = load_standard_uncertainty(
-        model, zeroed_outputs[:, columns], extra,
-        tare_sigma=None if tare_sigma is None else np.asarray(tare_sigma)[positions],
-        loads=None if loads_balance is None or not iterative else np.asarray(loads_balance)[:, positions],
-        design=design)
+    if design is not None and len(zeroed_outputs) == 1 and not iterative and not model.extra_variables:
+        per_component = design_row_uncertainty(model, design, tare)      # a lone sample: its row is known
+        if per_component is None:
+            return None
+    else:
+        if (model.extra_variables and extra is None) or not has_uncertainty(model):
+            return None
+        columns = [BRIDGE_OUTPUTS.index(v) for v in model.inputs]
+        per_component = load_standard_uncertainty(
+            model, zeroed_outputs[:, columns], extra, tare_sigma=tare,
+            loads=None if loads_balance is None or not iterative else np.asarray(loads_balance)[:, positions],
+            design=design)
     six = np.zeros((len(zeroed_outputs), 6))
-    six[:, [COMPONENTS.index(c) for c in model.components]] = per_component
+    six[:, positions] = per_component
     return np.abs(active.installation.to_tunnel(six))       # a signed permutation: magnitudes carry over
 
 

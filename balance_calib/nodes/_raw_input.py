@@ -72,9 +72,9 @@ class RawInput:
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(timeout=5.0)
 
-    def take_waiting(self, first: list | None = None) -> list:
+    def take_waiting(self) -> list:
         """What is waiting on the subscription, as bytes (up to max_batch)."""
-        batch = first if first is not None else []
+        batch = []
         handle, msg_type, limit = self.subscription.handle, self._msg_type, self._max_batch
         with handle:
             while len(batch) < limit:
