@@ -1,7 +1,7 @@
 """ament_python build of balance_calib (colcon build, or pip install -e .)."""
 from glob import glob
 
-from setuptools import find_packages, setup
+from setuptools import Extension, find_packages, setup
 
 package_name = 'balance_calib'
 
@@ -14,6 +14,10 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.csv')),
     ],
+    # the live calibrator's lone sample in C (live/lone_sample.py); optional: without a C compiler the
+    # package installs and every sample takes the pure core's path (the node says so at start-up)
+    ext_modules=[Extension('balance_calib.live._lone_kernel', ['balance_calib/live/_lone_kernel.c'],
+                           extra_compile_args=['-O2', '-std=c99'], optional=True)],
     install_requires=['setuptools'],
     zip_safe=False,
     maintainer='balance_calib maintainers',

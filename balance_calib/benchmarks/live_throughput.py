@@ -13,13 +13,20 @@ each as a subprocess between the same source and sink (reliable, depth 1000 both
 - raw relay: bytes in, bytes out, the calibrator's reader (nodes/_raw_input.py: a thread waiting on
   the subscription alone, batches of what is waiting; `--node raw-relay` of this module): rclpy's own
   ceiling for a node;
+- raw relay, 2 topics: the same, each sample published on balance/wrench and on
+  balance/wrench_uncertainty: the floor of any rclpy node with the calibrator's topics, before it
+  decodes, computes or encodes anything;
+- calibrator, pure core: the calibrator with its lone-sample C kernel switched off
+  (BALANCE_CALIB_LONE_KERNEL=0, live/lone_sample.py): the kernel's baseline, same run;
 - balance_calibrator: the memo's cubic matrix with a coefficient covariance, diagnostics at 1 Hz; the
   sink subscribes to balance/wrench_uncertainty too (the calibrator computes and publishes it only
   for subscribers), so one more message per sample is computed, published and counted.
 
 Per rate: messages back / sent and latency p50/p99 (receive time minus the sample's stamp). Per node:
 the highest rate with zero loss, and at 1 kHz the process CPU time per sample (/proc/PID/stat
-utime + stime over the samples of that step) and p50/p99 latency.
+utime + stime over the samples of that step), split by thread (rclpy's executor, the node's own
+Python threads, Fast DDS's event and transport threads) with their wake-ups per sample, and p50/p99
+latency.
 
 `--refit BAG` measures what issue 12 asks of ~/refit: the calibrator's latency at 1 kHz while quiet
 and while ~/refit fits BAG (in its own process), p50/p99/max, and that no sample is lost.
@@ -40,6 +47,8 @@ import numpy as np
 
 QOS_DEPTH = 1000
 UNCERTAINTY_TOPIC = '/balance/wrench_uncertainty'
+BOTH_TOPICS = 'raw relay, 2 topics'
+PURE_CORE = 'calibrator, pure core'
 CDR_LE = b'\x00\x01\x00\x00'
 
 
@@ -60,6 +69,40 @@ def _cpu_seconds(pid: int) -> float:
     with open(f'/proc/{pid}/stat') as handle:
         fields = handle.read().rsplit(')', 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / _clock_ticks()
+
+
+def _thread_cpu(pid: int) -> dict:
+    """Per thread of a process: (group, utime + stime in ticks, voluntary context switches).
+
+    Groups: 'main' (the thread whose id is the pid: rclpy's executor), 'dds.<kind>' for Fast DDS's
+    threads (event, shm, udp, ...), 'other' for the rest (the node's own Python threads)."""
+    import glob
+    threads = {}
+    for task in glob.glob(f'/proc/{pid}/task/*'):
+        tid = int(task.rsplit('/', 1)[1])
+        try:
+            with open(f'{task}/stat') as handle:
+                fields = handle.read().rsplit(')', 1)[1].split()
+            with open(f'{task}/comm') as handle:
+                name = handle.read().strip()
+            with open(f'{task}/status') as handle:
+                switches = int(handle.read().split('voluntary_ctxt_switches:')[1].split()[0])
+        except (OSError, IndexError, ValueError):      # the thread ended meanwhile
+            continue
+        group = 'main' if tid == pid else 'dds.' + name.split('.')[1] if name.startswith('dds.') else 'other'
+        threads[tid] = (group, int(fields[11]) + int(fields[12]), switches)
+    return threads
+
+
+def _thread_breakdown(before: dict, after: dict, samples: int) -> dict:
+    """CPU µs and wake-ups per sample by thread group, between two _thread_cpu snapshots."""
+    tick_us = 1e6 / _clock_ticks()
+    groups: dict = {}
+    for tid, (group, ticks, switches) in after.items():
+        old = before.get(tid, (group, 0, 0))
+        cpu, wakes = groups.get(group, (0.0, 0.0))
+        groups[group] = (cpu + (ticks - old[1]) * tick_us / samples, wakes + (switches - old[2]) / samples)
+    return dict(sorted(groups.items(), key=lambda item: -item[1][0]))
 
 
 class Harness:
@@ -110,6 +153,7 @@ class Harness:
         self.ask('reset')
         total = int(rate * seconds)
         cpu_before = _cpu_seconds(pid) if pid else 0.0
+        threads_before = _thread_cpu(pid) if pid else {}
         start = time.monotonic()
         for i in range(total):
             delay = start + i / rate - time.monotonic()
@@ -121,9 +165,10 @@ class Harness:
         while time.monotonic() < settle and int(self.ask('count')) < total:
             time.sleep(0.02)
         cpu = (_cpu_seconds(pid) - cpu_before) if pid else float('nan')
+        threads = _thread_breakdown(threads_before, _thread_cpu(pid), total) if pid else {}
         stats = json.loads(self.ask('stats'))
         return {'rate': rate, 'achieved': achieved, 'sent': total, **stats,
-                'cpu_us_per_sample': cpu / total * 1e6}
+                'cpu_us_per_sample': cpu / total * 1e6, 'threads': threads}
 
     def close(self):
         try:
@@ -221,15 +266,18 @@ def calibration_with_covariance(directory: str) -> str:
 def _node_commands(calibration_file: str):
     relay = [sys.executable, '-m', 'balance_calib.benchmarks.relay_node']
     raw_relay = [sys.executable, '-m', 'balance_calib.benchmarks.live_throughput', '--node', 'raw-relay']
+    both_topics = raw_relay[:-1] + ['raw-relay-both']
     calibrator = ['balance_calibrator', '--ros-args', '-p', f'calibration_file:={calibration_file}',
                   '-p', 'diagnostics_period_s:=1.0', '-p', f'input_depth:={QOS_DEPTH}']
     return [('harness ceiling', None), ('bare relay', relay), ('raw relay', raw_relay),
-            ('balance_calibrator', calibrator)]
+            (BOTH_TOPICS, both_topics), (PURE_CORE, calibrator), ('balance_calibrator', calibrator)]
 
 
-def raw_relay_main() -> None:
+def raw_relay_main(both_topics: bool = False) -> None:
     """bytes in, bytes out, the calibrator's reader (nodes/_raw_input.py: own thread, batches): rclpy's
-    ceiling for a node that does nothing."""
+    ceiling for a node that does nothing. both_topics: each sample also goes out on the uncertainty
+    topic, as the calibrator's do: the floor of any rclpy node with the calibrator's topics, before
+    it decodes, computes or encodes anything."""
     import rclpy
     from geometry_msgs.msg import WrenchStamped
     from rclpy.executors import ExternalShutdownException
@@ -240,11 +288,16 @@ def raw_relay_main() -> None:
     node = rclpy.create_node('raw_relay')
     qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
     publisher = node.create_publisher(WrenchStamped, '/balance/wrench', qos)
+    second = node.create_publisher(WrenchStamped, UNCERTAINTY_TOPIC, qos) if both_topics else None
 
     def relay(batch):
         publish = publisher.publish
         for data in batch:
             publish(data)
+        if second is not None:
+            publish = second.publish
+            for data in batch:
+                publish(data)
 
     reader = RawInput(node, WrenchStamped, '/balance/raw', qos, relay)
     reader.start()
@@ -293,8 +346,9 @@ def throughput(rates, seconds, only=None, calibrator_args=()) -> None:
             if command and command[0] == 'balance_calibrator':
                 command = command + [a for item in calibrator_args for a in ('-p', item)]
             print(f'{label}:', flush=True)
-            process = None if command is None else _start(command, env)
-            harness = Harness(rclpy.create_node(f'benchmark_{label.replace(" ", "_")}'),
+            process = None if command is None else \
+                _start(command, {**env, 'BALANCE_CALIB_LONE_KERNEL': '0'} if label == PURE_CORE else env)
+            harness = Harness(rclpy.create_node('benchmark_' + ''.join(c if c.isalnum() else '_' for c in label)),
                               '/balance/raw' if command is None else '/balance/wrench')
             try:
                 harness.wait_connected()
@@ -307,6 +361,10 @@ def throughput(rates, seconds, only=None, calibrator_args=()) -> None:
                     print(f'  {rate:6.0f} Hz (sent at {result["achieved"]:6.0f}): {result["received"]}/'
                           f'{result["sent"]} back{also}, p50 {result["p50_ms"]:.3f} ms, p99 {result["p99_ms"]:.3f} ms, '
                           f'CPU {result["cpu_us_per_sample"]:.1f} µs/sample', flush=True)
+                    if rate == 1000.0 and result['threads']:
+                        print('         by thread (CPU µs, wake-ups per sample): ' + ', '.join(
+                            f'{group} {cpu:.0f} µs {wakes:.1f}' for group, (cpu, wakes) in result['threads'].items()),
+                            flush=True)
                     if result['received'] < 0.5 * result['sent']:
                         break                  # far beyond this node's rate: the next steps say nothing new
             finally:
@@ -329,7 +387,7 @@ def throughput(rates, seconds, only=None, calibrator_args=()) -> None:
         one = at_1k(results) or {}
         print(f'{label:20s} {best(results):12.0f} {one.get("cpu_us_per_sample", float("nan")):18.1f} '
               f'{one.get("p50_ms", float("nan")):11.3f} {one.get("p99_ms", float("nan")):11.3f}')
-    bare, raw, cal = (summary.get(k) for k in ('bare relay', 'raw relay', 'balance_calibrator'))
+    bare, raw, cal, floor = (summary.get(k) for k in ('bare relay', 'raw relay', 'balance_calibrator', BOTH_TOPICS))
     if bare and raw and cal:
         ceiling = best(summary['harness ceiling'])
         print(f'harness ceiling / bare relay rate: {ceiling / max(best(bare), 1):.1f} (should be >= 3)')
@@ -339,6 +397,17 @@ def throughput(rates, seconds, only=None, calibrator_args=()) -> None:
             print(f'calibrator CPU per sample: {at_1k(cal)["cpu_us_per_sample"] / at_1k(bare)["cpu_us_per_sample"]:.2f}'
                   f' x bare relay (target <= 0.5); added p99 over the raw relay: '
                   f'{at_1k(cal)["p99_ms"] - at_1k(raw)["p99_ms"]:+.3f} ms (target <= 0.2)')
+        pure = summary.get(PURE_CORE)
+        if pure and at_1k(pure) and at_1k(cal):
+            print(f'lone-sample C kernel: CPU per sample at 1 kHz {at_1k(cal)["cpu_us_per_sample"]:.0f} µs against '
+                  f'{at_1k(pure)["cpu_us_per_sample"]:.0f} µs with the pure core '
+                  f'({at_1k(cal)["cpu_us_per_sample"] / at_1k(pure)["cpu_us_per_sample"]:.2f} x)')
+        if floor and at_1k(floor) and at_1k(bare) and at_1k(cal):
+            bare_us, floor_us = at_1k(bare)['cpu_us_per_sample'], at_1k(floor)['cpu_us_per_sample']
+            print(f'floor (raw relay publishing both of the calibrator\'s topics, no arithmetic): '
+                  f'{floor_us / bare_us:.2f} x bare relay; the calibrator\'s own work (decode, calibrate, '
+                  f'uncertainty, encode, bookkeeping): {at_1k(cal)["cpu_us_per_sample"] - floor_us:.0f} µs/sample, '
+                  f'against {0.5 * bare_us - floor_us:.0f} µs left by the CPU target')
 
 
 def refit_latency(bag: str, seconds: float) -> None:
@@ -401,14 +470,14 @@ def main(argv=None) -> None:
     parser.add_argument('--domain', type=int, default=int(os.environ.get('ROS_DOMAIN_ID', '77')))
     parser.add_argument('--refit', metavar='BAG', help='measure latency quiet and during ~/refit of BAG')
     parser.add_argument('--only', help='comma-separated subset of: harness ceiling, bare relay, raw relay, '
-                                       'balance_calibrator')
+                                       f'"{BOTH_TOPICS}", "{PURE_CORE}", balance_calibrator')
     parser.add_argument('--calibrator-parameter', action='append', default=[], metavar='NAME:=VALUE',
                         help='extra balance_calibrator parameter (repeatable), e.g. publish_uncertainty:=false')
-    parser.add_argument('--node', choices=['raw-relay', 'sink'], help=argparse.SUPPRESS)
+    parser.add_argument('--node', choices=['raw-relay', 'raw-relay-both', 'sink'], help=argparse.SUPPRESS)
     parser.add_argument('--topic', default='/balance/wrench', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    if args.node == 'raw-relay':
-        raw_relay_main()
+    if args.node in ('raw-relay', 'raw-relay-both'):
+        raw_relay_main(args.node == 'raw-relay-both')
         return
     if args.node == 'sink':
         sink_main(args.topic)

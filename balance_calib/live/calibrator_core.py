@@ -593,14 +593,18 @@ class InputCounters:
     period_out_of_envelope: int = 0
     period_not_converged: int = 0
 
+    def count_one(self, out_of_envelope: bool) -> None:
+        """count() for one accepted sample (the live path at low rates)."""
+        self.received += 1
+        self.period_received += 1
+        self.published += 1
+        if out_of_envelope:
+            self.out_of_envelope += 1
+            self.period_out_of_envelope += 1
+
     def count(self, batch: WrenchBatch) -> None:
-        if len(batch.accepted) == 1 and batch.accepted[0]:       # the live path at low rates
-            self.received += 1
-            self.period_received += 1
-            self.published += 1
-            if batch.out_of_envelope[0]:
-                self.out_of_envelope += 1
-                self.period_out_of_envelope += 1
+        if len(batch.accepted) == 1 and batch.accepted[0]:
+            self.count_one(bool(batch.out_of_envelope[0]))
             return
         n, ok = len(batch.accepted), int(np.count_nonzero(batch.accepted))
         saturated = 0 if batch.saturated is None else int(np.count_nonzero(batch.saturated))

@@ -80,14 +80,14 @@ class WrenchEncoder:
         template[12:16] = np.frombuffer((len(encoded) + 1).to_bytes(4, 'little'), np.uint8)
         template[16:16 + len(encoded)] = np.frombuffer(encoded, np.uint8)
         self.template = template
-        self._middle = template[12:self.offset].tobytes()     # frame_id and padding
+        self.middle = template[12:self.offset].tobytes()     # frame_id and padding
 
     def encode(self, stamps_ns: np.ndarray, values: np.ndarray) -> list[bytes]:
         """stamps (M,) int64 ns and values (M, 6) -> M serialized messages."""
         m = len(values)
         if m == 1:
             sec, nanosec = divmod(int(stamps_ns[0]), 1_000_000_000)
-            return [CDR_LE + _STAMP.pack(sec, nanosec) + self._middle + _SIX.pack(*values[0].tolist())]
+            return [CDR_LE + _STAMP.pack(sec, nanosec) + self.middle + _SIX.pack(*values[0].tolist())]
         rows = np.empty((m, self.size), dtype=np.uint8)
         rows[:] = self.template
         stamps = np.asarray(stamps_ns, dtype=np.int64)

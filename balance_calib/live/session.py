@@ -18,6 +18,7 @@ import numpy as np
 
 from ..calibration_file import ConfigError
 from ..config import resolve_config_path
+from . import lone_sample
 from .calibrator_core import ActiveCalibration, activate, parse_reliability
 from .parameters import check_parameter, input_scale_mv, load_calibration_checked
 from .raw_codec import WrenchEncoder, decode_wrenches
@@ -52,14 +53,17 @@ def activate_file(path: str, value: Callable[[str], object]) -> ActiveCalibratio
 
 class Output:
     """What one batch of samples gives the node to publish (serialized): the wrenches, the overload state
-    if it changed, and uncertainty() -> the uncertainties, computed when asked (after the wrenches went out)."""
-    __slots__ = ('wrench', 'overload', '_later', '_stamps', '_encoder')
+    if it changed, and uncertainty() -> the uncertainties, computed when asked (after the wrenches went
+    out), or `ready` already (the C kernel's lone sample)."""
+    __slots__ = ('wrench', 'overload', '_later', '_stamps', '_encoder', '_ready')
 
-    def __init__(self, wrench: list, overload: bool | None, later=None, stamps=None, encoder=None):
+    def __init__(self, wrench: list, overload: bool | None, later=None, stamps=None, encoder=None, ready=None):
         self.wrench, self.overload = wrench, overload
-        self._later, self._stamps, self._encoder = later, stamps, encoder
+        self._later, self._stamps, self._encoder, self._ready = later, stamps, encoder, ready
 
     def uncertainty(self) -> list:
+        if self._ready is not None:
+            return self._ready
         values = None if self._later is None else self._later()
         return [] if values is None else self._encoder.encode(self._stamps, values)
 
@@ -92,6 +96,10 @@ class CalibratorSession:
         self.period_start_s = time.monotonic()
         self.pending: ActiveCalibration | None = None    # checked by validate(), applied by apply()
         self._restore_tare()
+        if not lone_sample.available:
+            self.log('warning', f'the C kernel for lone samples is not built ({lone_sample.unavailable_reason}): '
+                                'every sample takes the pure core\'s path (slower at low rates; reinstall with a C '
+                                'compiler)')
         self.log('info', f'{active.model_name} model of {active.calibration.balance} from {path}, '
                          f'{active.installation.name} installation; requires '
                          f'{", ".join(active.requires) or "bridge outputs only"}')
@@ -108,6 +116,14 @@ class CalibratorSession:
     def on_samples(self, messages: list[bytes], uncertainty_wanted: bool = True) -> Output | None:
         """One batch of serialized balance/raw samples -> serialized wrenches (None: nothing can run);
         the uncertainty only when wanted (someone subscribes to it), computed by Output.uncertainty()."""
+        if len(messages) == 1:
+            now_s = time.monotonic()
+            with self.lock:
+                lone = self.live.process_lone(messages[0], now_s=now_s, input_scale=self.input_scale,
+                                              middle=self.encoder.middle, uncertainty_wanted=uncertainty_wanted)
+                if lone is not None:
+                    self.last_sample_s = now_s
+                    return Output([lone[0]], self._say_changes(''), ready=[] if lone[1] is None else [lone[1]])
         try:
             stamps_ns, outputs, frame_ids = decode_wrenches(messages)
         except ValueError:

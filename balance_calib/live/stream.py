@@ -18,6 +18,7 @@ from ..units import BRIDGE_OUTPUTS, COMPONENTS
 from .calibrator_core import (ActiveCalibration, InputCounters, LiveState, LoadHistory, StatusReport, TareResult,
                               TareWindow, WrenchBatch, _extra_variables, compute_wrench, diagnostics, evaluate_window,
                               six_axis_loads)
+from . import lone_sample
 from .tare_store import TareState, now_iso
 
 
@@ -59,7 +60,7 @@ class InputMonitor:
 
     def update(self, stamps_ns: np.ndarray, frame_ids=None) -> None:
         if len(stamps_ns) == 1:
-            self._update_one(int(stamps_ns[0]), frame_ids[0] if frame_ids else '')
+            self.update_one(int(stamps_ns[0]), frame_ids[0] if frame_ids else '')
             return
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         if frame_ids is not None:
@@ -99,7 +100,7 @@ class InputMonitor:
             self.interval_ns = float(np.median(self._differences[:min(self._filled, 256)]))
             self._since_estimate = 0
 
-    def _update_one(self, stamp: int, frame_id: str) -> None:
+    def update_one(self, stamp: int, frame_id: str) -> None:
         """update() for one sample, in plain Python (the live path at low rates)."""
         if frame_id and frame_id.lower() != self.balance:
             self._add('samples from another balance', 1)
@@ -155,14 +156,18 @@ class OverloadMonitor:
         self._capacity = np.asarray(value, dtype=float)
         self.capacity_list = self._capacity.tolist()
 
+    def _exceeds_one(self, loads: list | tuple) -> bool:
+        """One sample's loads (6 floats): its peak noted; True if any exceeds the limit."""
+        ratios = [abs(v) / c for v, c in zip(loads, self.capacity_list)]
+        peak = self.peak_fraction
+        if any(r > p for r, p in zip(ratios, peak.tolist())):
+            np.maximum(peak, ratios, out=peak)
+        return any(r > self.fraction for r in ratios)
+
     def update(self, loads_total: np.ndarray, saturated: np.ndarray, now_s: float) -> bool:
         """Feed a batch (loads of the accepted samples (N, 6), saturated flags); True if the state changed."""
         if len(loads_total) == 1 and len(saturated) == 1 and not self.active and not saturated[0]:   # lone sample
-            ratios = [abs(v) / c for v, c in zip(loads_total[0].tolist(), self.capacity_list)]
-            peak = self.peak_fraction
-            if any(r > p for r, p in zip(ratios, peak.tolist())):
-                np.maximum(peak, ratios, out=peak)
-            if not any(r > self.fraction for r in ratios):
+            if not self._exceeds_one(loads_total[0].tolist()):
                 return False
         if len(loads_total):
             ratio = np.abs(loads_total).max(axis=0) / self.capacity
@@ -282,6 +287,7 @@ class LiveCalibrator:
         self.fallback_reason = ''
         self.overload_changed = False
         self.uncertainty_wanted = True
+        self._lone_plan, self._lone_plan_for = None, None
 
     # --- configuration --------------------------------------------------------------------------
     def set_active(self, active: ActiveCalibration) -> None:
@@ -349,6 +355,33 @@ class LiveCalibrator:
         if defer_uncertainty:
             return Published(indices, wrench, batch, uncertainty_later=uncertainty)
         return Published(indices, wrench, batch, uncertainty())
+
+    def process_lone(self, data: bytes, *, now_s: float, input_scale: float, middle: bytes,
+                     uncertainty_wanted: bool) -> tuple[bytes, bytes | None] | None:
+        """One serialized sample by the C kernel (lone_sample.py) -> (wrench bytes, uncertainty bytes or
+        None), with the same bookkeeping as process(); None: process() must take it (the kernel does not
+        apply here, or declined this sample)."""
+        if self.window is not None or self.lowpass.cutoff_hz > 0 or self.overload.active:
+            return None
+        made_for = self._lone_plan_for     # (calibration, zero and tare, input scale, frame): made again on a change
+        if made_for is None or made_for[0] is not self.active or made_for[1] is not self.tare \
+                or made_for[2] != input_scale or made_for[3] is not middle:
+            self._lone_plan = lone_sample.make_plan(self.active, self.tare, input_scale, middle)
+            self._lone_plan_for = (self.active, self.tare, input_scale, middle)
+        if self._lone_plan is None:
+            return None
+        overload = self.overload
+        result = lone_sample.run(self._lone_plan, data, uncertainty_wanted and self.settings.publish_uncertainty,
+                                 overload.fraction, overload.peak_fraction)
+        if result is None:
+            return None
+        stamp_ns, frame_id, loads_total, outside, exceeds, wrench, uncertainty = result
+        self.uncertainty_wanted = uncertainty_wanted
+        self.inputs.update_one(stamp_ns, frame_id.decode('utf-8', 'replace'))
+        self.counters.count_one(outside)
+        self.fallback_reason = ''
+        self.overload_changed = exceeds and overload.update(np.array([loads_total]), np.zeros(1, bool), now_s)
+        return wrench, uncertainty
 
     # --- ~/tare, ~/zero, ~/clear_tare ------------------------------------------------------------
     def start_window(self, kind: str, samples: int) -> TareWindow:

@@ -1,0 +1,175 @@
+"""The C kernel of the lone sample (live/_lone_kernel.c) against the pure core's batch path.
+
+Bytes in as rclpy serializes them, bytes out read back by rclpy: wrench, uncertainty, flags, counters,
+input monitor and overload must be the pure core's, to 1e-12, with a zero, a tare (and its scatter),
+an inverted installation and ratiometric inputs; what the kernel declines goes to the pure core."""
+import numpy as np
+import pytest
+from geometry_msgs.msg import WrenchStamped
+from rclpy.serialization import deserialize_message, serialize_message
+
+from balance_calib.calibration_file import load_calibration
+from balance_calib.config import CONFIG_DIR
+from balance_calib.live import _lone_kernel, lone_sample  # noqa: F401  (an import error must fail)
+from balance_calib.live.calibrator_core import activate
+from balance_calib.live.raw_codec import WrenchEncoder
+from balance_calib.live.stream import LiveCalibrator, LiveSettings
+from balance_calib.tunnel_axes import INVERTED, UPRIGHT
+from test_live_stream import calibration_with_covariance, show_run, take
+
+MEMO = load_calibration(CONFIG_DIR / 'lmc6522.yaml')
+CAPACITY = MEMO.capacity
+
+
+def serialized(values, stamps_ns, frame='LMC6522'):
+    messages = []
+    for row, stamp in zip(values, stamps_ns):
+        msg = WrenchStamped()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp), 10**9)
+        msg.header.frame_id = frame
+        (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
+         msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = [float(v) for v in row]
+        messages.append(serialize_message(msg))
+    return messages
+
+
+def six(data: bytes) -> np.ndarray:
+    m = deserialize_message(data, WrenchStamped)
+    return np.array([m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
+                     m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z])
+
+
+def lone_through_kernel(live, messages, scale, encoder):
+    """Each message alone through process_lone, process() when it declines, 0.1 s apart; wrench/uncertainty
+    per message (None: not published), and which ones the kernel took."""
+    wrench, uncertainty, by_kernel = [], [], []
+    for k, data in enumerate(messages):
+        done = live.process_lone(data, now_s=0.1 * k, input_scale=scale, middle=encoder.middle, uncertainty_wanted=True)
+        by_kernel.append(done is not None)
+        if done is not None:
+            wrench.append(six(done[0]))
+            uncertainty.append(None if done[1] is None else six(done[1]))
+            assert deserialize_message(done[0], WrenchStamped).header.frame_id == 'tunnel'
+            continue
+        m = deserialize_message(data, WrenchStamped)
+        values = six(data)[None, :] * scale
+        published = live.process(values, np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec]),
+                                  [m.header.frame_id], now_s=0.1 * k)
+        wrench.append(published.wrench[0] if len(published.indices) else None)
+        uncertainty.append(published.uncertainty[0] if len(published.indices) and published.uncertainty is not None
+                           else None)
+    return wrench, uncertainty, by_kernel
+
+
+@pytest.mark.parametrize('installation, scale', [(INVERTED, 1.0), (UPRIGHT, 2.5)])
+def test_kernel_lone_samples_equal_the_pure_core_after_a_zero_and_a_tare(installation, scale):
+    calibration = calibration_with_covariance()
+    active = activate(calibration, 'cubic', installation)
+    zero, wind_off, wind_on, _ = show_run(installation, samples_per_condition=3, seed=7)
+    samples = wind_on.reshape(-1, 6).copy()
+    samples[30, 2] = 50.0 * MEMO.rated_output_mv[2]         # saturated: declined, not published
+    samples[9, 0] = np.nan                                  # not finite: declined, not published
+    samples[11, 2] = 1.4 * MEMO.rated_output_mv[2]          # beyond the envelope: published, flagged
+    lives = []
+    for _ in range(2):
+        live = LiveCalibrator(active, LiveSettings(overload_fraction=2.0))
+        assert take(live, 'zero', zero).ok and take(live, 'tare', wind_off, 10**9).ok
+        lives.append(live)
+    batch_live, lone_live = lives
+    stamps = 2 * 10**9 + np.arange(len(samples)) * 10**6
+    stamps[20] = stamps[19]                                 # a duplicate stamp, counted by both
+    frames = ['LMC6522'] * len(samples)
+    messages = serialized(samples / scale, stamps)
+    messages[30] = serialized(samples[30:31] / scale, stamps[30:31], 'B660H')[0]   # another balance's frame
+    frames[30] = 'B660H'
+    batch = batch_live.process(samples, stamps, frames, now_s=0.0)
+    wrench, uncertainty, by_kernel = lone_through_kernel(lone_live, messages, scale, WrenchEncoder('tunnel'))
+
+    published = [k for k, w in enumerate(wrench) if w is not None]
+    assert published == batch.indices.tolist() and 30 not in published and 9 not in published
+    # the kernel declines the non-finite sample; the saturated bridge (30) raises the overload, held for
+    # the rest of the run (1 s), and while it is held the pure core takes every sample
+    assert by_kernel == [k != 9 and k < 30 for k in range(len(samples))]
+    assert lone_live.counters.out_of_envelope == 1 and lone_live.overload.active
+    fs = np.abs(installation.to_tunnel(CAPACITY))
+    np.testing.assert_allclose(np.vstack([wrench[k] for k in published]) / fs, batch.wrench / fs, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.vstack([uncertainty[k] for k in published]), batch.uncertainty, rtol=1e-12)
+    assert batch.batch.out_of_envelope[11]
+    for name in ('received', 'published', 'rejected_nonfinite', 'saturated', 'out_of_envelope'):
+        assert getattr(lone_live.counters, name) == getattr(batch_live.counters, name), name
+    assert lone_live.inputs.problems() == batch_live.inputs.problems()
+    assert lone_live.inputs.foreign_frames == {'B660H'}
+    np.testing.assert_allclose(lone_live.overload.peak_fraction, batch_live.overload.peak_fraction, rtol=1e-12)
+
+
+def test_kernel_raises_the_overload_and_a_new_tare_reaches_it():
+    """An overloading sample through the kernel raises the overload as process() does; while it is held,
+    and while a tare window collects, the pure core takes the samples; the new tare then reaches the
+    kernel's numbers."""
+    calibration = calibration_with_covariance()
+    active = activate(calibration, 'cubic', UPRIGHT)
+    settings = LiveSettings(overload_fraction=0.4, overload_clear_s=0.5)
+    kernel_live, core_live = LiveCalibrator(active, settings), LiveCalibrator(active, settings)
+    encoder = WrenchEncoder('tunnel')
+    rng = np.random.default_rng(3)
+    quiet = rng.uniform(-0.1, 0.1, (5, 6)) * MEMO.rated_output_mv
+    loud = quiet[:1].copy()
+    loud[0, 2] = 0.6 * MEMO.rated_output_mv[2]
+    stamps = 10**9 + np.arange(8) * 10**6
+    rows = np.vstack([quiet[:2], loud, quiet[2:]])
+    changes = []
+    for k, row in enumerate(rows):
+        data = serialized(row[None, :], stamps[k:k + 1])[0]
+        now_s = 0.1 * k
+        done = kernel_live.process_lone(data, now_s=now_s, input_scale=1.0, middle=encoder.middle,
+                                        uncertainty_wanted=True)
+        if done is None:
+            kernel_live.process(row[None, :], stamps[k:k + 1], now_s=now_s)
+        assert (done is None) == (k > 2)                 # held overload: the pure core's turn
+        core_live.process(row[None, :], stamps[k:k + 1], now_s=now_s)
+        changes.append((kernel_live.overload_changed, kernel_live.overload.active))
+        assert (kernel_live.overload.active, kernel_live.overload.components) == \
+            (core_live.overload.active, core_live.overload.components)
+    assert changes[2] == (True, True) and kernel_live.overload.components == ('FZ',)
+    assert kernel_live.overload.active      # 0.2 s inside so far: still held (clear_s 0.5)
+
+    live = LiveCalibrator(active)
+    first = serialized(quiet[:1], stamps[:1])[0]
+    before = live.process_lone(first, now_s=0.0, input_scale=1.0, middle=encoder.middle, uncertainty_wanted=True)
+    live.start_window('tare', 20)
+    window = quiet[:1] + rng.normal(0.0, 1e-4, (20, 6)) * MEMO.rated_output_mv
+    assert live.process_lone(serialized(window[:1], stamps[1:2])[0], now_s=0.0, input_scale=1.0,
+                             middle=encoder.middle, uncertainty_wanted=True) is None   # the window collects
+    live.process(window, 2 * 10**9 + np.arange(20) * 10**6, now_s=0.0)
+    assert live.finish_window().ok
+    after = live.process_lone(serialized(quiet[:1], stamps[2:3] + 3 * 10**9)[0], now_s=0.0, input_scale=1.0,
+                              middle=encoder.middle, uncertainty_wanted=True)
+    reference = live.process(quiet[:1], stamps[3:4] + 4 * 10**9, now_s=0.0)
+    np.testing.assert_allclose(six(after[0]), reference.wrench[0], rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(six(after[1]), reference.uncertainty[0], rtol=1e-12)
+    assert np.abs(six(after[0])).max() < 1e-3 * CAPACITY.max() < np.abs(six(before[0])).max()   # tared away
+    assert np.all(six(after[1]) > six(before[1]))        # the tare's scatter added
+
+
+def test_what_the_kernel_does_not_take():
+    encoder = WrenchEncoder('tunnel')
+    memo_live = LiveCalibrator(activate(MEMO, 'cubic', UPRIGHT))      # the memo's matrices: no covariance
+    data = serialized(np.full((1, 6), 0.1), [10**9])[0]
+    done = memo_live.process_lone(data, now_s=0.0, input_scale=1.0, middle=encoder.middle, uncertainty_wanted=True)
+    assert done is not None and done[1] is None
+    big_endian = b'\x00\x00' + data[2:]
+    assert memo_live.process_lone(big_endian, now_s=0.0, input_scale=1.0, middle=encoder.middle,
+                                  uncertainty_wanted=True) is None
+    assert memo_live.process_lone(data[:-8], now_s=0.0, input_scale=1.0, middle=encoder.middle,
+                                  uncertainty_wanted=True) is None
+    filtered = LiveCalibrator(activate(MEMO, 'cubic', UPRIGHT), LiveSettings(lowpass_hz=10.0))
+    assert filtered.process_lone(data, now_s=0.0, input_scale=1.0, middle=encoder.middle,
+                                 uncertainty_wanted=True) is None
+    with pytest.raises(ValueError, match='covariance'):
+        _lone_kernel.plan(1.0, *[np.zeros(6)] * 5, np.arange(6), np.ones(6), 2, 1, np.zeros((2, 1), np.intp),
+                          np.zeros((6, 2)), np.zeros(3), np.zeros(6), np.zeros(6), np.ones(6, np.int64), b'')
+    plan = lone_sample.make_plan(memo_live.active, memo_live.tare, 1.0, encoder.middle)
+    with pytest.raises(ValueError, match='peak'):
+        lone_sample.run(plan, data, True, 1.0, np.zeros(5))
+    with pytest.raises(TypeError):                    # read-only: the peak is written in place
+        lone_sample.run(plan, data, True, 1.0, bytes(48))
