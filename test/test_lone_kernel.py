@@ -173,3 +173,34 @@ def test_what_the_kernel_does_not_take():
         lone_sample.run(plan, data, True, 1.0, np.zeros(5))
     with pytest.raises(TypeError):                    # read-only: the peak is written in place
         lone_sample.run(plan, data, True, 1.0, bytes(48))
+
+
+def test_a_batch_goes_through_the_kernel_until_it_declines_and_the_rest_through_the_pure_core(tmp_path, monkeypatch):
+    """CalibratorSession.on_samples: the kernel takes a batch sample by sample; from the first sample it
+    declines (here not finite) the pure core takes the rest. Wrenches and uncertainties in order, and
+    the counters, must be those of the pure core alone."""
+    from balance_calib.calibration_file import save_calibration
+    from balance_calib.live import session as session_module
+    from balance_calib.live.parameters import PARAMETERS
+    path = tmp_path / 'calibration.yaml'
+    save_calibration(str(path), calibration_with_covariance())
+    values = {name: spec.default for name, spec in PARAMETERS.items()}
+    values.update(calibration_file=str(path), tare_file=str(tmp_path / 'tare.yaml'), installation='inverted')
+    rng = np.random.default_rng(21)
+    batch = rng.uniform(-0.4, 0.4, (12, 6)) * MEMO.rated_output_mv
+    batch[7, 3] = np.nan
+    messages = serialized(batch, 10**9 + np.arange(12) * 10**6)
+
+    def run(kernel: bool):
+        monkeypatch.setattr(lone_sample, 'available', kernel)
+        session = session_module.CalibratorSession(lambda name: values[name], 'test', lambda level, line: None)
+        out = session.on_samples(messages[:4]), session.on_samples(messages[4:])
+        return session, [six(w) for o in out for w in o.wrench], [six(u) for o in out for u in o.uncertainty()]
+    core_session, core_wrench, core_uncertainty = run(False)
+    kernel_session, kernel_wrench, kernel_uncertainty = run(True)
+    assert len(kernel_wrench) == len(kernel_uncertainty) == 11
+    np.testing.assert_allclose(kernel_wrench, core_wrench, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(kernel_uncertainty, core_uncertainty, rtol=1e-12)
+    for name in ('received', 'published', 'rejected_nonfinite', 'saturated', 'out_of_envelope'):
+        assert getattr(kernel_session.live.counters, name) == getattr(core_session.live.counters, name), name
+    assert kernel_session.live.counters.rejected_nonfinite == 1
