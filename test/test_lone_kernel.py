@@ -204,3 +204,12 @@ def test_a_batch_goes_through_the_kernel_until_it_declines_and_the_rest_through_
     for name in ('received', 'published', 'rejected_nonfinite', 'saturated', 'out_of_envelope'):
         assert getattr(kernel_session.live.counters, name) == getattr(core_session.live.counters, name), name
     assert kernel_session.live.counters.rejected_nonfinite == 1
+
+
+def test_the_in_process_benchmark_runs_both_paths():
+    """benchmarks/lone_kernel.py (figures in the README): every case measured for both paths (no
+    timing is asserted), and the kernel switched back on afterwards."""
+    from balance_calib.benchmarks.lone_kernel import BATCHES, measure
+    results = measure(30)
+    assert len(results) == 2 * (len(BATCHES) + 1) and all(v > 0 for v in results.values())
+    assert lone_sample.available

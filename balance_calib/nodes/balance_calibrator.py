@@ -9,7 +9,8 @@ its covariance and someone subscribes), balance/overload (std_msgs/Bool, transie
 kept in <calibration>.tare.yaml beside the calibration file and restored at start-up. QoS through
 the standard overrides, e.g. -p qos_overrides./balance/raw.subscription.reliability:=best_effort.
 
-This node translates; live/session.py does the work (math in live/calibrator_core.py). balance/raw
+This node translates; live/session.py does the work (math in live/calibrator_core.py; each sample in
+one C call where it applies, live/lone_sample.py). balance/raw
 is read serialized by a thread of its own (nodes/_raw_input.py) in batches of what is waiting; the
 executor runs the services, parameters and timers and never wakes for a sample. ~/tare and ~/zero
 await a future that the reader completes once the window is full; ~/refit runs the pipeline in a
