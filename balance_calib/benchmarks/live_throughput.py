@@ -18,9 +18,10 @@ each as a subprocess between the same source and sink (reliable, depth 1000 both
   decodes, computes or encodes anything;
 - calibrator, pure core: the calibrator with its lone-sample C kernel switched off
   (BALANCE_CALIB_LONE_KERNEL=0, live/lone_sample.py): the kernel's baseline, same run;
-- balance_calibrator: the memo's cubic matrix with a coefficient covariance, diagnostics at 1 Hz; the
-  sink subscribes to balance/wrench_uncertainty too (the calibrator computes and publishes it only
-  for subscribers), so one more message per sample is computed, published and counted.
+- balance_calibrator: the memo's cubic matrix with a coefficient covariance, diagnostics at 1 Hz; a
+  second sink process subscribes to balance/wrench_uncertainty (the calibrator computes and
+  publishes it only for subscribers), so one more message per sample is computed, published and
+  counted.
 
 Per rate: messages back / sent and latency p50/p99 (receive time minus the sample's stamp). Per node:
 the highest rate with zero loss, and at 1 kHz the process CPU time per sample (/proc/PID/stat
@@ -106,12 +107,14 @@ def _thread_breakdown(before: dict, after: dict, samples: int) -> dict:
 
 
 class Harness:
-    """Source (pre-serialized, this process) and sink (bytes, stamp only, its own process).
+    """Source (pre-serialized, this process) and sinks (bytes, stamp only, each its own process).
 
-    The sink is `--node sink` of this module: a RawInput thread (the calibrator's reader) that takes
+    A sink is `--node sink` of this module: a RawInput thread (the calibrator's reader) that takes
     what is waiting as bytes and notes receive time minus stamp; it answers `reset`, `count`, `stats`
     (JSON), `publishers` and `dump FILE` on stdin/stdout. In its own process it neither competes with
-    the source for the GIL nor is counted in the node's CPU."""
+    the source for the GIL nor is counted in the node's CPU. With a node between, a second sink
+    counts balance/wrench_uncertainty (the calibrator computes it only for subscribers): in a process
+    of its own too, so that the latency sink's one reader thread never waits for another's GIL."""
 
     def __init__(self, node, sink_topic: str):
         from geometry_msgs.msg import WrenchStamped
@@ -119,18 +122,27 @@ class Harness:
         qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         self.node = node
         self.publisher = node.create_publisher(WrenchStamped, '/balance/raw', qos)
-        self.sink = subprocess.Popen([sys.executable, '-m', 'balance_calib.benchmarks.live_throughput',
-                                      '--node', 'sink', '--topic', sink_topic],
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, bufsize=1)
+        topics = [sink_topic] + ([UNCERTAINTY_TOPIC] if sink_topic != '/balance/raw' else [])
+        self.sinks = [subprocess.Popen([sys.executable, '-m', 'balance_calib.benchmarks.live_throughput',
+                                        '--node', 'sink', '--topic', topic],
+                                       stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, bufsize=1)
+                      for topic in topics]
         self.template = _raw_template()
 
-    def ask(self, command: str) -> str:
-        self.sink.stdin.write(command + '\n')
-        self.sink.stdin.flush()
-        line = self.sink.stdout.readline()
+    def ask(self, command: str, sink: int = 0) -> str:
+        process = self.sinks[sink]
+        process.stdin.write(command + '\n')
+        process.stdin.flush()
+        line = process.stdout.readline()
         if not line:
-            raise RuntimeError(f'the benchmark sink exited (code {self.sink.poll()})')
+            raise RuntimeError(f'the benchmark sink exited (code {process.poll()})')
         return line.strip()
+
+    def wait_uncertainty_connected(self, timeout_s: float = 10.0) -> None:
+        """For a node that publishes balance/wrench_uncertainty: until the second sink is matched."""
+        deadline = time.monotonic() + timeout_s
+        while len(self.sinks) > 1 and int(self.ask('publishers', 1)) == 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
 
     def wait_connected(self, timeout_s: float = 30.0) -> None:
         deadline = time.monotonic() + timeout_s
@@ -150,7 +162,8 @@ class Harness:
         self.publisher.publish(bytes(message))
 
     def run(self, rate: float, seconds: float, pid: int | None) -> dict:
-        self.ask('reset')
+        for k in range(len(self.sinks)):
+            self.ask('reset', k)
         total = int(rate * seconds)
         cpu_before = _cpu_seconds(pid) if pid else 0.0
         threads_before = _thread_cpu(pid) if pid else {}
@@ -167,15 +180,20 @@ class Harness:
         cpu = (_cpu_seconds(pid) - cpu_before) if pid else float('nan')
         threads = _thread_breakdown(threads_before, _thread_cpu(pid), total) if pid else {}
         stats = json.loads(self.ask('stats'))
+        if len(self.sinks) > 1:
+            while time.monotonic() < settle and int(self.ask('count', 1)) < total:
+                time.sleep(0.02)
+            stats['uncertainty_received'] = int(self.ask('count', 1))
         return {'rate': rate, 'achieved': achieved, 'sent': total, **stats,
                 'cpu_us_per_sample': cpu / total * 1e6, 'threads': threads}
 
     def close(self):
-        try:
-            self.sink.stdin.close()
-            self.sink.wait(timeout=10)
-        except (OSError, subprocess.TimeoutExpired):
-            self.sink.kill()
+        for process in self.sinks:
+            try:
+                process.stdin.close()
+                process.wait(timeout=10)
+            except (OSError, subprocess.TimeoutExpired):
+                process.kill()
         self.node.destroy_node()
 
 
@@ -201,21 +219,12 @@ def sink_main(topic: str) -> None:
     qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
     reader = RawInput(node, WrenchStamped, topic, qos, on_batch)
     reader.start()
-    # the calibrator publishes balance/wrench_uncertainty only to subscribers: be one, and count them
-    uncertainty_count = [0]
-
-    def count_uncertainty(batch):
-        with lock:
-            uncertainty_count[0] += len(batch)
-    uncertainty = RawInput(node, WrenchStamped, UNCERTAINTY_TOPIC, qos, count_uncertainty, thread_name='uncertainty')
-    uncertainty.start()
     try:
         for line in sys.stdin:
             command = line.strip()
             if command == 'reset':
                 with lock:
                     latencies_ns.clear()
-                    uncertainty_count[0] = 0
                 answer = 'ok'
             elif command == 'count':            # cheap: polled while the last samples arrive
                 with lock:
@@ -225,9 +234,8 @@ def sink_main(topic: str) -> None:
             elif command == 'stats':
                 with lock:
                     latencies = np.array(latencies_ns, dtype=float) / 1e6
-                    uncertainties = uncertainty_count[0]
                 answer = json.dumps({
-                    'received': len(latencies), 'uncertainty_received': uncertainties,
+                    'received': len(latencies), 'uncertainty_received': 0,
                     'p50_ms': float(np.percentile(latencies, 50)) if len(latencies) else float('nan'),
                     'p99_ms': float(np.percentile(latencies, 99)) if len(latencies) else float('nan'),
                     'max_ms': float(latencies.max()) if len(latencies) else float('nan')})
@@ -241,7 +249,6 @@ def sink_main(topic: str) -> None:
             print(answer, flush=True)
     finally:
         reader.close()
-        uncertainty.close()
         node.destroy_node()
         rclpy.try_shutdown()
 
@@ -352,6 +359,8 @@ def throughput(rates, seconds, only=None, calibrator_args=()) -> None:
                               '/balance/raw' if command is None else '/balance/wrench')
             try:
                 harness.wait_connected()
+                if label in (BOTH_TOPICS, PURE_CORE, 'balance_calibrator'):
+                    harness.wait_uncertainty_connected()
                 summary[label] = []
                 for rate in rates:
                     result = harness.run(rate, seconds, None if process is None else process.pid)
