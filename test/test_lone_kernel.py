@@ -213,3 +213,48 @@ def test_the_in_process_benchmark_runs_both_paths():
     results = measure(30)
     assert len(results) == 2 * (len(BATCHES) + 1) and all(v > 0 for v in results.values())
     assert lone_sample.available
+
+
+def test_arbitrary_bytes_never_crash_the_kernel_and_what_it_takes_is_what_the_decoder_reads():
+    """The kernel reads bytes off the network: any bytes give None or the numbers the pure core's decoder
+    and calibration give for the same bytes (no read outside the message, no silent wrong number)."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from balance_calib.live.calibrator_core import compute_wrench
+    from balance_calib.live.raw_codec import decode_wrenches
+    active = activate(MEMO, 'cubic', UPRIGHT)
+    live = LiveCalibrator(active)
+    encoder = WrenchEncoder('tunnel')
+    plan = lone_sample.make_plan(active, live.tare, 1.0, encoder.middle)
+    valid = serialized(np.full((1, 6), 0.2), [10**9])[0]
+
+    def check(data: bytes) -> None:
+        peak = np.zeros(6)
+        result = lone_sample.run(plan, data, True, 1.0, peak)
+        if result is None:
+            return
+        stamps, values, frames = decode_wrenches([data])
+        stamp_ns, frame_id, loads, _, _, wrench, _ = result
+        assert stamp_ns == int(stamps[0]) and frame_id.decode('utf-8', 'replace') == frames[0]
+        core = compute_wrench(active, values)
+        assert core.accepted[0]
+        np.testing.assert_allclose(loads, core.loads_total[0], rtol=1e-12, atol=1e-12 * CAPACITY.max())
+        np.testing.assert_allclose(six(wrench), core.wrench_tunnel[0], rtol=1e-12, atol=1e-12 * CAPACITY.max())
+
+    @settings(max_examples=300, deadline=None)
+    @given(st.binary(max_size=200))
+    def any_bytes(data):
+        check(data)
+
+    @settings(max_examples=300, deadline=None)
+    @given(st.lists(st.tuples(st.integers(0, len(valid) - 1), st.integers(0, 255)), max_size=6),
+           st.integers(-8, 8))
+    def mutated(flips, resize):
+        data = bytearray(valid)
+        for position, value in flips:
+            data[position] = value
+        data = bytes(data[:len(data) + resize]) if resize < 0 else bytes(data) + bytes(resize)
+        check(data)
+    any_bytes()
+    mutated()
