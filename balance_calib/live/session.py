@@ -61,6 +61,11 @@ class Output:
         self.wrench, self.overload = wrench, overload
         self._later, self._stamps, self._encoder, self._ready = later, stamps, encoder, ready
 
+    def after(self, wrench: list, ready: list, overload: bool | None) -> Output:
+        """This output preceded by the C kernel's samples of the same batch (wrench and uncertainty bytes)."""
+        return Output(wrench + self.wrench, overload if self.overload is None else self.overload,
+                      self._later, self._stamps, self._encoder, ready=ready)
+
     def uncertainty(self) -> list:
         values = None if self._later is None else self._later()
         later = [] if values is None else self._encoder.encode(self._stamps, values)
@@ -148,8 +153,7 @@ class CalibratorSession:
             return rest
         if rest is None:
             return Output(wrench, overload, ready=ready)
-        return Output(wrench + rest.wrench, overload if rest.overload is None else rest.overload,
-                      rest._later, rest._stamps, rest._encoder, ready=ready)
+        return rest.after(wrench, ready, overload)
 
     def _through_core(self, messages: list[bytes], uncertainty_wanted: bool) -> Output | None:
         """on_samples() by the pure core's vectorised path."""
