@@ -22,6 +22,12 @@ _counter = itertools.count()
 RELIABLE = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
 
 
+def six(msg) -> list:
+    """The six components of a WrenchStamped (or Wrench), force then torque."""
+    w = getattr(msg, 'wrench', msg)
+    return [w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z]
+
+
 def new_domain_id() -> int:
     """A domain in 1..99 unlikely to be shared with another test running at the same time."""
     return 1 + (os.getpid() * 13 + next(_counter) * 37) % 99

@@ -15,6 +15,7 @@ from balance_calib.live.calibrator_core import activate
 from balance_calib.live.raw_codec import WrenchEncoder
 from balance_calib.live.stream import LiveCalibrator, LiveSettings
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
+from ros_harness import six as wrench_six
 from test_live_stream import calibration_with_covariance, show_run, take
 
 MEMO = load_calibration(CONFIG_DIR / 'lmc6522.yaml')
@@ -34,9 +35,7 @@ def serialized(values, stamps_ns, frame='LMC6522'):
 
 
 def six(data: bytes) -> np.ndarray:
-    m = deserialize_message(data, WrenchStamped)
-    return np.array([m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
-                     m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z])
+    return np.array(wrench_six(deserialize_message(data, WrenchStamped)))
 
 
 def lone_through_kernel(live, messages, scale, encoder):

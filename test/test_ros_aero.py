@@ -13,7 +13,7 @@ from sensor_msgs.msg import FluidPressure
 
 from balance_calib.cli import main as cli_main
 from balance_calib.launchless.aero_story import aero_executable
-from ros_harness import NodeProcess, Probe, new_domain_id, wait_for
+from ros_harness import NodeProcess, Probe, new_domain_id, six, wait_for
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 COEFFICIENTS = ['CAF', 'CY', 'CN', 'Cl', 'Cm', 'Cn', 'CD', 'CL']

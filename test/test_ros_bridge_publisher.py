@@ -15,7 +15,7 @@ from balance_calib.config import load_balance_config
 from balance_calib.live.timeline import select_points
 from balance_calib.nodes.bridge_publisher import BridgePublisher, StartupError
 from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
-from ros_harness import NodeProcess, Probe, new_domain_id, wait_for
+from ros_harness import NodeProcess, Probe, new_domain_id, six, wait_for
 
 pytestmark = pytest.mark.ros
 CONFIG = load_balance_config('lmc6522')
@@ -23,11 +23,6 @@ CONFIG = load_balance_config('lmc6522')
 
 def stamp_ns(msg):
     return msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
-
-
-def six(msg):
-    w = msg.wrench
-    return [w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z]
 
 
 @pytest.fixture

@@ -83,3 +83,34 @@ def test_an_exception_in_one_batch_is_logged_and_the_stream_goes_on(probe):
     assert reader._thread.is_alive()
     reader.close()
     node.destroy_node()
+
+
+def test_a_second_topic_is_read_by_the_same_thread_and_each_batch_reaches_its_own_callback(probe):
+    node = Node('reader_of_two', context=probe.context)
+    first, second, threads = [], [], set()
+
+    def into(seen):
+        def on_batch(batch):
+            threads.add(threading.get_ident())
+            seen.extend(deserialize_message(data, WrenchStamped).wrench.force.x for data in batch)
+        return on_batch
+    reader = RawInput(node, WrenchStamped, 'one', RELIABLE, into(first))
+    also = reader.also_read('two', into(second), RELIABLE)
+    assert also.topic_name == '/two' and reader.subscription.topic_name == '/one'
+    reader.start()
+    with pytest.raises(RuntimeError, match="also_read\\('three'\\) after start"):
+        reader.also_read('three', into([]), RELIABLE)
+    one = probe.node.create_publisher(WrenchStamped, 'one', RELIABLE)
+    two = probe.node.create_publisher(WrenchStamped, 'two', RELIABLE)
+    wait_for(lambda: one.get_subscription_count() >= 1 and two.get_subscription_count() >= 1, 10.0,
+             'the reader to connect to both topics')
+    for k in range(200):
+        one.publish(message(k))
+        two.publish(message(1000 + k))
+    wait_for(lambda: len(first) >= 200 and len(second) >= 200, 20.0, 'both streams')
+    assert first == [float(k) for k in range(200)]
+    assert second == [float(1000 + k) for k in range(200)]
+    assert threads == {reader._thread.ident}
+    reader.close()
+    assert not reader._thread.is_alive()
+    node.destroy_node()

@@ -20,20 +20,14 @@ import time
 from ..live import lone_sample
 from ..live.parameters import PARAMETERS
 from ..live.session import CalibratorSession
-from .live_throughput import _raw_template, calibration_with_covariance
+from .live_throughput import _raw_template, calibration_with_covariance, stamped
 
 BATCHES = (1, 2, 3, 10, 100, 1000)
 
 
 def _messages(count: int, start_ns: int) -> list[bytes]:
     template = _raw_template()
-    out = []
-    for k in range(count):
-        sec, nanosec = divmod(start_ns + k * 100_000, 1_000_000_000)
-        template[4:8] = sec.to_bytes(4, 'little', signed=True)
-        template[8:12] = nanosec.to_bytes(4, 'little')
-        out.append(bytes(template))
-    return out
+    return [stamped(template, start_ns + k * 100_000) for k in range(count)]
 
 
 def _session(directory: str) -> CalibratorSession:

@@ -21,7 +21,7 @@ import os
 
 import numpy as np
 
-from ..model.uncertainty import _pieces
+from ..model.uncertainty import covariance_and_sigma
 from ..units import COMPONENTS
 
 try:
@@ -46,7 +46,7 @@ def make_plan(active, tare, input_scale: float, middle: bytes):
     has_component = np.zeros(6, np.int64)
     has_component[positions] = 1
     sigma2 = np.zeros(6)
-    pieces = _pieces(model)
+    pieces = covariance_and_sigma(model)
     covariance = None
     if pieces is not None:
         covariance = np.ascontiguousarray(pieces[0], dtype=float)

@@ -24,7 +24,9 @@ class UncertaintyUnavailable(ValueError):
     """The calibration carries no coefficient covariance (e.g. the memo's published matrices)."""
 
 
-def _pieces(model) -> tuple[np.ndarray, np.ndarray] | None:
+def covariance_and_sigma(model) -> tuple[np.ndarray, np.ndarray] | None:
+    """The model's unscaled coefficient covariance and residual σ per component (cached), or None when
+    the calibration carries none (the memo's published matrices)."""
     cached = _CACHE.get(id(model))
     if cached is not None and cached[0] is model:
         return cached[1], cached[2]
@@ -49,12 +51,12 @@ def _resolve(calibration_or_model, model: str):
 
 
 def has_uncertainty(calibration_or_model, model: str = 'adopted') -> bool:
-    return _pieces(_resolve(calibration_or_model, model)) is not None
+    return covariance_and_sigma(_resolve(calibration_or_model, model)) is not None
 
 
 def require_covariance(calibration_or_model, model: str = 'adopted') -> None:
     chosen = _resolve(calibration_or_model, model)
-    if _pieces(chosen) is None:
+    if covariance_and_sigma(chosen) is None:
         raise UncertaintyUnavailable(f'model {getattr(chosen, "name", "?")} carries no coefficient covariance '
                                      f'(metadata.uncertainty); refit it with balance-calib fit or refit')
 
@@ -73,7 +75,7 @@ def load_standard_uncertainty(calibration_or_model, outputs_mv, extra: Mapping[s
     chosen = _resolve(calibration_or_model, model)
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
     n = outputs.shape[0]
-    pieces = _pieces(chosen)
+    pieces = covariance_and_sigma(chosen)
     result = np.full((n, len(chosen.components)), np.nan)
     finite = np.all(np.isfinite(outputs), axis=1)
     if pieces is None or not finite.any():
@@ -107,7 +109,7 @@ def _direct_variance(design: np.ndarray, covariance: np.ndarray, sigma: np.ndarr
 def design_row_uncertainty(model, design_row: np.ndarray, tare_sigma=None) -> np.ndarray | None:
     """load_standard_uncertainty for one sample of a direct model whose design row (n_terms,) the caller
     has (the live calibrator's lone sample): (n_components,), or None without a stored covariance."""
-    pieces = _pieces(model)
+    pieces = covariance_and_sigma(model)
     if pieces is None:
         return None
     covariance, sigma = pieces

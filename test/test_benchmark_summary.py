@@ -1,0 +1,39 @@
+"""The live benchmark's summary (benchmarks/live_throughput.py): what counts as zero loss, worked by hand
+on made-up steps, so that the README's rates mean what its text says they mean."""
+import math
+
+from balance_calib.benchmarks.live_throughput import first_loss_rate, medians_at_1k, zero_loss_rate
+
+
+def step(rate, received=None, uncertainty=0, achieved=None, cpu=100.0, p99=0.5):
+    sent = int(rate * 3)
+    return {'rate': float(rate), 'sent': sent, 'received': sent if received is None else received,
+            'uncertainty_received': uncertainty, 'achieved': float(rate) if achieved is None else achieved,
+            'cpu_us_per_sample': cpu, 'p50_ms': 0.2, 'p99_ms': p99}
+
+
+def test_zero_loss_is_the_highest_rate_whose_every_trial_came_back_whole_and_first_loss_the_lowest_that_did_not():
+    results = [step(1000), step(1000), step(4000), step(4000, received=11999),   # one trial of 4 kHz lost one
+               step(8000), step(8000), step(12000, received=0)]
+    assert zero_loss_rate(results) == 8000.0       # 8 kHz whole twice, above a lossy 4 kHz: reported as run
+    assert first_loss_rate(results) == 4000.0
+
+
+def test_a_step_sent_below_95_percent_of_its_rate_is_not_zero_loss():
+    results = [step(1000), step(2000, achieved=1890.0)]
+    assert zero_loss_rate(results) == 1000.0 and first_loss_rate(results) == 2000.0
+
+
+def test_the_second_topic_must_come_back_whole_too_when_the_row_published_it():
+    two = [step(1000, uncertainty=3000), step(2000, uncertainty=5999)]
+    assert zero_loss_rate(two) == 1000.0 and first_loss_rate(two) == 2000.0
+    one = [step(1000), step(2000)]                   # a row with no second topic at all
+    assert zero_loss_rate(one) == 2000.0 and math.isnan(first_loss_rate(one))
+    assert zero_loss_rate([step(1000, received=2999)]) == 0.0
+
+
+def test_the_1khz_figures_are_medians_over_the_trials():
+    results = [step(1000, cpu=150.0, p99=0.4), step(1000, cpu=120.0, p99=1.3), step(1000, cpu=130.0, p99=0.5),
+               step(2000, cpu=1.0, p99=9.0)]
+    assert medians_at_1k(results) == {'cpu_us_per_sample': 130.0, 'p50_ms': 0.2, 'p99_ms': 0.5}
+    assert medians_at_1k([step(2000)]) is None
