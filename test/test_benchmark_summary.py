@@ -14,7 +14,7 @@ def step(rate, received=None, uncertainty=0, achieved=None, cpu=100.0, p99=0.5):
 
 def test_zero_loss_is_the_highest_rate_whose_every_trial_came_back_whole_and_first_loss_the_lowest_that_did_not():
     results = [step(1000), step(1000), step(4000), step(4000, received=11999),   # one trial of 4 kHz lost one
-               step(8000), step(8000), step(12000, received=0)]
+               step(8000), step(8000), step(12000), step(12000, received=0)]   # 12 kHz: one whole, one not
     assert zero_loss_rate(results) == 8000.0       # 8 kHz whole twice, above a lossy 4 kHz: reported as run
     assert first_loss_rate(results) == 4000.0
 
