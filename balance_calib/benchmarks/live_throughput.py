@@ -56,7 +56,7 @@ WRENCH_ONLY = 'calibrator, wrench only'
 CDR_LE = b'\x00\x01\x00\x00'
 
 
-def _raw_template(frame_id: str = 'LMC6522') -> bytearray:
+def raw_template(frame_id: str = 'LMC6522') -> bytearray:
     from balance_calib.live.raw_codec import WrenchEncoder
     encoder = WrenchEncoder(frame_id)
     values = np.zeros((1, 6))
@@ -140,19 +140,18 @@ class Harness:
         self.sink = subprocess.Popen([sys.executable, '-m', 'balance_calib.benchmarks.live_throughput',
                                       '--node', 'sink'] + [a for topic in topics for a in ('--topic', topic)],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, bufsize=1)
-        self.template = _raw_template()
+        self.template = raw_template()
 
     def ask(self, command: str) -> str:
-        process = self.sink
-        process.stdin.write(command + '\n')
-        process.stdin.flush()
-        line = process.stdout.readline()
+        self.sink.stdin.write(command + '\n')
+        self.sink.stdin.flush()
+        line = self.sink.stdout.readline()
         if not line:
-            raise RuntimeError(f'the benchmark sink exited (code {process.poll()})')
+            raise RuntimeError(f'the benchmark sink exited (code {self.sink.poll()})')
         return line.strip()
 
     def wait_uncertainty_connected(self, timeout_s: float = 10.0) -> None:
-        """For a node that publishes balance/wrench_uncertainty: until the second sink is matched."""
+        """For a node that publishes balance/wrench_uncertainty: until the sink's second subscription is matched."""
         deadline = time.monotonic() + timeout_s
         while self.topics > 1 and int(self.ask('publishers 1')) == 0 and time.monotonic() < deadline:
             time.sleep(0.05)

@@ -20,13 +20,13 @@ import time
 from ..live import lone_sample
 from ..live.parameters import PARAMETERS
 from ..live.session import CalibratorSession
-from .live_throughput import _raw_template, calibration_with_covariance, stamped
+from .live_throughput import calibration_with_covariance, raw_template, stamped
 
 BATCHES = (1, 2, 3, 10, 100, 1000)
 
 
 def _messages(count: int, start_ns: int) -> list[bytes]:
-    template = _raw_template()
+    template = raw_template()
     return [stamped(template, start_ns + k * 100_000) for k in range(count)]
 
 
