@@ -2,14 +2,15 @@
 on made-up steps, so that the README's rates mean what its text says they mean."""
 import math
 
-from balance_calib.benchmarks.live_throughput import first_loss_rate, medians_at_1k, zero_loss_rate
+from balance_calib.benchmarks.live_throughput import cpu_budget, first_loss_rate, medians_at_1k, zero_loss_rate
 
 
-def step(rate, received=None, uncertainty=0, achieved=None, cpu=100.0, p99=0.5):
+def step(rate, received=None, uncertainty=0, achieved=None, cpu=100.0, p99=0.5, source=20.0, sink=30.0):
     sent = int(rate * 3)
     return {'rate': float(rate), 'sent': sent, 'received': sent if received is None else received,
             'uncertainty_received': uncertainty, 'achieved': float(rate) if achieved is None else achieved,
-            'cpu_us_per_sample': cpu, 'p50_ms': 0.2, 'p99_ms': p99}
+            'cpu_us_per_sample': cpu, 'p50_ms': 0.2, 'p99_ms': p99,
+            'source_us_per_sample': source, 'sink_us_per_sample': sink}
 
 
 def test_zero_loss_is_the_highest_rate_whose_every_trial_came_back_whole_and_first_loss_the_lowest_that_did_not():
@@ -37,3 +38,19 @@ def test_the_1khz_figures_are_medians_over_the_trials():
                step(2000, cpu=1.0, p99=9.0)]
     assert medians_at_1k(results) == {'cpu_us_per_sample': 130.0, 'p50_ms': 0.2, 'p99_ms': 0.5}
     assert medians_at_1k([step(2000)]) is None
+
+
+def test_the_cpu_budget_is_taken_at_the_highest_rate_every_row_came_back_whole_as_medians_of_its_trials():
+    summary = {
+        'a': [step(8000, cpu=30.0), step(8000, cpu=34.0), step(8000, cpu=32.0),
+              step(12000, cpu=1.0), step(12000, cpu=1.0)],
+        'b': [step(8000, cpu=50.0, sink=40.0, uncertainty=24000), step(8000, cpu=70.0, sink=44.0, uncertainty=24000),
+              step(8000, cpu=60.0, sink=42.0, uncertainty=24000),
+              step(12000, uncertainty=36000), step(12000, uncertainty=35999)],     # 12 kHz: one trial lost one
+    }
+    rate, rows = cpu_budget(summary, ('a', 'b'))
+    assert rate == 8000.0          # 12 kHz was whole for 'a' only
+    assert rows['a'] == {'node': 32.0, 'source': 20.0, 'sink': 30.0, 'total': 82.0}
+    assert rows['b'] == {'node': 60.0, 'source': 20.0, 'sink': 42.0, 'total': 122.0}
+    assert cpu_budget(summary, ('a', 'missing')) is None
+    assert cpu_budget({'a': [step(1000, received=1)]}, ('a',)) is None

@@ -295,6 +295,40 @@ def test_wrench_uncertainty_is_published_beside_each_wrench(probe, tmp_path):
     assert np.all(expected > 0) and np.all(expected < 0.01 * CAPACITY.max())
 
 
+
+def test_uncertainty_is_computed_while_someone_subscribes_and_stops_when_they_leave(probe, tmp_path):
+    """The node keeps the count of uncertainty readers from the publisher's matched events (no rmw
+    query per batch once one matched); a reader arriving or leaving mid-stream is heard."""
+    from test_live_stream import calibration_with_covariance
+    path = tmp_path / 'calibration.yaml'
+    save_calibration(path, calibration_with_covariance())
+    node = start_calibrator(probe, tmp_path, path, model='cubic')
+    wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
+    source = Stamped(probe)
+    connected(node, source)
+    live = node.session.live
+
+    def one_sample(expect_uncertainty: bool):
+        before = len(wrenches)
+        source.send((0.2, -0.1, 0.3, 0.05, -0.2, 0.1))
+        wait_for(lambda: len(wrenches) == before + 1, 10.0, 'the wrench')
+        assert live.uncertainty_wanted is expect_uncertainty
+
+    one_sample(False)                       # nobody reads balance/wrench_uncertainty: not computed
+    assert node._uncertainty_readers == 0
+    uncertainties = []
+    reader = probe.node.create_subscription(WrenchStamped, '/balance/wrench_uncertainty', uncertainties.append,
+                                            RELIABLE)
+    wait_for(lambda: node._uncertainty_readers == 1, 10.0, 'the matched event of the uncertainty publisher')
+    one_sample(True)
+    wait_for(lambda: len(uncertainties) == 1, 10.0, 'the uncertainty')
+    assert uncertainties[0].header.stamp == wrenches[-1].header.stamp
+    probe.node.destroy_subscription(reader)
+    wait_for(lambda: node._uncertainty_readers == 0, 10.0, 'the unmatched event')
+    one_sample(False)
+    assert len(uncertainties) == 1
+
+
 @pytest.mark.slow
 def test_refit_process_killed_with_sigkill_keeps_the_calibration_and_the_stream(probe, tmp_path, calibration_file):
     import multiprocessing

@@ -174,6 +174,7 @@ class Harness:
         total = int(rate * seconds)
         cpu_before = _cpu_seconds(pid) if pid else 0.0
         threads_before = _thread_cpu(pid) if pid else {}
+        source_before, sink_before = time.process_time(), _cpu_seconds(self.sink.pid)
         start = time.monotonic()
         for i in range(total):
             delay = start + i / rate - time.monotonic()
@@ -184,15 +185,18 @@ class Harness:
         settle = time.monotonic() + 3.0
         while time.monotonic() < settle and int(self.ask('count')) < total:
             time.sleep(0.02)
-        cpu = (_cpu_seconds(pid) - cpu_before) if pid else float('nan')
-        threads = _thread_breakdown(threads_before, _thread_cpu(pid), total) if pid else {}
-        stats = json.loads(self.ask('stats'))
         if self.topics > 1:
             while time.monotonic() < settle and int(self.ask('count 1')) < total:
                 time.sleep(0.02)
+        cpu = (_cpu_seconds(pid) - cpu_before) if pid else float('nan')
+        threads = _thread_breakdown(threads_before, _thread_cpu(pid), total) if pid else {}
+        source, sink = time.process_time() - source_before, _cpu_seconds(self.sink.pid) - sink_before
+        stats = json.loads(self.ask('stats'))
+        if self.topics > 1:
             stats['uncertainty_received'] = int(self.ask('count 1'))
         return {'rate': rate, 'achieved': achieved, 'sent': total, **stats,
-                'cpu_us_per_sample': cpu / total * 1e6, 'threads': threads}
+                'cpu_us_per_sample': cpu / total * 1e6, 'threads': threads,
+                'source_us_per_sample': source / total * 1e6, 'sink_us_per_sample': sink / total * 1e6}
 
     def close(self):
         try:
@@ -388,6 +392,29 @@ def medians_at_1k(results: list) -> dict | None:
     return {key: float(np.median([r[key] for r in ones])) for key in ('cpu_us_per_sample', 'p50_ms', 'p99_ms')}
 
 
+def cpu_budget(summary: dict, labels: tuple) -> tuple[float, dict] | None:
+    """The two cores' budget per sample: at the highest rate at which every trial of every row in
+    `labels` came back whole, the median over its trials of node, source and sink CPU per sample (µs)
+    and their total, per row. When the two cores are what runs out, a row's zero-loss rate goes as
+    1 / total, so the ratio of totals is the rate ratio the machine allows, free of the stalls' luck.
+    None if some row is missing or no rate is whole in all of them."""
+    rows = [summary.get(label) for label in labels]
+    if any(not row for row in rows):
+        return None
+    common = set.intersection(*({r['rate'] for r in row if all(_whole(row, t) for t in row if t['rate'] == r['rate'])}
+                                for row in rows))
+    if not common:
+        return None
+    rate = max(common)
+    budget = {}
+    for label, row in zip(labels, rows):
+        at = [r for r in row if r['rate'] == rate]
+        parts = {key: float(np.median([r[key + '_us_per_sample'] for r in at])) for key in ('cpu', 'source', 'sink')}
+        budget[label] = {'node': parts['cpu'], 'source': parts['source'], 'sink': parts['sink'],
+                         'total': parts['cpu'] + parts['source'] + parts['sink']}
+    return rate, budget
+
+
 def throughput(rates, seconds, only=None, calibrator_args=(), trials: int = 1) -> None:
     import tempfile
 
@@ -421,7 +448,8 @@ def throughput(rates, seconds, only=None, calibrator_args=(), trials: int = 1) -
                         step = f'{rate:6.0f} Hz' if trial == 0 else f'{"":>6s} #{trial + 1}'
                         print(f'  {step} (sent at {result["achieved"]:6.0f}): {result["received"]}/'
                               f'{result["sent"]} back{also}, p50 {result["p50_ms"]:.3f} ms, p99 {result["p99_ms"]:.3f} ms, '
-                              f'CPU {result["cpu_us_per_sample"]:.1f} µs/sample', flush=True)
+                              f'CPU {result["cpu_us_per_sample"]:.1f} µs/sample (source '
+                              f'{result["source_us_per_sample"]:.0f}, sink {result["sink_us_per_sample"]:.0f})', flush=True)
                         if rate == 1000.0 and result['threads']:
                             print('         by thread (CPU µs, wake-ups per sample): ' + ', '.join(
                                 f'{group} {cpu:.0f} µs {wakes:.1f}' for group, (cpu, wakes) in result['threads'].items()),
@@ -469,6 +497,18 @@ def throughput(rates, seconds, only=None, calibrator_args=(), trials: int = 1) -
             print(f'lone-sample C kernel: CPU per sample at 1 kHz {at_1k(cal)["cpu_us_per_sample"]:.0f} µs against '
                   f'{at_1k(pure)["cpu_us_per_sample"]:.0f} µs with the pure core '
                   f'({at_1k(cal)["cpu_us_per_sample"] / at_1k(pure)["cpu_us_per_sample"]:.2f} x)')
+        budget = cpu_budget(summary, ('raw relay', BOTH_TOPICS, 'balance_calibrator'))
+        if budget:
+            rate, rows = budget
+            print(f'CPU per sample at {rate:.0f} Hz, the highest rate all three came back whole (node + source + '
+                  f'sink = total, µs): ' + '; '.join(
+                      f'{label} {b["node"]:.0f} + {b["source"]:.0f} + {b["sink"]:.0f} = {b["total"]:.0f}'
+                      for label, b in rows.items()))
+            raw_total = rows['raw relay']['total']
+            print(f'rate the two cores allow (raw relay total / row total): floor '
+                  f'{raw_total / rows[BOTH_TOPICS]["total"]:.2f}, calibrator '
+                  f'{raw_total / rows["balance_calibrator"]["total"]:.2f} x raw relay; the calibrator\'s node '
+                  f'{rows["balance_calibrator"]["node"] - rows[BOTH_TOPICS]["node"]:+.0f} µs/sample over the floor\'s')
         if floor and at_1k(floor) and at_1k(bare) and at_1k(cal):
             bare_us, floor_us = at_1k(bare)['cpu_us_per_sample'], at_1k(floor)['cpu_us_per_sample']
             print(f'floor (raw relay publishing both of the calibrator\'s topics, no arithmetic): '
