@@ -357,8 +357,8 @@ def _stop(process):
 def _machine_line() -> str:
     load = os.getloadavg()
     return (f'machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, '
-            f'{os.environ.get("RMW_IMPLEMENTATION", "default rmw")}; load average {load[0]:.1f} '
-            f'(shared machine: other work was running)')
+            f'{os.environ.get("RMW_IMPLEMENTATION", "default rmw")}; load average {load[0]:.1f} over the last '
+            f'minute (the benchmark\'s own processes included)')
 
 
 def _whole(results: list, r: dict) -> bool:
