@@ -71,8 +71,9 @@ class BalanceCalibrator(Node):
         self._wrench_pub = self.create_publisher(WrenchStamped, 'balance/wrench', WRENCH_QOS,
                                                  qos_overriding_options=overrides)
         # who reads the uncertainty, kept by the publisher's matched event: asking rmw at every batch
-        # cost 5-15 µs a sample at 1 kHz (cold caches); asked still while the count is 0, so that the
-        # first batch after a subscriber matches does not wait for the executor to deliver the event
+        # cost 5-15 µs a sample at 1 kHz (cold caches); asked still while the count is 0 (and
+        # publish_uncertainty is on), so that the first batch after a subscriber matches does not
+        # wait for the executor to deliver the event
         self._uncertainty_readers = 0
         self._uncertainty_pub = self.create_publisher(
             WrenchStamped, 'balance/wrench_uncertainty', WRENCH_QOS, qos_overriding_options=overrides,
@@ -114,7 +115,8 @@ class BalanceCalibrator(Node):
 
     def _on_raw(self, messages: list[bytes]) -> None:
         """In the reader thread: one batch of serialized samples (the uncertainty only for subscribers)."""
-        wanted = self._uncertainty_readers > 0 or self._uncertainty_pub.get_subscription_count() > 0
+        wanted = self._uncertainty_readers > 0 or (self.session.live.settings.publish_uncertainty
+                                                   and self._uncertainty_pub.get_subscription_count() > 0)
         out = self.session.on_samples(messages, wanted)
         if out is None:
             return
