@@ -369,12 +369,17 @@ def _whole(results: list, r: dict) -> bool:
         and (not two_topics or r['uncertainty_received'] == r['sent'])
 
 
+def _whole_rates(results: list) -> set:
+    """The rates at which every trial came back whole."""
+    return {rate for rate in {r['rate'] for r in results}
+            if all(_whole(results, r) for r in results if r['rate'] == rate)}
+
+
 def zero_loss_rate(results: list) -> float:
     """The highest rate at which every trial came back whole (0 if none did). A lower rate may have
     lost samples in one of its trials (first_loss_rate says which): losses come from scheduling
     stalls on two cores, not from a sharp ceiling."""
-    rates = sorted({r['rate'] for r in results})
-    lossless = [rate for rate in rates if all(_whole(results, r) for r in results if r['rate'] == rate)]
+    lossless = _whole_rates(results)
     return max(lossless) if lossless else 0.0
 
 
@@ -395,23 +400,23 @@ def medians_at_1k(results: list) -> dict | None:
 def cpu_budget(summary: dict, labels: tuple) -> tuple[float, dict] | None:
     """The two cores' budget per sample: at the highest rate at which every trial of every row in
     `labels` came back whole, the median over its trials of node, source and sink CPU per sample (µs)
-    and their total, per row. When the two cores are what runs out, a row's zero-loss rate goes as
-    1 / total, so the ratio of totals is the rate ratio the machine allows, free of the stalls' luck.
+    and their total, per row. Were the two cores what runs out, a row's zero-loss rate would go as
+    1 / total; at 10-12 kHz they are 1.0-1.5 cores busy and the losses come from stalls (README), so
+    the ratio of totals is evidence of where the CPU goes, not a prediction of the rate.
     None if some row is missing or no rate is whole in all of them."""
     rows = [summary.get(label) for label in labels]
     if any(not row for row in rows):
         return None
-    common = set.intersection(*({r['rate'] for r in row if all(_whole(row, t) for t in row if t['rate'] == r['rate'])}
-                                for row in rows))
+    common = set.intersection(*(_whole_rates(row) for row in rows))
     if not common:
         return None
     rate = max(common)
     budget = {}
     for label, row in zip(labels, rows):
         at = [r for r in row if r['rate'] == rate]
-        parts = {key: float(np.median([r[key + '_us_per_sample'] for r in at])) for key in ('cpu', 'source', 'sink')}
-        budget[label] = {'node': parts['cpu'], 'source': parts['source'], 'sink': parts['sink'],
-                         'total': parts['cpu'] + parts['source'] + parts['sink']}
+        node, source, sink = (float(np.median([r[key] for r in at]))
+                              for key in ('cpu_us_per_sample', 'source_us_per_sample', 'sink_us_per_sample'))
+        budget[label] = {'node': node, 'source': source, 'sink': sink, 'total': node + source + sink}
     return rate, budget
 
 
@@ -505,7 +510,7 @@ def throughput(rates, seconds, only=None, calibrator_args=(), trials: int = 1) -
                       f'{label} {b["node"]:.0f} + {b["source"]:.0f} + {b["sink"]:.0f} = {b["total"]:.0f}'
                       for label, b in rows.items()))
             raw_total = rows['raw relay']['total']
-            print(f'rate the two cores allow (raw relay total / row total): floor '
+            print(f'rate the two cores would allow were they what runs out (raw relay total / row total): floor '
                   f'{raw_total / rows[BOTH_TOPICS]["total"]:.2f}, calibrator '
                   f'{raw_total / rows["balance_calibrator"]["total"]:.2f} x raw relay; the calibrator\'s node '
                   f'{rows["balance_calibrator"]["node"] - rows[BOTH_TOPICS]["node"]:+.0f} µs/sample over the floor\'s')
