@@ -652,6 +652,7 @@ class LiveState:
     refit_running: bool = False
     tare_load: np.ndarray | None = None        # balance axes, N / N·m (None: no tare)
     tare_source: str = ''                      # where the tare was persisted / restored from
+    tare_refused: str = ''                     # why the persisted zero and tare were not restored
     input_problems: tuple[tuple[str, int, int], ...] = ()   # (what, total, this period)
     input_values: tuple[tuple[str, str], ...] = ()
     overload: tuple[str, ...] | None = None    # components over the limit now (None = no overload)
@@ -716,9 +717,12 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
                            f'stale ({state.temperature_age_s:.1f} s)'))
         else:
             inputs.append((needed, 'fresh' if state.last_sample_age_s is not None else 'missing'))
-    cal_level = WARN if state.fallback_reason else OK
+    cal_level = WARN if state.fallback_reason or state.tare_refused else OK
     message = (f'{active.model_name} model, {active.installation.name} installation'
                + (f'; FALLBACK to {active.base_name}: {state.fallback_reason}' if state.fallback_reason else ''))
+    if state.tare_refused:
+        message += (f'; zero and tare NOT restored ({state.tare_refused}): '
+                    'take ~/zero and ~/tare again')
     zero = state.tare_zero_mv
     cal_values = (
         ('calibration_file', active.source),
@@ -737,6 +741,7 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('tare_load', 'none' if state.tare_load is None else
          f'{describe_loads(state.tare_load, active)} (tunnel axes)'),
         ('tare_file', state.tare_source or 'none'),
+        ('tare_not_restored', state.tare_refused or 'none'),
         ('lowpass_hz', f'{state.lowpass_hz:g}' if state.lowpass_hz else 'off'),
         ('refit_running', str(state.refit_running)),
     )
