@@ -660,6 +660,13 @@ class LiveState:
     lowpass_hz: float = 0.0
 
 
+def count_key(what: str) -> str:
+    """The /diagnostics key stem of an input problem: 'samples lost (gaps in the stamps)' ->
+    'samples_lost' (with _last_period and _since_start: the count of this diagnostics period, the
+    count since the node started)."""
+    return what.split(' (')[0].replace(' ', '_')
+
+
 def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'balance_calibrator',
                 now: _dt.datetime | None = None) -> list[StatusReport]:
     """Input health, calibration status and overload; levels OK / WARN / ERROR / STALE as DiagnosticStatus."""
@@ -688,7 +695,9 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
     for what, total, period in state.input_problems:
         if period:
             level = max(level, WARN) if level != STALE else level
-            problems.append(f'{period} {what}')
+            # both counts, named: this period's (as the other counts here) and the total
+            problems.append(f'{period} {what} in the last {state.period_s:.1f} s '
+                            f'({total} since start)')
     input_values = (
         ('input_rate_hz', f'{rate:.1f}'),
         ('last_sample_age_s', 'never' if state.last_sample_age_s is None else f'{state.last_sample_age_s:.3f}'),
@@ -700,7 +709,9 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('newton_not_converged', str(c.not_converged)),
         ('out_of_envelope', str(c.out_of_envelope)),
         ('envelope', ', '.join(f'{k}={v:.4g}' for k, v in zip(COMPONENTS, active.envelope))),
-        *((what.replace(' ', '_'), str(total)) for what, total, _ in state.input_problems),
+        *((f'{count_key(what)}_{window}', str(count))
+          for what, total, period in state.input_problems
+          for window, count in (('last_period', period), ('since_start', total))),
         *state.input_values,
     )
     reports = [StatusReport(level, f'{node_name}: input', '; '.join(problems) or f'{rate:.1f} Hz',
