@@ -35,11 +35,12 @@ def outputs(load_balance, n, noise=True, seed=0):
                            electrical_zero_mv=0.0, noise_mv=NOISE_MV if noise else 0.0, seed=seed)
 
 
-def calibration_status(diagnostics, since):
-    """The latest calibration status of /diagnostics published after index `since`."""
-    for array in reversed(diagnostics[since:]):
+def calibration_status(diagnostics, installation):
+    """The latest calibration status of /diagnostics from a node of that installation."""
+    for array in reversed(list(diagnostics)):
         for status in array.status:
-            if status.name.endswith(': calibration'):
+            if status.name.endswith(': calibration') and \
+                    f'{installation} installation' in status.message:
                 return status, {kv.key: kv.value for kv in status.values}
 
 
@@ -49,15 +50,16 @@ def restart(probe, node, tmp_path, calibration_file, **parameters):
     return start_calibrator(probe, tmp_path, calibration_file, model='cubic', **parameters)
 
 
-def read_one(node, source, wrenches, row):
-    """Send `row` until the node answers (a new node is matched after a while); its wrench."""
-    before = len(wrenches)
+def read_one(source, wrenches, row):
+    """Send `row` until a node answers (a new node is matched after a while); its wrench. Told
+    apart by its stamp from any late wrench of the node before (stamps grow with source.sent)."""
+    first_ns = 10**9 + source.sent * 10**6          # Stamped's stamps: 1 kHz from 1 s
 
     def answered():
         source.send(row)
-        return len(wrenches) > before
-    wait_for(answered, 20.0, 'a wrench from the node', poll_s=0.05)
-    return wrench_values(wrenches[-1:])[0]
+        return [m for m in list(wrenches)
+                if m.header.stamp.sec * 10**9 + m.header.stamp.nanosec >= first_ns]
+    return wrench_values(wait_for(answered, 20.0, 'a wrench from the node', poll_s=0.05)[:1])[0]
 
 
 def test_a_tare_taken_upright_is_not_restored_inverted_and_is_restored_upright(
@@ -76,12 +78,11 @@ def test_a_tare_taken_upright_is_not_restored_inverted_and_is_restored_upright(
     # the balance rolled 180° on the sting, the same calibration file: the tare is not applied
     node = restart(probe, node, tmp_path, calibration_file, installation='inverted')
     assert node.session.live.tare.tare_load is None
-    read = read_one(node, source, wrenches, outputs(INVERTED_LOAD, 1, noise=False)[0])
+    read = read_one(source, wrenches, outputs(INVERTED_LOAD, 1, noise=False)[0])
     truth = INVERTED_SIGNS * INVERTED_LOAD                     # the untared load, tunnel axes
     np.testing.assert_allclose(read / full_scale, truth / full_scale, atol=1e-6)
-    since = len(diagnostics)
-    status, values = wait_for(lambda: calibration_status(diagnostics, since), 10.0,
-                              'diagnostics of the node')
+    status, values = wait_for(lambda: calibration_status(diagnostics, 'inverted'), 10.0,
+                              'diagnostics of the inverted node')
     assert status.level == WARN and 'NOT restored' in status.message, status.message
     why = values['tare_not_restored']
     assert 'taken in the upright installation' in why and 'now inverted' in why, why
@@ -90,10 +91,10 @@ def test_a_tare_taken_upright_is_not_restored_inverted_and_is_restored_upright(
     # upright again: the tare is restored and the model's weight reads zero
     node = restart(probe, node, tmp_path, calibration_file, installation='upright')
     assert node.session.live.tare.tare_load is not None
-    read = read_one(node, source, wrenches, wind_off.mean(axis=0))
+    read = read_one(source, wrenches, wind_off.mean(axis=0))
     # to the second-order effect of the noise (mean f(V) against f(mean V))
     np.testing.assert_allclose(read / full_scale, 0.0, atol=1e-6)
-    since = len(diagnostics)
-    status, values = wait_for(lambda: calibration_status(diagnostics, since), 10.0,
-                              'diagnostics of the node')
+    del diagnostics[:]                    # the upright node's own, not its first life's
+    status, values = wait_for(lambda: calibration_status(diagnostics, 'upright'), 10.0,
+                              'diagnostics of the upright node')
     assert status.level == b'\x00' and values['tare_not_restored'] == 'none', status.message
