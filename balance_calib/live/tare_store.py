@@ -61,7 +61,7 @@ def calibration_sha256(path: str | Path) -> str:
 
 
 def restore_refusal(saved: TareOwner | None, current: TareOwner) -> str:
-    """'' when a zero and tare taken for `saved` belong to `current`, else why not (one clause)."""
+    """'' when a zero and tare taken for `saved` belong to `current`, else why not ('; '-joined)."""
     if saved is None:
         return ('the file records no calibration, installation, namespace or node '
                 '(an older tare file)')
