@@ -52,10 +52,12 @@ def parameter_value_to_python(value):
     return list(result) if kind >= 5 else result
 
 
-def python_to_parameter_value(text: str, current_type: int):
+def python_to_parameter_value(text: str, current_type: int, name: str = ''):
     """VALUE as typed on the command line (YAML) -> ParameterValue, in the parameter's current type
     when it has one (so `set calibration_bags bag1` gives a one-element string array, and
-    `set envelope_margin 2` stays a double)."""
+    `set envelope_margin 2` stays a double). For a double, the words YAML 1.1 leaves as strings
+    are numbers as Python spells them (`nan`, `inf`, `1e3`): the node, which knows the parameter's
+    range, is the one to refuse a NaN, with its reason."""
     import yaml
     from rcl_interfaces.msg import ParameterType, ParameterValue
 
@@ -75,6 +77,8 @@ def python_to_parameter_value(text: str, current_type: int):
                 raise ValueError
             out.integer_value = value
         elif kind == ParameterType.PARAMETER_DOUBLE:
+            if isinstance(value, str):
+                value = float(value)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ValueError
             out.double_value = float(value)
@@ -94,7 +98,8 @@ def python_to_parameter_value(text: str, current_type: int):
         else:
             raise ValueError
     except (ValueError, TypeError):
-        raise ToolError(f'value {text!r} is not a {_TYPE_NAMES.get(kind, "supported")} '
+        what = f' for {name}' if name else ''
+        raise ToolError(f'value {text!r}{what} is not a {_TYPE_NAMES.get(kind, "supported")} '
                         '(the parameter\'s type)') from None
     out.type = kind
     return out
@@ -236,7 +241,7 @@ def param_set(args) -> int:
     with _Session() as session:
         current = _get(session, node, [args.name], args.timeout)
         kind = current[0].type if current else 0
-        value = python_to_parameter_value(args.value, kind)
+        value = python_to_parameter_value(args.value, kind, args.name)
         reply = session.call(SetParameters, f'{node}/set_parameters',
                              SetParameters.Request(parameters=[Parameter(name=args.name, value=value)]), args.timeout)
     result = reply.results[0]

@@ -652,11 +652,19 @@ class LiveState:
     refit_running: bool = False
     tare_load: np.ndarray | None = None        # balance axes, N / N·m (None: no tare)
     tare_source: str = ''                      # where the tare was persisted / restored from
+    tare_refused: str = ''                     # why the persisted zero and tare were not restored
     input_problems: tuple[tuple[str, int, int], ...] = ()   # (what, total, this period)
     input_values: tuple[tuple[str, str], ...] = ()
     overload: tuple[str, ...] | None = None    # components over the limit now (None = no overload)
     overload_values: tuple[tuple[str, str], ...] = ()
     lowpass_hz: float = 0.0
+
+
+def count_key(what: str) -> str:
+    """The /diagnostics key stem of an input problem: 'samples lost (gaps in the stamps)' ->
+    'samples_lost' (with _last_period and _since_start: the count of this diagnostics period, the
+    count since the node started)."""
+    return what.split(' (')[0].replace(' ', '_')
 
 
 def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'balance_calibrator',
@@ -687,7 +695,9 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
     for what, total, period in state.input_problems:
         if period:
             level = max(level, WARN) if level != STALE else level
-            problems.append(f'{period} {what}')
+            # both counts, named: this period's (as the other counts here) and the total
+            problems.append(f'{period} {what} in the last {state.period_s:.1f} s '
+                            f'({total} since start)')
     input_values = (
         ('input_rate_hz', f'{rate:.1f}'),
         ('last_sample_age_s', 'never' if state.last_sample_age_s is None else f'{state.last_sample_age_s:.3f}'),
@@ -699,7 +709,9 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('newton_not_converged', str(c.not_converged)),
         ('out_of_envelope', str(c.out_of_envelope)),
         ('envelope', ', '.join(f'{k}={v:.4g}' for k, v in zip(COMPONENTS, active.envelope))),
-        *((what.replace(' ', '_'), str(total)) for what, total, _ in state.input_problems),
+        *((f'{count_key(what)}_{window}', str(count))
+          for what, total, period in state.input_problems
+          for window, count in (('last_period', period), ('since_start', total))),
         *state.input_values,
     )
     reports = [StatusReport(level, f'{node_name}: input', '; '.join(problems) or f'{rate:.1f} Hz',
@@ -716,9 +728,12 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
                            f'stale ({state.temperature_age_s:.1f} s)'))
         else:
             inputs.append((needed, 'fresh' if state.last_sample_age_s is not None else 'missing'))
-    cal_level = WARN if state.fallback_reason else OK
+    cal_level = WARN if state.fallback_reason or state.tare_refused else OK
     message = (f'{active.model_name} model, {active.installation.name} installation'
                + (f'; FALLBACK to {active.base_name}: {state.fallback_reason}' if state.fallback_reason else ''))
+    if state.tare_refused:
+        message += (f'; zero and tare NOT restored ({state.tare_refused}): '
+                    'take ~/zero and ~/tare again')
     zero = state.tare_zero_mv
     cal_values = (
         ('calibration_file', active.source),
@@ -737,6 +752,7 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('tare_load', 'none' if state.tare_load is None else
          f'{describe_loads(state.tare_load, active)} (tunnel axes)'),
         ('tare_file', state.tare_source or 'none'),
+        ('tare_not_restored', state.tare_refused or 'none'),
         ('lowpass_hz', f'{state.lowpass_hz:g}' if state.lowpass_hz else 'off'),
         ('refit_running', str(state.refit_running)),
     )

@@ -434,13 +434,15 @@ class LiveCalibrator:
         return 'published' if self.uncertainty_wanted else 'no subscriber: not computed until one subscribes'
 
     def report(self, *, period_s: float, last_sample_age_s: float | None, temperature_age_s: float | None,
-               refit_running: bool, tare_source: str, node_name: str) -> list[StatusReport]:
+               refit_running: bool, tare_source: str, node_name: str,
+               tare_refused: str = '') -> list[StatusReport]:
         interval = self.inputs.interval_ns
         state = LiveState(
             period_s=period_s, counters=self.counters, last_sample_age_s=last_sample_age_s,
             stale_after_s=self.settings.stale_after_s, temperature_age_s=temperature_age_s,
             fallback_reason=self.fallback_reason, tare_zero_mv=self.tare.zero_mv, refit_running=refit_running,
-            tare_load=self.tare.tare_load, tare_source=tare_source, input_problems=self.inputs.problems(),
+            tare_load=self.tare.tare_load, tare_source=tare_source, tare_refused=tare_refused,
+            input_problems=self.inputs.problems(),
             input_values=(('nominal_interval_ms', 'unknown' if interval is None else f'{interval * 1e-6:.4g}'),
                           ('wrench_uncertainty', self._uncertainty_state()),
                           ('frame_ids_seen_from_other_balances', ', '.join(sorted(self.inputs.foreign_frames))

@@ -47,8 +47,8 @@ from balance_calib.live import timeline as tl
 from balance_calib.live.replay import read_recorded_messages
 from balance_calib.aero.model_file import load_model
 from balance_calib.live.wind_on import aero_run_profile, aoa_sweep_profile, csv_profile, wind_on_outputs
-from balance_calib.simulation.balance_sim import (SimulationSettings, noise_mv_for_load_sigma, simulate_campaign,
-                                                  table17_noise)
+from balance_calib.simulation.balance_sim import (noise_mv_for_load_sigma, paced_settings,
+                                                  simulate_campaign, table17_noise)
 from balance_calib.simulation.effects import parse_effects
 from balance_calib.tunnel_axes import parse_installation
 
@@ -164,12 +164,9 @@ class BridgePublisher(Node):
         self._publisher(tl.APPLIED_LOAD, WrenchStamped, '/calibration/applied_load')
 
         def build(cycle):
-            settings = SimulationSettings(
-                samples_per_point=max(1, round(duration * rate)), sample_rate_hz=rate,
-                point_duration_s=duration, transition_s=transition,
-                transition_samples=round(transition * rate), noise_sigma_pct_fs=noise,
-                seed=int(self._settings['seed']) + cycle,
-                time_scale=float(self._settings['physical_seconds_per_point']) / max(duration + transition, 1e-9))
+            settings = paced_settings(rate, duration, transition, noise,
+                                      int(self._settings['seed']) + cycle,
+                                      float(self._settings['physical_seconds_per_point']))
             campaign = simulate_campaign(config, truth, schedule=schedule, settings=settings, effects=effects)
             return tl.campaign_timeline(campaign, transition, self._temperature_every())
         return build
