@@ -185,7 +185,9 @@ def write_text_atomically(path: str | Path, text: str) -> None:
 
 
 def save_calibration(path: str | Path, calibration: Calibration) -> None:
-    header = f'# {calibration.balance} calibration written by balance_calib; loads in N, N·m from outputs in mV.\n'
+    unit = (calibration.extra or {}).get('output_unit', 'mV')     # counts, -, mV/V from some tables
+    header = (f'# {calibration.balance} calibration written by balance_calib; loads in N, N·m from '
+              f'outputs in {unit}.\n')
     write_text_atomically(path, header + yaml.safe_dump(calibration.to_dict(), sort_keys=False, width=160))
 
 
