@@ -146,6 +146,15 @@ class ActiveCalibration:
     def output_range_list(self) -> list[float]:
         return self.output_range_mv.tolist()
 
+    @cached_property
+    def absent_components(self) -> tuple[str, ...]:
+        """Components of the published wrench (tunnel axes) that the calibration does not give
+        (a 1-, 3- or 5-component balance): published as 0, their uncertainty NaN, never out of
+        the envelope or overloaded."""
+        present = set(self.calibration.components)
+        return tuple(COMPONENTS[i] for i, p in enumerate(self.installation.permutation)
+                     if COMPONENTS[p] not in present)
+
     @property
     def capacity(self) -> np.ndarray:
         """(6,) full scale per component FX..MZ (inf for components the calibration lacks)."""
@@ -717,7 +726,10 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         else:
             inputs.append((needed, 'fresh' if state.last_sample_age_s is not None else 'missing'))
     cal_level = WARN if state.fallback_reason else OK
+    absent = active.absent_components
     message = (f'{active.model_name} model, {active.installation.name} installation'
+               + (f'; {6 - len(absent)}-component calibration: {", ".join(absent)} absent '
+                  f'(published as 0, uncertainty NaN)' if absent else '')
                + (f'; FALLBACK to {active.base_name}: {state.fallback_reason}' if state.fallback_reason else ''))
     zero = state.tare_zero_mv
     cal_values = (
@@ -727,6 +739,8 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('model_in_use', active.base_name if state.fallback_reason else active.model_name),
         ('fallback_reason', state.fallback_reason or 'none'),
         ('installation', f'{active.installation.name} ({active.installation.spec})'),
+        ('components', ', '.join(cal.components)),
+        ('absent_components', ', '.join(absent) or 'none'),
         ('fitted_at', cal.fitted_at or 'unknown (memo matrices)'),
         ('age_days', 'unknown' if age is None else f'{age:.2f}'),
         ('sigma_pct_fs', sigma),

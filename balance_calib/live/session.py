@@ -106,9 +106,12 @@ class CalibratorSession:
             self.log('warning', f'the C kernel for lone samples is not built ({lone_sample.unavailable_reason}): '
                                 'every sample takes the pure core\'s path (slower at low rates; reinstall with a C '
                                 'compiler)')
+        absent = active.absent_components
         self.log('info', f'{active.model_name} model of {active.calibration.balance} from {path}, '
                          f'{active.installation.name} installation; requires '
-                         f'{", ".join(active.requires) or "bridge outputs only"}')
+                         f'{", ".join(active.requires) or "bridge outputs only"}'
+                 + (f'; {", ".join(absent)} absent from the calibration: published as 0, '
+                    f'uncertainty NaN' if absent else ''))
 
     @property
     def active(self) -> ActiveCalibration:

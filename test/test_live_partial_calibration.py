@@ -1,0 +1,186 @@
+"""A 3-component calibration (a cell measuring F_Z, M_X, M_Y), fitted from a table by `fit --axes`,
+run by the live calibrator's pure core and its C kernel: the three components from their bridges,
+the absent ones published as 0 with their uncertainty NaN, the envelope, saturation and overload
+checks blind to the absent ones, /diagnostics naming them."""
+import numpy as np
+import pytest
+
+from balance_calib.calibration_file import load_calibration
+from balance_calib.cli import main
+from balance_calib.live.calibrator_core import OK, InputCounters, LiveState, activate, diagnostics
+from balance_calib.live.raw_codec import WrenchEncoder
+from balance_calib.live.stream import LiveCalibrator, LiveSettings
+from balance_calib.tunnel_axes import INVERTED, UPRIGHT
+from test_lone_kernel import lone_through_kernel, serialized
+from test_live_stream import take
+
+# The cell, by hand: outputs (mV) = K · (F_Z [N], M_X [N·m], M_Y [N·m]); small interactions.
+K_MV = np.array([[4.0e-3, 3.0e-4, -2.0e-4],
+                 [1.0e-4, 5.0e-2, 2.0e-3],
+                 [-3.0e-4, 1.0e-3, 3.5e-2]])
+CAPACITY = np.array([500.0, 40.0, 60.0])        # N, N·m, N·m
+NOISE_MV = 2.0e-5                               # output noise, standard deviation
+NATURAL_ZERO_MV = np.array([0.012, -0.008, 0.020])
+AXES = ('FZ', 'MX', 'MY')
+SLOTS = [2, 3, 4]                               # their places in FX..MZ and in FXV..MZV
+ABSENT = ('FX', 'FY', 'MZ')
+# loads from the noise alone (first principles): δL = K⁻¹ δV, per component
+SIGMA_LOAD = np.sqrt(((np.linalg.inv(K_MV) * NOISE_MV) ** 2).sum(axis=1))
+
+
+def cell_table_text(rng) -> str:
+    """A one-axis-at-a-time deadweight calibration as a small laboratory writes it: 6 series (each
+    axis in two fixture orientations, each with its own tare) of 7 points, natural zeros at two
+    roll angles, in N, N-m and mV, symbols of the lab's own."""
+    rows = []
+    for series, axis in enumerate([0, 1, 2, 0, 1, 2], 1):
+        tare = rng.uniform(-0.04, 0.04, 3) * CAPACITY
+        for step, fraction in enumerate(np.linspace(-1.0, 1.0, 7)):
+            applied = np.zeros(3)
+            applied[axis] = fraction * CAPACITY[axis]
+            outputs = K_MV @ (applied + tare) + rng.normal(0.0, NOISE_MV, 3) + NATURAL_ZERO_MV
+            cells = [repr(float(v)) for v in np.r_[applied, outputs]]
+            rows.append(f',S{series}-{step + 1},{series},Z,' + ','.join(cells))
+    zeros = [f',NZ{k + 1},Z,{roll},,,,' + ','.join(repr(float(v)) for v in NATURAL_ZERO_MV)
+             for k, roll in enumerate((0, 180))]
+    return '\n'.join(['FILE_TYPE,DATA_FOR_ITERATIVE_REGRESSION_ANALYSIS,,,,,,,,',
+                      'BALANCE_NAME,cell-3,,,,,,,,', 'DESCRIPTION,three-component cell,,,,,,,,',
+                      '; load and output symbols,,,,,,,,,', ',,,,N,RM,PM,rN,rRM,rPM',
+                      '; units,,,,,,,,,', ',,,,N,N-m,N-m,mV,mV,mV',
+                      '; capacities,,,,,,,,,', ',,,,500,40,60,,,',
+                      '; natural zeros,,,,,,,,,', *zeros,
+                      '; data for analysis,,,,,,,,,', ',Point ID,Series,Set,,,,,,', *rows]) + '\n'
+
+
+def fit_cell(directory, seed: int = 5):
+    """The table written, then `balance-calib fit --axes FZ,MX,MY` with a hand-written linear term
+    file: the calibration.yaml path."""
+    (directory / 'cell.csv').write_text(cell_table_text(np.random.default_rng(seed)))
+    (directory / 'linear.terms').write_text('# the linear model of the cell\nFZV, MXV, MYV\n')
+    assert main(['fit', str(directory / 'cell.csv'), '--out', str(directory / 'fit'),
+                 '--axes', 'FZ,MX,MY', '--method', 'direct',
+                 '--terms', str(directory / 'linear.terms'), '--no-plots']) == 0
+    return directory / 'fit' / 'calibration.yaml'
+
+
+def raw_samples(rng, loads) -> np.ndarray:
+    """Raw /balance/raw rows (N, 6) for loads (N, 3): the cell's bridges in the FZV, MXV, MYV
+    slots, unrelated numbers in the others (a DAQ's unused inputs), which the calibration must
+    ignore."""
+    raw = rng.uniform(-5.0, 5.0, (len(loads), 6))
+    raw[:, SLOTS] = loads @ K_MV.T
+    return raw
+
+
+@pytest.fixture(scope='module')
+def calibration(tmp_path_factory):
+    return load_calibration(fit_cell(tmp_path_factory.mktemp('cell')))
+
+
+def test_the_fitted_file_is_a_three_component_calibration(calibration):
+    assert calibration.components == AXES and calibration.bridge_outputs == ('FZV', 'MXV', 'MYV')
+    np.testing.assert_allclose(calibration.capacity, CAPACITY)
+    # the linear coefficients are the cell's K⁻¹, to the noise (relative 1e-5 of the outputs' span)
+    np.testing.assert_allclose(calibration.model().coefficients, np.linalg.inv(K_MV), rtol=2e-3,
+                               atol=2e-3 * np.abs(np.linalg.inv(K_MV)).max())
+
+
+@pytest.mark.parametrize('installation', [UPRIGHT, INVERTED])
+def test_three_components_from_their_bridges_the_absent_ones_zero_with_nan_uncertainty(calibration,
+                                                                                    installation):
+    rng = np.random.default_rng(8)
+    loads = rng.uniform(-0.9, 0.9, (25, 3)) * CAPACITY
+    live = LiveCalibrator(activate(calibration, 'adopted', installation))
+    published = live.process(raw_samples(rng, loads), np.arange(1, 26) * 1_000_000, now_s=0.0)
+    assert published.indices.tolist() == list(range(25))
+    expected = np.zeros((25, 6))
+    expected[:, SLOTS] = loads                          # hand-computed: K⁻¹ · (K · L) = L
+    expected = installation.to_tunnel(expected)
+    absent_slots = [0, 1, 5]
+    assert np.all(published.wrench[:, absent_slots] == 0.0)
+    assert np.all(np.abs(published.wrench[:, SLOTS] - expected[:, SLOTS]) < 5 * SIGMA_LOAD)
+    u = published.uncertainty
+    assert np.all(np.isnan(u[:, absent_slots]))
+    # the present components' uncertainty is the noise carried to the loads (σ estimated from
+    # 42 points: within ±40 %), and the points' leverage adds little
+    ratio = u[:, SLOTS] / SIGMA_LOAD
+    assert np.all((ratio > 0.6) & (ratio < 1.4)), ratio
+    assert not published.batch.out_of_envelope.any() and not live.overload.active
+
+
+def test_envelope_saturation_and_overload_ignore_the_absent_components(calibration):
+    rng = np.random.default_rng(9)
+    live = LiveCalibrator(activate(calibration, 'adopted', UPRIGHT),
+                          LiveSettings(overload_fraction=1.2))
+    assert live.active.absent_components == ABSENT
+    assert np.isinf(live.active.envelope[[0, 1, 5]]).all()
+    assert np.isinf(live.active.output_range_mv[[0, 1, 5]]).all()
+    calm = raw_samples(rng, np.array([[100.0, 5.0, -10.0]] * 3))
+    calm[:, [0, 1, 5]] = [1e4, -1e4, 1e5]      # wild numbers on unused inputs: not a saturation
+    published = live.process(calm, np.arange(1, 4) * 1_000_000, now_s=0.0)
+    assert published.indices.tolist() == [0, 1, 2] and not published.batch.out_of_envelope.any()
+    assert not live.overload.active
+    # F_Z at 1.3 x capacity: beyond the envelope (1.1) and the overload limit (1.2), named
+    beyond = raw_samples(rng, np.array([[1.3 * CAPACITY[0], 0.0, 0.0]]))
+    published = live.process(beyond, np.array([5_000_000]), now_s=0.1)
+    assert published.batch.out_of_envelope.all() and live.overload.active
+    assert live.overload.components == ('FZ',)
+    # the FZ bridge beyond its range (2 x rated output) is a saturated sample: not published
+    saturated = raw_samples(rng, np.zeros((1, 3)))
+    saturated[0, 2] = 3.0 * calibration.rated_output_mv[0]
+    assert len(live.process(saturated, np.array([6_000_000]), now_s=0.2).indices) == 0
+
+
+def test_a_tare_on_the_three_components_and_the_absent_ones_stay_zero(calibration):
+    rng = np.random.default_rng(10)
+    live = LiveCalibrator(activate(calibration, 'adopted', UPRIGHT))
+    weight = np.array([-20.0, 0.4, 1.5])
+    wind_off = raw_samples(rng, weight + rng.normal(0, 0.001, (30, 3)) * CAPACITY)
+    tare = take(live, 'tare', wind_off)
+    assert tare.ok, tare.message
+    np.testing.assert_allclose(live.tare.tare_load[SLOTS], weight, atol=3e-3 * CAPACITY.max())
+    assert np.all(live.tare.tare_load[[0, 1, 5]] == 0.0)
+    aero = np.array([[50.0, -2.0, 3.0]])
+    published = live.process(raw_samples(rng, weight + aero), np.array([10**9]), now_s=1.0)
+    wrench = published.wrench[0]
+    np.testing.assert_allclose(wrench[SLOTS], UPRIGHT.to_tunnel(np.r_[0, 0, aero[0], 0])[SLOTS],
+                               atol=3e-3 * CAPACITY.max())
+    assert np.all(wrench[[0, 1, 5]] == 0.0)
+    assert np.all(np.isnan(published.uncertainty[0, [0, 1, 5]]))
+
+
+def test_diagnostics_name_the_absent_components(calibration):
+    active = activate(calibration, 'adopted', UPRIGHT)
+    state = LiveState(period_s=1.0, counters=InputCounters(received=10, period_received=10),
+                      last_sample_age_s=0.01, stale_after_s=1.0, temperature_age_s=None,
+                      fallback_reason='', tare_zero_mv=None)
+    reports = diagnostics(active, state)
+    status = reports[1]
+    values = dict(status.values)
+    assert status.level == OK
+    assert values['components'] == 'FZ, MX, MY' and values['absent_components'] == 'FX, FY, MZ'
+    said = '3-component calibration: FX, FY, MZ absent (published as 0, uncertainty NaN)'
+    assert said in status.message
+    six = activate(load_calibration('lmc6522'), 'cubic', UPRIGHT)
+    assert dict(diagnostics(six, state)[1].values)['absent_components'] == 'none'
+    assert 'absent' not in diagnostics(six, state)[1].message
+
+
+def test_the_c_kernel_gives_the_pure_cores_wrench_and_nan_uncertainty(calibration):
+    rng = np.random.default_rng(11)
+    active = activate(calibration, 'adopted', INVERTED)
+    loads = rng.uniform(-0.9, 0.9, (12, 3)) * CAPACITY
+    samples = raw_samples(rng, loads)
+    stamps = 10**9 + np.arange(12) * 10**6
+    batch_live, lone_live = LiveCalibrator(active), LiveCalibrator(active)
+    batch = batch_live.process(samples, stamps, ['cell-3'] * 12, now_s=0.0)
+    messages = serialized(samples, stamps, 'cell-3')
+    wrench, uncertainty, by_kernel = lone_through_kernel(lone_live, messages, 1.0,
+                                                         WrenchEncoder('tunnel'))
+    assert all(by_kernel)              # a linear direct model of the bridges: the kernel's case
+    np.testing.assert_allclose(np.vstack(wrench), batch.wrench, rtol=0,
+                               atol=1e-12 * CAPACITY.max())
+    # NaN where the pure core has NaN (assert_allclose holds NaN equal to NaN)
+    np.testing.assert_allclose(np.vstack(uncertainty), batch.uncertainty, rtol=1e-12)
+    assert np.isnan(np.vstack(uncertainty)[:, [0, 1, 5]]).all()
+    assert np.all(np.vstack(wrench)[:, [0, 1, 5]] == 0.0)
