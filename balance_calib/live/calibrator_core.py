@@ -184,6 +184,7 @@ def activate(calibration: Calibration, model: str = 'adopted', installation: str
         raise ValueError(f'envelope_margin must be between 0.5 and 10 (x capacity), not {envelope_margin}')
     if not np.isfinite(output_range_factor) or not 1.0 <= output_range_factor <= 100.0:
         raise ValueError(f'output_range_factor must be between 1 and 100 (x rated output), not {output_range_factor}')
+    _check_channels(calibration, source)
     for what, values, names in (('capacity', calibration.capacity, calibration.components),
                                 ('rated_output_mv', calibration.rated_output_mv, calibration.bridge_outputs)):
         bad = [f'{n}={v}' for n, v in zip(names, np.asarray(values, dtype=float)) if not (np.isfinite(v) and v > 0)]
@@ -202,6 +203,23 @@ def activate(calibration: Calibration, model: str = 'adopted', installation: str
                              float(envelope_margin) * six_axis(calibration.capacity, calibration.components, np.inf),
                              float(output_range_factor) * np.abs(six_axis(calibration.rated_output_mv,
                                                                           calibration.bridge_outputs, np.inf)))
+
+
+def _check_channels(calibration: Calibration, source: str) -> None:
+    """The live calibrator reads six raw channels (FXV..MZV in force.x..torque.z of balance/raw)
+    and publishes six components (FX..MZ): a calibration under other names (a table's own
+    symbols) or with more bridge outputs than that (an 8-channel sensor) is refused in one line."""
+    where = source or calibration.balance
+    for what, names, known, verb in (
+            ('components', calibration.components, COMPONENTS, 'publishes'),
+            ('bridge outputs', calibration.bridge_outputs, BRIDGE_OUTPUTS, 'reads')):
+        if set(names) <= set(known) and len(set(names)) == len(names):
+            continue
+        raise ConfigError(
+            f'{where}: {what} {", ".join(names)}: balance_calibrator {verb} only '
+            f'{", ".join(known)}, each once, so this calibration ({len(calibration.components)} '
+            f'components from {len(calibration.bridge_outputs)} bridge outputs) cannot run live '
+            f'(balance-calib fit --axes names a table\'s loads and bridges as TM-663\'s)')
 
 
 # --- live extra inputs ------------------------------------------------------------------------

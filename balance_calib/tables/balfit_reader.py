@@ -282,7 +282,7 @@ def read_table(path: str | Path, text: str | None = None,
             raise TableError(f'{where}: unit {unit!r} of {symbols[i]} is not known '
                              f'(known: {known_units()})')
 
-    n_loads = _count_loads(zero_rows, capacity_row, n_columns, name)
+    n_loads = _count_loads(zero_rows, capacity_row, units, n_columns)
     if not 0 < n_loads < n_columns:
         raise TableError(f'{name}: cannot tell loads from outputs ({n_loads} loads among {n_columns} symbols)')
     for i in range(n_columns):
@@ -370,9 +370,10 @@ def read_table(path: str | Path, text: str | None = None,
         np.array(outputs, float).reshape(-1, n_outputs), disabled, np.array(point_row, dtype=int))
 
 
-def _count_loads(zero_rows, capacity_row, n_columns: int, name: str) -> int:
+def _count_loads(zero_rows, capacity_row, units: Sequence[str], n_columns: int) -> int:
     """field_data_format.md: blank load cells of a natural-zero row; else filled load capacities when
-    the output capacities are blank; else half the symbols."""
+    the output capacities are blank; else, where the units tell (force and moment units first,
+    none after: e.g. 6 loads and 8 outputs), their count; else half the symbols."""
     if zero_rows:
         line, cells = zero_rows[0]
         count = 0
@@ -389,6 +390,10 @@ def _count_loads(zero_rows, capacity_row, n_columns: int, name: str) -> int:
             count += 1
         if count < n_columns and not any(filled[count:]):
             return count
+    kinds = [is_load_unit(u) for u in units]
+    count = kinds.index(False) if False in kinds else len(kinds)
+    if 0 < count < n_columns and not any(kinds[count:]):
+        return count
     return n_columns // 2
 
 
