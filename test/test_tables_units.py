@@ -174,3 +174,33 @@ def test_an_unknown_unit_is_one_line_naming_file_row_column_and_the_known_units(
     for known in ('counts', 'gf', 'ozf', 'in-ozf', 'kN-m', 'N-mm', 'mV/V', 'lbs'):
         assert known in err
     assert not out.exists()
+
+
+def test_the_live_session_takes_a_counts_calibration_only_with_unconverted_input(campaign):
+    """balance_calibrator's input_units turn balance/raw into mV: for a calibration in counts the
+    raw outputs must pass as they are (input_units mV); a ratiometric setting is refused in one
+    line, at start-up and at runtime, since every load would be off by the excitation."""
+    from balance_calib.calibration_file import ConfigError
+    from balance_calib.live.parameters import PARAMETERS
+    from balance_calib.live.session import CalibratorSession
+    table, _, directory = campaign
+    write_table(directory / 'live-counts.csv', _table_in(table, ('gf',) * 3 + ('in-ozf',) * 3,
+                                                         'counts', 8388.608))
+    assert main(['fit', str(directory / 'live-counts.csv'),
+                 '--out', str(directory / 'live-counts'),
+                 '--method', 'direct', '--terms', 'tm663-cubic', '--no-plots']) == 0
+    path = directory / 'live-counts' / 'calibration.yaml'
+    values = {name: spec.default for name, spec in PARAMETERS.items()}
+    values.update(calibration_file=str(path), tare_file=str(directory / 'tare.yaml'))
+    lines = []
+    session = CalibratorSession(lambda name: values[name], 'test',
+                                lambda level, line: lines.append(line))
+    assert any('balance/raw carries bridge outputs in counts' in line for line in lines), lines
+    with pytest.raises(ValueError, match=r'input_units = mV/V turns balance/raw into mV, '
+                                         r'but .* takes bridge outputs in counts: '
+                                         r'set input_units mV'):
+        session.validate({'input_units': 'mV/V', 'excitation_v': 5.0})
+    values.update(input_units='microV/V', excitation_v=5.0)
+    with pytest.raises(ConfigError) as refused:
+        CalibratorSession(lambda name: values[name], 'test', lambda level, line: None)
+    assert len(str(refused.value).splitlines()) == 1 and str(path) in str(refused.value)

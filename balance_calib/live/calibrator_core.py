@@ -758,6 +758,7 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('fallback_reason', state.fallback_reason or 'none'),
         ('installation', f'{active.installation.name} ({active.installation.spec})'),
         ('components', ', '.join(cal.components)),
+        ('output_unit', str((cal.extra or {}).get('output_unit', 'mV'))),
         ('absent_components', ', '.join(absent) or 'none'),
         ('fitted_at', cal.fitted_at or 'unknown (memo matrices)'),
         ('age_days', 'unknown' if age is None else f'{age:.2f}'),
