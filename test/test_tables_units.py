@@ -137,6 +137,13 @@ def test_a_table_in_lab_units_fits_the_same_calibration_as_in_si(campaign, load_
     np.testing.assert_allclose(wrench_uncertainty(live_lab, raw_mv * per_mv, None),
                                wrench_uncertainty(live_si, raw_mv, None), rtol=1e-5)
 
+    # the zero's reply states the outputs in the calibration's unit, not in mV
+    from balance_calib.live.stream import LiveCalibrator
+    from test_live_stream import take
+    zero = take(LiveCalibrator(live_lab), 'zero', np.tile(raw_mv[0] * per_mv, (10, 1)))
+    assert zero.ok, zero.message
+    assert f' {output_unit}' in zero.message and ' mV' not in zero.message, zero.message
+
     # the tares in the report are in the file's own units: SI tare / the unit's factor
     import json
     report_si = json.loads((directory / 'si' / 'report.json').read_text())

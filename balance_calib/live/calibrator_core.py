@@ -541,7 +541,8 @@ def evaluate_window(window: TareWindow, active: ActiveCalibration, *, max_ratio:
     if window.kind == 'zero':
         names = active.calibration.bridge_outputs
         columns = [BRIDGE_OUTPUTS.index(v) for v in names]
-        steady = check_steady(outputs[:, columns], names, ('mV',) * len(names),
+        units = (active.calibration.output_unit,) * len(names)
+        steady = check_steady(outputs[:, columns], names, units,
                               np.asarray(active.calibration.rated_output_mv, float), max_ratio)
         if not steady.steady:
             return TareResult(False, f'zero refused: the window of {n} samples is not steady: {steady.reason}')
@@ -569,11 +570,17 @@ def evaluate_window(window: TareWindow, active: ActiveCalibration, *, max_ratio:
     return TareResult(True, f'tare: averaged {n} samples, steady (scatter {steady.scatter_ratio:.1f}x, step '
                             f'{steady.step_ratio:.1f}x noise); tare load now subtracted: '
                             f'{describe_tare(tare_load, active)}; mean wind-off outputs: ' +
-                      ', '.join(f'{b}={mean_outputs[BRIDGE_OUTPUTS.index(b)]:+.5f} mV'
+                      ', '.join(f'{b}={output_text(mean_outputs[BRIDGE_OUTPUTS.index(b)], active)}'
                                 for b in active.calibration.bridge_outputs)
                       + ('' if zero_mv is not None else '; no electrical zero taken (~/zero with nothing on the '
                          'balance): the calibration sees outputs measured from the bridges\' own zero'),
                       tare_load=tare_load, tare_sigma=np.std(batch.loads_total, axis=0, ddof=1) / np.sqrt(n))
+
+
+def output_text(value: float, active: ActiveCalibration) -> str:
+    """A bridge output with its unit: mV to 5 decimals; counts, -, mV/V to 6 digits."""
+    unit = active.calibration.output_unit
+    return f'{value:+.5f} mV' if unit == 'mV' else f'{value:+.6g} {unit}'
 
 
 def describe_loads(loads_balance, active: ActiveCalibration) -> str:
@@ -596,9 +603,9 @@ def describe_zero(zero_mv, active: ActiveCalibration) -> str:
             else np.full(6, np.nan)
     except InverseDidNotConverge:      # an iterative model without a solution there: no number
         equivalent = np.full(6, np.nan)
-    outputs = ', '.join(f'{c}={v:+.5f} mV' for c, v in zip(active.calibration.bridge_outputs,
-                                                           zero[[BRIDGE_OUTPUTS.index(b) for b in
-                                                                 active.calibration.bridge_outputs]]))
+    names = active.calibration.bridge_outputs
+    outputs = ', '.join(f'{c}={output_text(v, active)}'
+                        for c, v in zip(names, zero[[BRIDGE_OUTPUTS.index(b) for b in names]]))
     return (f'{outputs} (the load these outputs read as, {active.installation.name} tunnel axes, '
             f'{active.base_name} model: {describe_loads(equivalent, active)})')
 
@@ -703,7 +710,8 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
     if c.period_saturated:
         level = ERROR
         problems.append(f'{c.period_saturated} samples saturated (an output beyond '
-                        f'{", ".join(f"{v:.3g}" for v in active.output_range_mv)} mV): not published')
+                        f'{", ".join(f"{v:.3g}" for v in active.output_range_mv)} '
+                        f'{active.calibration.output_unit}): not published')
     if c.period_not_converged:
         level = ERROR
         problems.append(f'{c.period_not_converged} samples where the {active.model_name} model\'s Newton '
@@ -758,7 +766,7 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('fallback_reason', state.fallback_reason or 'none'),
         ('installation', f'{active.installation.name} ({active.installation.spec})'),
         ('components', ', '.join(cal.components)),
-        ('output_unit', str((cal.extra or {}).get('output_unit', 'mV'))),
+        ('output_unit', cal.output_unit),
         ('absent_components', ', '.join(absent) or 'none'),
         ('fitted_at', cal.fitted_at or 'unknown (memo matrices)'),
         ('age_days', 'unknown' if age is None else f'{age:.2f}'),

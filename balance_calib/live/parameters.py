@@ -112,7 +112,7 @@ def check_input_units(calibration, input_units: str, where: str) -> None:
     `extra.output_unit`) takes balance/raw in that unit as it is: a ratiometric input_units would
     multiply the outputs by the excitation first and every load would be off by that factor.
     ValueError naming both; input_units mV (no conversion) passes."""
-    unit = str((calibration.extra or {}).get('output_unit', 'mV'))
+    unit = calibration.output_unit
     if unit != 'mV' and input_units != 'mV':
         raise ValueError(f'parameter input_units = {input_units} turns balance/raw into mV, but '
                          f'{where} takes bridge outputs in {unit}: set input_units mV (balance/raw '

@@ -109,7 +109,7 @@ class CalibratorSession:
                                 'every sample takes the pure core\'s path (slower at low rates; reinstall with a C '
                                 'compiler)')
         absent = active.absent_components
-        unit = str((active.calibration.extra or {}).get('output_unit', 'mV'))
+        unit = active.calibration.output_unit
         self.log('info', f'{active.model_name} model of {active.calibration.balance} from {path}, '
                          f'{active.installation.name} installation; requires '
                          f'{", ".join(active.requires) or "bridge outputs only"}'
