@@ -1,7 +1,8 @@
 """balance_calibrator, as its own process over real DDS, on a 3-component calibration that `fit
 --axes FZ,MX,MY` wrote from a small laboratory table: each raw sample gives the three components
 the cell's own linear response says (hand-computed), the other three 0 with their uncertainty NaN,
-and /diagnostics names the absent components."""
+and /diagnostics names the absent components; a calibration of 8 bridge outputs stops it with one
+line."""
 import time
 
 import numpy as np
@@ -91,3 +92,22 @@ def test_a_three_component_calibration_runs_in_the_node(tmp_path):
         node.stop()
         probe.close()
     assert 'FX, FY, MZ absent from the calibration' in node.output()
+
+
+def test_a_calibration_of_eight_outputs_stops_the_node_with_one_line(tmp_path):
+    from test_tables_more_outputs import eight_output_calibration
+
+    from balance_calib.calibration_file import save_calibration
+    path = tmp_path / 'sensor8.yaml'
+    save_calibration(path, eight_output_calibration())
+    node = NodeProcess('balance_calibrator', new_domain_id(), tmp_path / 'logs',
+                       {'calibration_file': str(path)})
+    try:
+        assert node.wait(30.0) == 1
+        errors = [line for line in node.output().splitlines() if '[ERROR]' in line]
+        assert len(errors) == 1, node.output()
+        said = f'cannot start: {path}: bridge outputs E1, E2, E3, E4, E5, E6, E7, E8: '
+        assert said in errors[0], errors[0]
+        assert errors[0].count(str(path)) == 1 and 'invalid parameter' not in errors[0]
+    finally:
+        node.stop()

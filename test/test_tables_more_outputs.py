@@ -69,11 +69,17 @@ def test_units_that_do_not_tell_loads_from_outputs_fall_back_to_half_the_symbols
         read_table(path)
 
 
+def eight_output_calibration() -> Calibration:
+    """A linear calibration of six components from the 8 channels (coefficients arbitrary)."""
+    model = BalanceModel('linear', parse_terms(list(CHANNELS)), np.arange(48.0).reshape(6, 8),
+                         sy.LOADS, CHANNELS)
+    return Calibration('sensor-8', {'linear': model}, 'linear', 'linear', sy.capacity_si(),
+                       np.full(8, 2.5), sy.LOADS, CHANNELS)
+
+
 def test_a_calibration_of_eight_outputs_is_carried_and_refused_live_in_one_line(tmp_path):
-    terms = parse_terms(list(CHANNELS))
-    model = BalanceModel('linear', terms, np.arange(48.0).reshape(6, 8), sy.LOADS, CHANNELS)
-    calibration = Calibration('sensor-8', {'linear': model}, 'linear', 'linear', sy.capacity_si(),
-                              np.full(8, 2.5), sy.LOADS, CHANNELS)
+    calibration = eight_output_calibration()
+    model = calibration.model()
     save_calibration(tmp_path / 'calibration.yaml', calibration)
     loaded = load_calibration(tmp_path / 'calibration.yaml')
     assert loaded.bridge_outputs == CHANNELS and loaded.model().inputs == CHANNELS

@@ -49,8 +49,10 @@ def activate_file(path: str, value: Callable[[str], object]) -> ActiveCalibratio
     try:
         return activate(calibration, value('model'), value('installation'), float(value('envelope_margin')),
                         source=str(path), output_range_factor=float(value('output_range_factor')))
-    except ConfigError as err:
-        raise ConfigError(f'{path}: {err}') from None
+    except ConfigError as err:          # named by the file once (activate names it when told)
+        message = str(err)
+        named = message if message.startswith(f'{path}: ') else f'{path}: {message}'
+        raise ConfigError(named) from None
 
 
 class Output:
@@ -88,6 +90,8 @@ class CalibratorSession:
             self.input_scale = input_scale_mv(value('input_units'), value('excitation_v'))
             active = activate_file(path, value)
             self.reliability = parse_reliability(value('input_reliability'))
+        except ConfigError:                 # the calibration file: its message names it
+            raise
         except ValueError as err:
             raise ConfigError(f'invalid parameter: {err}') from None
         self.lock = threading.Lock()
