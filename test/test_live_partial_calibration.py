@@ -257,3 +257,38 @@ def test_a_five_component_calibration_publishes_fx_as_0_and_names_it(tmp_path):
     status = diagnostics(live.active, state)[1]
     assert dict(status.values)['absent_components'] == 'FX'
     assert '5-component calibration: FX absent' in status.message
+
+
+def test_nan_on_a_channel_the_calibration_does_not_read_changes_nothing(calibration):
+    """A DAQ of three bridges may fill the other three slots of balance/raw with NaN: those samples
+    are published as if the slots held numbers (batch, lone sample, kernel declining to the pure
+    core), a zero taken then is finite; a NaN on a bridge the calibration reads is rejected."""
+    rng = np.random.default_rng(13)
+    loads = rng.uniform(-0.5, 0.5, (6, 3)) * CAPACITY
+    finite = raw_samples(rng, loads)
+    holes = finite.copy()
+    holes[:, [0, 1, 5]] = np.nan
+    holes[5, 2] = np.nan                               # FZV: read by the calibration
+    active = activate(calibration, 'adopted', UPRIGHT)
+    reference = LiveCalibrator(active).process(finite, np.arange(1, 7) * 10**6, now_s=0.0)
+    published = LiveCalibrator(active).process(holes, np.arange(1, 7) * 10**6, now_s=0.0)
+    assert published.indices.tolist() == [0, 1, 2, 3, 4]
+    np.testing.assert_array_equal(published.wrench, reference.wrench[:5])
+    np.testing.assert_allclose(published.uncertainty, reference.uncertainty[:5], rtol=1e-12)
+    lone, kernel = LiveCalibrator(active), LiveCalibrator(active)
+    for k in range(5):
+        one = lone.process(holes[k:k + 1], np.array([(k + 1) * 10**6]), now_s=0.0)
+        np.testing.assert_allclose(one.wrench, reference.wrench[k:k + 1], rtol=1e-12)
+    assert lone.counters.published == 5 and lone.counters.rejected_nonfinite == 0
+    stamps = np.arange(1, 7) * 10**6
+    wrench, uncertainty, by_kernel = lone_through_kernel(kernel, serialized(holes, stamps), 1.0,
+                                                         WrenchEncoder('tunnel'))
+    assert not any(by_kernel) and wrench[5] is None    # the kernel declines, the pure core takes
+    np.testing.assert_allclose(np.vstack(wrench[:5]), reference.wrench[:5], rtol=1e-12)
+    assert kernel.counters.rejected_nonfinite == 1
+    zeroing = LiveCalibrator(active)
+    window = np.tile(holes[0], (10, 1))
+    assert take(zeroing, 'zero', window).ok
+    assert np.all(np.isfinite(zeroing.tare.zero_mv))
+    assert np.all(zeroing.tare.zero_mv[[0, 1, 5]] == 0)
+    np.testing.assert_allclose(zeroing.tare.zero_mv[SLOTS], holes[0, SLOTS])

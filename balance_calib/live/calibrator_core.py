@@ -147,6 +147,22 @@ class ActiveCalibration:
         return self.output_range_mv.tolist()
 
     @cached_property
+    def unused_inputs(self) -> np.ndarray | None:
+        """Columns of the six raw outputs that the calibration does not read (a 1-, 3- or 5-bridge
+        calibration), None when it reads all six: their values, NaN included, change nothing."""
+        used = [BRIDGE_OUTPUTS.index(b) for b in self.calibration.bridge_outputs]
+        unused = [i for i in range(6) if i not in used]
+        return np.array(unused, dtype=np.intp) if unused else None
+
+    def inputs_finite(self, outputs: np.ndarray) -> np.ndarray:
+        """(N,) True where every raw output the calibration reads is finite; outputs (N, 6)."""
+        if self.unused_inputs is None:
+            return np.isfinite(outputs).all(axis=1)
+        used = np.isfinite(outputs)
+        used[:, self.unused_inputs] = True
+        return used.all(axis=1)
+
+    @cached_property
     def absent_components(self) -> tuple[str, ...]:
         """Components of the published wrench (tunnel axes) that the calibration does not give
         (a 1-, 3- or 5-component balance): published as 0, their uncertainty NaN, never out of
@@ -338,7 +354,7 @@ def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tare_
     if outputs.shape[0] == 1 and not active.model.extra_variables:
         return _one_plain_sample(active, outputs, zero_mv, tare_load)
     with np.errstate(invalid='ignore', over='ignore'):
-        finite = np.isfinite(outputs).all(axis=1)
+        finite = active.inputs_finite(outputs)       # channels the calibration does not read aside
         saturated = finite & (np.abs(outputs) > active.output_range_mv).any(axis=1)
     accepted = finite & ~saturated
     zeroed = outputs if zero_mv is None else outputs - np.asarray(zero_mv, dtype=float)
@@ -375,7 +391,7 @@ def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv, t
     where every sample comes alone (the same steps as the batch, with fewer numpy calls)."""
     row = outputs[0]
     values = row.tolist()
-    rejected = not all(map(math.isfinite, values))
+    rejected = not all(map(math.isfinite, values)) and not active.inputs_finite(outputs)[0]
     saturated = not rejected and any(abs(v) > r for v, r in zip(values, active.output_range_list))
     index = active.one_sample_index
     if index is not None and not (rejected or saturated) and max(map(abs, values)) < 1e30:
@@ -547,6 +563,8 @@ def evaluate_window(window: TareWindow, active: ActiveCalibration, *, max_ratio:
         if not steady.steady:
             return TareResult(False, f'zero refused: the window of {n} samples is not steady: {steady.reason}')
         zero = tare_zero(outputs)
+        if active.unused_inputs is not None:       # channels not read: no zero (finite, persisted)
+            zero[active.unused_inputs] = 0.0
         return TareResult(True, f'zero: averaged {n} samples, steady (scatter {steady.scatter_ratio:.1f}x, step '
                                 f'{steady.step_ratio:.1f}x noise); electrical zero now subtracted: '
                                 f'{describe_zero(zero, active)}', zero_mv=zero)

@@ -317,7 +317,7 @@ class LiveCalibrator:
         active, tare = self.active, self.tare
         direction = None
         if 'load_history' in active.requires:
-            finite = np.isfinite(outputs).all(axis=1)
+            finite = active.inputs_finite(outputs)
             zeroed = outputs[finite] - (0.0 if tare.zero_mv is None else tare.zero_mv)
             direction = np.ones((len(outputs), 6))
             direction[finite] = self.history.update(six_axis_loads(active.base_model, zeroed))
