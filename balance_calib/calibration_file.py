@@ -64,6 +64,12 @@ class Calibration:
         return tuple(needed)
 
     @property
+    def output_unit(self) -> str:
+        """The unit of the bridge outputs the models take: mV, or what a table gave that has no
+        conversion to mV (counts, -, mV/V without the excitation), as `fit` records it."""
+        return str((self.extra or {}).get('output_unit', 'mV'))
+
+    @property
     def fitted_datetime(self) -> _dt.datetime | None:
         try:
             return _dt.datetime.fromisoformat(self.fitted_at)
@@ -185,7 +191,8 @@ def write_text_atomically(path: str | Path, text: str) -> None:
 
 
 def save_calibration(path: str | Path, calibration: Calibration) -> None:
-    header = f'# {calibration.balance} calibration written by balance_calib; loads in N, N·m from outputs in mV.\n'
+    header = (f'# {calibration.balance} calibration written by balance_calib; loads in N, N·m from '
+              f'outputs in {calibration.output_unit}.\n')
     write_text_atomically(path, header + yaml.safe_dump(calibration.to_dict(), sort_keys=False, width=160))
 
 

@@ -21,7 +21,8 @@ from ..calibration_file import ConfigError
 from ..config import resolve_config_path
 from . import lone_sample
 from .calibrator_core import ActiveCalibration, activate, parse_reliability
-from .parameters import check_parameter, input_scale_mv, load_calibration_checked
+from .parameters import (check_input_units, check_parameter, input_scale_mv,
+                         load_calibration_checked)
 from .raw_codec import WrenchEncoder, decode_wrenches
 from .refit_process import RefitJob, is_balance_config, make_refit_job, run_refit_job
 from .stream import LiveCalibrator, LiveSettings
@@ -46,11 +47,14 @@ def live_settings(value: Callable[[str], object]) -> LiveSettings:
 def activate_file(path: str, value: Callable[[str], object]) -> ActiveCalibration:
     """The calibration `path` with the parameters `value(name)`; ConfigError/ValueError with a reason."""
     calibration = load_calibration_checked(path, 10.0)
+    check_input_units(calibration, value('input_units'), str(path))
     try:
         return activate(calibration, value('model'), value('installation'), float(value('envelope_margin')),
                         source=str(path), output_range_factor=float(value('output_range_factor')))
-    except ConfigError as err:
-        raise ConfigError(f'{path}: {err}') from None
+    except ConfigError as err:          # named by the file once (activate names it when told)
+        message = str(err)
+        named = message if message.startswith(f'{path}: ') else f'{path}: {message}'
+        raise ConfigError(named) from None
 
 
 class Output:
@@ -88,6 +92,8 @@ class CalibratorSession:
             self.input_scale = input_scale_mv(value('input_units'), value('excitation_v'))
             active = activate_file(path, value)
             self.reliability = parse_reliability(value('input_reliability'))
+        except ConfigError:                 # the calibration file: its message names it
+            raise
         except ValueError as err:
             raise ConfigError(f'invalid parameter: {err}') from None
         self.lock = threading.Lock()
@@ -112,9 +118,14 @@ class CalibratorSession:
             self.log('warning', f'the C kernel for lone samples is not built ({lone_sample.unavailable_reason}): '
                                 'every sample takes the pure core\'s path (slower at low rates; reinstall with a C '
                                 'compiler)')
+        absent = active.absent_components
+        unit = active.calibration.output_unit
         self.log('info', f'{active.model_name} model of {active.calibration.balance} from {path}, '
                          f'{active.installation.name} installation; requires '
-                         f'{", ".join(active.requires) or "bridge outputs only"}')
+                         f'{", ".join(active.requires) or "bridge outputs only"}'
+                 + (f'; {", ".join(absent)} absent from the calibration: published as 0, '
+                    f'uncertainty NaN' if absent else '')
+                 + (f'; balance/raw carries bridge outputs in {unit}' if unit != 'mV' else ''))
 
     @property
     def active(self) -> ActiveCalibration:
@@ -353,6 +364,9 @@ class CalibratorSession:
         value = (lambda n: changes.get(n, self.value(n)))
         if {'input_units', 'excitation_v'} & set(changes):
             input_scale_mv(value('input_units'), value('excitation_v'))
+            if not CALIBRATION_PARAMETERS & set(changes):    # else activate_file checks the new
+                active = self.live.active
+                check_input_units(active.calibration, value('input_units'), active.source)
         if CALIBRATION_PARAMETERS & set(changes):
             path = changes.get('calibration_file', None)
             path = self.live.active.source if path is None else (path or str(default_calibration_file()))
