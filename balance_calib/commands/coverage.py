@@ -1,0 +1,85 @@
+"""balance-calib coverage CAL.yaml (BAG ... | LOADS.csv) [--out DIR] (interfaces.md, "Coverage of a
+run, and design of calibration points")."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        'coverage', help='does a calibration cover a run? predicted uncertainty at every load of it',
+        description='At every load of a run (the /balance/wrench of wind-on bags, or a CSV FX,FY,FZ,MX,MY,MZ '
+                    'in N and N·m, balance axes) the standard uncertainty (k = 1) the calibration predicts '
+                    'from its coefficient covariance (as balance_calibrator publishes it on '
+                    '/balance/wrench_uncertainty), and the share of the run outside the support of the '
+                    'calibration\'s schedule, per component against the calibration\'s σ. Prints the '
+                    'summary; with --out writes coverage.json and coverage.png.')
+    parser.add_argument('calibration', help='calibration.yaml written by refit or fit')
+    parser.add_argument('run', nargs='+', help='wind-on bags (rosbag2 directories or .mcap) or one LOADS.csv')
+    parser.add_argument('--out', help='directory for coverage.json and coverage.png')
+    parser.add_argument('--model', default='adopted', help='calibration model (default: the adopted one)')
+    parser.add_argument('--installation', default='upright',
+                        help='bags: how the balance was installed, to turn /balance/wrench (tunnel axes) back '
+                             'into balance axes: upright, inverted or a signed permutation (default upright)')
+    parser.add_argument('--wrench-topic', default='/balance/wrench', help='bags: topic of the calibrated loads')
+    parser.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..bags.errors import BagError
+    from ..calibration_file import ConfigError, load_calibration
+    from ..cli import CommandError
+    from ..coverage.plots import coverage_figure
+    from ..coverage.run import run_coverage
+    from ..coverage.run_inputs import RunInputError, read_loads_csv, read_wrench_bags
+    from ..model.inverse import InverseDidNotConverge
+    from ..model.uncertainty import UncertaintyUnavailable
+    from ..tunnel_axes import parse_installation
+
+    try:
+        calibration = load_calibration(args.calibration)
+        time_s = None
+        first = Path(args.run[0])
+        if len(args.run) == 1 and first.suffix.lower() == '.csv':
+            loads = read_loads_csv(first, calibration.components)
+        else:
+            if tuple(calibration.components) != ('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'):
+                raise CommandError(f'{args.calibration}: bags carry six-component wrenches; this calibration has '
+                                   f'components {", ".join(calibration.components)}: give a LOADS.csv')
+            time_s, loads = read_wrench_bags(args.run, parse_installation(args.installation), args.wrench_topic)
+        coverage = run_coverage(calibration, loads, model=args.model)
+    except (ConfigError, RunInputError, BagError, UncertaintyUnavailable, InverseDidNotConverge,
+            ValueError) as err:
+        raise CommandError(' '.join(str(err).split())) from None
+    summary = coverage.summary()
+    print(_summary_text(summary, coverage.components))
+    if args.out:
+        out = Path(args.out)
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            from ..calibration_file import write_text_atomically
+            write_text_atomically(out / 'coverage.json', json.dumps(summary, indent=2) + '\n')
+            coverage_figure(coverage, out / 'coverage.png', time_s)
+        except OSError as err:
+            raise CommandError(f'{err.filename or out}: {err.strerror or err}') from None
+        print(f'coverage: {out / "coverage.json"}')
+    return 0
+
+
+def _summary_text(summary: dict, components) -> str:
+    lines = [f'{summary["points"]} loads, model {summary["model"]}'
+             + (f' ({summary["not_computed"]} not computed: not finite or beyond 2x capacity)'
+                if summary['not_computed'] else ''),
+             f'{"":22s}' + ''.join(f'{c:>9s}' for c in components)]
+
+    def row(label, values, fmt):
+        return f'{label:22s}' + ''.join(f'{"n/a" if values.get(c) is None else format(values[c], fmt):>9s}'
+                                        for c in components)
+    lines.append(row('predicted u RMS, % FS', summary['predicted_u_pct_fs'], '.4f'))
+    lines.append(row('predicted u max, % FS', summary['worst_u_pct_fs'], '.4f'))
+    lines.append(row('calibration σ, % FS', summary['sigma_pct_fs'], '.4f'))
+    lines.append(row('outside support', summary['outside_support_fraction'], '.1%'))
+    if all(v is None for v in summary['outside_support_fraction'].values()):
+        lines.append('the calibration records no schedule support (refit it with this version to record it)')
+    return '\n'.join(lines)
