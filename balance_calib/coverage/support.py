@@ -7,7 +7,7 @@ A load of a run is outside the support for component k when
 2. the load as a whole combines the components beyond anything the schedule applied together:
    its leverage in the calibration's base model, h = x (XᵀX)⁻¹ xᵀ (x the model's design row at
    the load's bridge outputs, XᵀX over the calibration points), exceeds the largest leverage of
-   any calibration point. Such a load lies outside the hull of the schedule in the space of the
+   any calibration point by more than LEVERAGE_TOLERANCE (the points' own noise moves it). Such a load lies outside the hull of the schedule in the space of the
    model's terms ("hidden extrapolation", Montgomery & Peck §3.8): every component is then
    extrapolated, even when each load alone and each pair was calibrated. This is what a tunnel
    load (six components at once) does to a schedule of one or two components at a time.
@@ -20,6 +20,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 RANGE_TOLERANCE_FS = 0.02          # 2 % FS beyond the calibrated range still counts as inside
+LEVERAGE_TOLERANCE = 1.1           # and 10 % beyond the largest leverage of a calibration point
 
 
 @dataclass(frozen=True)
@@ -37,7 +38,8 @@ class ScheduleSupport:
         """Plain data for calibration.yaml (`extra.support`)."""
         return {
             'definition': 'outside for a component: its load beyond the calibrated range (+2 % FS), or the '
-                          'load\'s leverage in the base model beyond the largest of a calibration point',
+                          'load\'s leverage in the base model beyond 1.1 x the largest of a calibration '
+                          'point',
             'load_min': {c: float(v) for c, v in zip(self.components, self.load_min)},
             'load_max': {c: float(v) for c, v in zip(self.components, self.load_max)},
             'leverage_max': float(self.leverage_max), 'model': self.model,
@@ -76,5 +78,5 @@ def outside_support(support: ScheduleSupport, loads, load_leverage) -> np.ndarra
     margin = RANGE_TOLERANCE_FS * support.capacity
     with np.errstate(invalid='ignore'):
         outside = ~((loads >= support.load_min - margin) & (loads <= support.load_max + margin))
-        combined = ~(np.asarray(load_leverage, dtype=float) <= support.leverage_max)
+        combined = ~(np.asarray(load_leverage, dtype=float) <= LEVERAGE_TOLERANCE * support.leverage_max)
     return outside | combined[:, None]
