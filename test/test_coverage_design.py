@@ -304,3 +304,24 @@ def test_coverage_refuses_a_calibration_without_covariance(tmp_path, capsys):
     env = write_loads(tmp_path / 'env.csv', envelope(LMC.capacity, 5, 1))
     assert main(['coverage', 'lmc6522', str(env)]) == 2       # the memo's matrices: no covariance
     assert 'covariance' in capsys.readouterr().err
+
+
+def test_reduce_report_carries_the_coverage_of_its_run(tmp_path):
+    from balance_calib.calibration_file import save_calibration
+    from test_aero_reduce import run_bag
+    run_bag(tmp_path / 'run')
+    save_calibration(tmp_path / 'cal.yaml', refit(None, 7, table17_noise(LMC)))
+    out = tmp_path / 'out'
+    assert main(['reduce', str(tmp_path / 'run'), '--calibration', str(tmp_path / 'cal.yaml'),
+                 '--model', 'euler_replica_lmc6522', '--out', str(out)]) == 0
+    section = (out / 'report.md').read_text().split('## Coverage of this run')[1].split('\n## ')[0]
+    from balance_calib.aero.bag_io import read_run
+    samples = read_run([tmp_path / 'run'])
+    expected = run_coverage(load_calibration(tmp_path / 'cal.yaml'), outputs_mv=samples.raw_mv).summary()
+    assert f'{len(samples.raw_mv)} loads, model cubic' in section
+    assert f'{expected["predicted_u_pct_fs"]["FZ"]:.4f}' in section.split('predicted u RMS')[1]
+    assert (out / 'coverage.png').exists()
+    # the memo's matrices have no covariance: the section says so instead of a number
+    assert main(['reduce', str(tmp_path / 'run'), '--calibration', 'lmc6522',
+                 '--model', 'euler_replica_lmc6522', '--out', str(tmp_path / 'memo')]) == 0
+    assert 'carries no coefficient covariance' in (tmp_path / 'memo' / 'report.md').read_text()

@@ -31,7 +31,7 @@ def run(args) -> int:
     from ..calibration_file import ConfigError, load_calibration
     from ..cli import CommandError
     from ..coverage.plots import coverage_figure
-    from ..coverage.run import run_coverage
+    from ..coverage.run import run_coverage, summary_table
     from ..coverage.run_inputs import RunInputError, read_loads_csv, read_wrench_bags
     from ..model.inverse import InverseDidNotConverge
     from ..model.uncertainty import UncertaintyUnavailable
@@ -53,7 +53,7 @@ def run(args) -> int:
             ValueError) as err:
         raise CommandError(' '.join(str(err).split())) from None
     summary = coverage.summary()
-    print(_summary_text(summary, coverage.components))
+    print(summary_table(summary, coverage.components))
     if args.out:
         out = Path(args.out)
         try:
@@ -66,20 +66,3 @@ def run(args) -> int:
         print(f'coverage: {out / "coverage.json"}')
     return 0
 
-
-def _summary_text(summary: dict, components) -> str:
-    lines = [f'{summary["points"]} loads, model {summary["model"]}'
-             + (f' ({summary["not_computed"]} not computed: not finite or beyond 2x capacity)'
-                if summary['not_computed'] else ''),
-             f'{"":22s}' + ''.join(f'{c:>9s}' for c in components)]
-
-    def row(label, values, fmt):
-        return f'{label:22s}' + ''.join(f'{"n/a" if values.get(c) is None else format(values[c], fmt):>9s}'
-                                        for c in components)
-    lines.append(row('predicted u RMS, % FS', summary['predicted_u_pct_fs'], '.4f'))
-    lines.append(row('predicted u max, % FS', summary['worst_u_pct_fs'], '.4f'))
-    lines.append(row('calibration σ, % FS', summary['sigma_pct_fs'], '.4f'))
-    lines.append(row('outside support', summary['outside_support_fraction'], '.1%'))
-    if all(v is None for v in summary['outside_support_fraction'].values()):
-        lines.append('the calibration records no schedule support (refit it with this version to record it)')
-    return '\n'.join(lines)

@@ -134,3 +134,23 @@ def run_coverage(calibration: Calibration, loads=None, *, outputs_mv=None, model
     name = calibration.adopted if model in ('adopted', '') else model
     return RunCoverage(tuple(calibration.components), capacity, loads, uncertainty, outside,
                        dict(calibration.sigma_pct_fs), name)
+
+
+def summary_table(summary: dict, components) -> str:
+    """coverage.json's numbers as a plain-text table (the coverage command's output, and the
+    section of reduce's report.md)."""
+    computed = summary['not_computed']
+    lines = [f'{summary["points"]} loads, model {summary["model"]}'
+             + (f' ({computed} not computed: not finite or beyond 2x capacity)' if computed else ''),
+             f'{"":22s}' + ''.join(f'{c:>9s}' for c in components)]
+
+    def row(label, values, fmt):
+        return f'{label:22s}' + ''.join(
+            f'{"n/a" if values.get(c) is None else format(values[c], fmt):>9s}' for c in components)
+    lines.append(row('predicted u RMS, % FS', summary['predicted_u_pct_fs'], '.4f'))
+    lines.append(row('predicted u max, % FS', summary['worst_u_pct_fs'], '.4f'))
+    lines.append(row('calibration σ, % FS', summary['sigma_pct_fs'], '.4f'))
+    lines.append(row('outside support', summary['outside_support_fraction'], '.1%'))
+    if all(v is None for v in summary['outside_support_fraction'].values()):
+        lines.append('the calibration records no schedule support (refit records it)')
+    return '\n'.join(lines)
