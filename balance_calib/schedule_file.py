@@ -34,7 +34,8 @@ def read_schedule_csv(path: str | Path) -> LoadSchedule:
     try:
         text = path.read_text(encoding='utf-8-sig')
     except (OSError, UnicodeDecodeError) as err:
-        raise ConfigError(f'{path}: cannot read the schedule: {getattr(err, "strerror", None) or err}') from None
+        reason = getattr(err, 'strerror', None) or err
+        raise ConfigError(f'{path}: cannot read the schedule: {reason}') from None
     reader = csv.DictReader(io.StringIO(text))
     header = [h.strip() for h in (reader.fieldnames or [])]
     missing = [c for c in REQUIRED if c not in header]
@@ -43,10 +44,12 @@ def read_schedule_csv(path: str | Path) -> LoadSchedule:
                           f'(expected {",".join(COLUMNS)})')
     points, orientations, loads, byproducts = [], [], [], []
     for number, raw in enumerate(reader, start=1):
-        record = {(k or '').strip(): (v or '').strip() if isinstance(v, str) else '' for k, v in raw.items()}
+        record = {(k or '').strip(): v.strip() if isinstance(v, str) else ''
+                  for k, v in raw.items()}
         if record.get('executed', '1') not in ('1', ''):
             if record['executed'] != '0':
-                raise ConfigError(f'{path}: row {number}: executed must be 0 or 1, not {record["executed"]!r}')
+                raise ConfigError(f'{path}: row {number}: executed must be 0 or 1, '
+                                  f'not {record["executed"]!r}')
             continue
         try:
             point = int(record['point'])
@@ -54,11 +57,13 @@ def read_schedule_csv(path: str | Path) -> LoadSchedule:
             values = [float(record[c]) for c in LOAD_COLUMNS]
         except ValueError:
             bad = next(c for c in REQUIRED if not _is_number(record[c]))
-            raise ConfigError(f'{path}: row {number}: column {bad} is {record[bad]!r}, not a number') from None
+            raise ConfigError(f'{path}: row {number}: column {bad} is {record[bad]!r}, '
+                              f'not a number') from None
         if not all(math.isfinite(v) for v in values):
             raise ConfigError(f'{path}: row {number}: loads must be finite numbers')
         if not 1 <= orientation <= 8:
-            raise ConfigError(f'{path}: row {number}: I_g = {orientation}, expected 1-8 (TM-663 Fig. 10)')
+            raise ConfigError(f'{path}: row {number}: I_g = {orientation}, expected 1-8 '
+                              f'(TM-663\'s orientations)')
         points.append(point)
         orientations.append(orientation)
         loads.append(values)
@@ -67,7 +72,8 @@ def read_schedule_csv(path: str | Path) -> LoadSchedule:
         raise ConfigError(f'{path}: the schedule has no executed load point')
     repeated = sorted({p for p in points if points.count(p) > 1})
     if repeated:
-        raise ConfigError(f'{path}: point number(s) {", ".join(map(str, repeated[:5]))} appear more than once')
+        raise ConfigError(f'{path}: point number(s) {", ".join(map(str, repeated[:5]))} '
+                          f'appear more than once')
     return LoadSchedule(np.array(points), np.array(orientations),
                         np.array(loads, dtype=float) * STANDARD_GRAVITY_M_S2, tuple(byproducts))
 
@@ -100,14 +106,16 @@ def schedule_for(config, path: str | Path) -> LoadSchedule:
     schedule = read_schedule_csv(path)
     unknown = sorted(set(int(i) for i in schedule.orientation) - set(config.gravity_directions))
     if unknown:
-        raise ConfigError(f'{path}: I_g {", ".join(map(str, unknown))} not among the orientations of '
+        raise ConfigError(f'{path}: I_g {", ".join(map(str, unknown))} not among the '
+                          f'orientations of '
                           f'{config.path or config.name} (gravity_directions)')
-    from .refit.gates import acceptance_limits        # the capacity gate's margin, one source of truth
+    from .refit.gates import acceptance_limits     # the capacity gate's margin: one source
     margin = acceptance_limits(config).capacity_margin
     over = np.abs(schedule.loads) > np.asarray(config.capacity, float) * (1 + margin)
     if over.any():
         row, k = np.argwhere(over)[0]
         raise ConfigError(f'{path}: point {int(schedule.point[row])}: {config.components[k]} '
-                          f'{schedule.loads[row, k]:.6g} beyond the capacity {config.capacity[k]:.6g} of '
+                          f'{schedule.loads[row, k]:.6g} beyond the capacity '
+                          f'{config.capacity[k]:.6g} of '
                           f'{config.name} (+{100 * margin:.0f} %)')
     return schedule

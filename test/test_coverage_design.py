@@ -1,9 +1,10 @@
 """Coverage of a run and design of calibration points (issue 22, interfaces.md "Coverage of a run,
-and design of calibration points"): the predicted u is honest on simulated campaigns with a known
-truth, a designed schedule reads a sting-mounted model's loads to 0.03 % FS, the commands refuse bad
-input with one line, and a campaign runs and refits on a designed schedule."""
+and design of calibration points"): the predicted u is honest on simulated campaigns with a
+known truth, a designed schedule reads a sting-mounted model's loads to 0.03 % FS, the commands
+refuse bad input with one line, and a campaign runs and refits on a designed schedule."""
 import json
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,8 +26,8 @@ from balance_calib.simulation.balance_sim import (SimulationSettings, noise_mv_f
 from sting_envelope import envelope
 
 LMC = load_balance_config('lmc6522')
-DATA = __import__('pathlib').Path(__file__).resolve().parents[2] / 'shared' / 'data'
-ISSUE_SIGMA_PCT_FS = 0.025        # the "clean campaign" of issue 22: its calibration quotes 0.025 % FS
+DATA = Path(__file__).resolve().parents[2] / 'shared' / 'data'
+ISSUE_SIGMA_PCT_FS = 0.025        # issue 22's "clean campaign": its calibration quotes 0.025 % FS
 
 
 def refit(schedule, seed, noise):
@@ -82,7 +83,7 @@ def test_support_flags_a_component_beyond_its_range_and_every_component_beyond_t
                               np.array([5.0, 10.0]), 0.5, 'cubic')
     loads = np.array([[5.1, 0.0],      # within 2 % FS of the range: inside
                       [5.3, 0.0],      # A beyond its range: only A outside
-                      [0.0, 0.0]])     # inside the ranges, but leverage 0.6 > 1.1 x 0.5: both outside
+                      [0.0, 0.0]])     # in range, but leverage 0.6 > 1.1 x 0.5: both outside
     outside = outside_support(support, loads, np.array([0.1, 0.54, 0.6]))
     assert outside.tolist() == [[False, False], [True, False], [True, True]]
     assert outside_support(support, loads[:1], np.array([np.nan])).all()    # unknown is not inside
@@ -110,7 +111,8 @@ def test_predicted_u_is_honest_at_envelope_loads(designed, capsys):
     held = envelope(LMC.capacity, 300, 2)
     true_outputs = outputs_for_loads(truth, held)
     reading_noise_mv = noise_mv_for_load_sigma(truth, LMC.capacity, noise)
-    schedule = design_points(LMC, envelope(LMC.capacity, 400, 1), 12).schedule if designed else None
+    schedule = design_points(LMC, envelope(LMC.capacity, 400, 1), 12).schedule if designed \
+        else None
     errors, predicted = [], []
     for seed in range(10):
         calibration = refit(schedule, 100 + seed, noise)
@@ -155,9 +157,11 @@ def test_a_designed_schedule_reads_held_out_tunnel_loads_within_0_03_pct_fs(caps
             rows[label].append(worst_read_error(calibration, held, true_outputs))
     median = {label: float(np.median(v)) for label, v in rows.items()}
     with capsys.disabled():
-        print('\nworst |error| at 300 held-out sting loads, % FS, 6 seeds (σ 0.025 % FS campaigns):')
+        print('\nworst |error| at 300 held-out sting loads, % FS, 6 seeds '
+              '(σ 0.025 % FS campaigns):')
         for label, values in rows.items():
-            print(f'  {label:16s} median {median[label]:.4f}  ' + ' '.join(f'{v:.4f}' for v in values))
+            print(f'  {label:16s} median {median[label]:.4f}  '
+                  + ' '.join(f'{v:.4f}' for v in values))
     memo, designed, random = median.values()
     assert memo > 0.2                      # the problem the issue measured (0.42 % FS)
     assert designed <= 0.03
@@ -182,8 +186,8 @@ def test_the_design_keeps_the_schedule_and_brackets_added_blocks_with_zero_point
     assert np.all(np.abs(schedule.loads[added]) <= LMC.capacity)
     assert np.all(np.abs(total) <= LMC.capacity)
     summary = design.summary()
-    assert all(summary['predicted_u_pct_fs']['after'][c] < summary['predicted_u_pct_fs']['before'][c]
-               for c in LMC.components)
+    predicted = summary['predicted_u_pct_fs']
+    assert all(predicted['after'][c] < predicted['before'][c] for c in LMC.components)
 
 
 # --- the commands -------------------------------------------------------------------------------
@@ -201,10 +205,11 @@ def test_design_and_coverage_commands_write_the_interface_files(tmp_path, capsys
     assert len(schedule) > len(LMC.schedule)
 
     # the campaign on it: simulate --schedule writes the bag, refit --schedule fits it
-    assert main(['simulate', '--balance', 'lmc6522', '--schedule', str(tmp_path / 'd' / 'schedule.csv'),
+    schedule_file = str(tmp_path / 'd' / 'schedule.csv')
+    assert main(['simulate', '--balance', 'lmc6522', '--schedule', schedule_file,
                  '--no-diagnosis', '--bag', str(tmp_path / 'bag')]) == 0
     assert main(['refit', str(tmp_path / 'bag'), '--balance', 'lmc6522', '--schedule',
-                 str(tmp_path / 'd' / 'schedule.csv'), '--no-diagnosis', '--out', str(tmp_path / 'r')]) == 0
+                 schedule_file, '--no-diagnosis', '--out', str(tmp_path / 'r')]) == 0
     report = json.loads((tmp_path / 'r' / 'report.json').read_text())
     assert report['points'] == len(schedule)
     calibration = load_calibration(tmp_path / 'r' / 'calibration.yaml')
@@ -256,8 +261,8 @@ def test_coverage_reads_the_wrenches_of_a_bag_in_tunnel_axes(tmp_path, capsys):
     from_csv = json.loads((tmp_path / 'c' / 'coverage.json').read_text())
     assert from_bag['points'] == 40
     for c in LMC.components:
-        assert from_bag['predicted_u_pct_fs'][c] == pytest.approx(from_csv['predicted_u_pct_fs'][c],
-                                                                  rel=1e-6)
+        assert from_bag['predicted_u_pct_fs'][c] == pytest.approx(
+            from_csv['predicted_u_pct_fs'][c], rel=1e-6)
 
 
 @pytest.mark.parametrize('case', ['beyond capacity', 'header only', 'empty file', 'no points',
@@ -280,8 +285,9 @@ def test_design_refuses_with_one_line_and_writes_nothing(tmp_path, capsys, case)
     err = capsys.readouterr().err.strip()
     assert status == 2
     assert len(err.splitlines()) == 1 and 'Traceback' not in err
-    expected = {'beyond capacity': 'row 8: FZ', 'header only': 'no loads', 'empty file': 'no loads',
-                'no points': 'at least 1', 'negative points': 'at least 1'}[case]
+    expected = {'beyond capacity': 'row 8: FZ', 'header only': 'no loads',
+                'empty file': 'no loads', 'no points': 'at least 1',
+                'negative points': 'at least 1'}[case]
     assert expected in err
     assert not (tmp_path / 'd' / 'schedule.csv').exists()
 
@@ -317,7 +323,8 @@ def test_reduce_report_carries_the_coverage_of_its_run(tmp_path):
     section = (out / 'report.md').read_text().split('## Coverage of this run')[1].split('\n## ')[0]
     from balance_calib.aero.bag_io import read_run
     samples = read_run([tmp_path / 'run'])
-    expected = run_coverage(load_calibration(tmp_path / 'cal.yaml'), outputs_mv=samples.raw_mv).summary()
+    calibration = load_calibration(tmp_path / 'cal.yaml')
+    expected = run_coverage(calibration, outputs_mv=samples.raw_mv).summary()
     assert f'{len(samples.raw_mv)} loads, model cubic' in section
     assert f'{expected["predicted_u_pct_fs"]["FZ"]:.4f}' in section.split('predicted u RMS')[1]
     assert (out / 'coverage.png').exists()

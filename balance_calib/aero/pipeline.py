@@ -100,7 +100,8 @@ def reduce_bags(bags: Sequence[str | Path], calibration_path: str, model_path: s
                           f'within {max_input_age_s} s before it')
     sigma, sigma_source = calibration_sigma(calibration, parsed)
     runs = []
-    raw = samples.raw_mv if electrical_zero_mv is None else samples.raw_mv - np.asarray(electrical_zero_mv, float)
+    raw = samples.raw_mv if electrical_zero_mv is None \
+        else samples.raw_mv - np.asarray(electrical_zero_mv, float)
     coverage = run_coverage(calibration, outputs_mv=raw, model=main_name) \
         if has_uncertainty(calibration, main_name) else None
     for name in names:

@@ -161,12 +161,12 @@ def coverage_section(reduction: Reduction) -> list[str]:
     from ..coverage.run import summary_table
     coverage = reduction.coverage
     if coverage is None:
-        return [f'Not available: the calibration\'s {reduction.main.name} model carries no coefficient '
-                f'covariance (the memo\'s published matrices); refit it to have one.']
-    return ['Predicted standard uncertainty (k = 1) of the calibrated load at every sample, from the '
-            'coefficient covariance (as `/balance/wrench_uncertainty`), balance axes, and the share of '
-            'the samples outside the support of the calibration\'s schedule (`coverage` command, '
-            'interfaces.md); figure [coverage.png](coverage.png).', '',
+        return [f'Not available: the calibration\'s {reduction.main.name} model carries no '
+                f'coefficient covariance (the memo\'s published matrices); refit it to have one.']
+    return ['Predicted standard uncertainty (k = 1) of the calibrated load at every sample, from '
+            'the coefficient covariance (as `/balance/wrench_uncertainty`), balance axes, and the '
+            'share of the samples outside the support of the calibration\'s schedule (`coverage` '
+            'command, interfaces.md); figure [coverage.png](coverage.png).', '',
             '```', summary_table(coverage.summary(), coverage.components), '```']
 
 

@@ -28,9 +28,9 @@ def register(subparsers) -> None:
     parser.add_argument('--active', metavar='CAL.yaml', default=None,
                         help='the calibration in use: the new sensitivities must stay near its ones')
     parser.add_argument('--schedule', metavar='FILE', default=None,
-                        help='the load schedule the campaign ran (layout of the Appendix A/B sheets, e.g. from '
-                             'balance-calib design) when it is not the balance config\'s own; the gates judge '
-                             'the campaign against it')
+                        help='the load schedule the campaign ran (layout of the Appendix A/B '
+                             'sheets, e.g. from balance-calib design) when it is not the balance '
+                             'config\'s own; the gates judge the campaign against it')
     parser.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                         help='progress lines on stderr (default: when stderr is a terminal)')
     parser.set_defaults(func=run)

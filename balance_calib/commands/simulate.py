@@ -28,8 +28,9 @@ def register(subparsers) -> None:
                         help='do not examine the residuals for effects the base model lacks')
     parser.add_argument('--matrix', action='store_true', help='print the fitted cubic matrix (memo layout)')
     parser.add_argument('--schedule', metavar='FILE',
-                        help='run the campaign on this load schedule (layout of the Appendix A/B sheets, e.g. '
-                             'from balance-calib design) instead of the balance config\'s; needs one --balance')
+                        help='run the campaign on this load schedule (layout of the Appendix A/B '
+                             'sheets, e.g. from balance-calib design) instead of the balance '
+                             'config\'s; needs one --balance')
     parser.set_defaults(func=run)
 
 

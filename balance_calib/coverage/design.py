@@ -192,7 +192,8 @@ def _rows(model: BalanceModel, total_loads: np.ndarray) -> np.ndarray:
 
 def design_points(config: BalanceConfig, envelope_loads, points: int, *,
                   model: BalanceModel | None = None, sigma=None,
-                  combined_limit: float = DEFAULT_COMBINED_LIMIT, where: str = 'envelope') -> Design:
+                  combined_limit: float = DEFAULT_COMBINED_LIMIT,
+                  where: str = 'envelope') -> Design:
     """Add at most `points` combined load points to the balance's schedule for this envelope.
 
     Parameters
@@ -229,7 +230,8 @@ def design_points(config: BalanceConfig, envelope_loads, points: int, *,
 
     thinned = envelope
     if len(thinned) > MAX_CANDIDATES // len(STRETCH):
-        thinned = thinned[np.linspace(0, len(thinned) - 1, MAX_CANDIDATES // len(STRETCH)).astype(int)]
+        keep = np.linspace(0, len(thinned) - 1, MAX_CANDIDATES // len(STRETCH)).astype(int)
+        thinned = thinned[keep]
     candidates = np.vstack([thinned * s for s in STRETCH])
     candidates = candidates[rig_loading(config, candidates, combined_limit)[0]]
     if len(candidates) == 0:
@@ -249,7 +251,8 @@ def design_points(config: BalanceConfig, envelope_loads, points: int, *,
     loaded = ~np.all(schedule.loads[added:] == 0.0, axis=1)
     before = predicted_uncertainty(model, base_rows, sigma, envelope)
     after = predicted_uncertainty(model, _rows(model, total), sigma, envelope)
-    return Design(schedule, total[added:][loaded], before, after, tuple(config.components), capacity)
+    return Design(schedule, total[added:][loaded], before, after, tuple(config.components),
+                  capacity)
 
 
 def predicted_uncertainty(model: BalanceModel, point_rows: np.ndarray, sigma, loads) -> np.ndarray:

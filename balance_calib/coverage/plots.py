@@ -11,7 +11,8 @@ from matplotlib.figure import Figure
 from .run import RunCoverage
 
 
-def coverage_figure(coverage: RunCoverage, path: str | Path, time_s: np.ndarray | None = None) -> Path:
+def coverage_figure(coverage: RunCoverage, path: str | Path,
+                    time_s: np.ndarray | None = None) -> Path:
     """Six panels, u in % FS against the sample (or time) along the run."""
     n = len(coverage.components)
     x = np.arange(len(coverage.loads)) if time_s is None else np.asarray(time_s, float)
@@ -26,12 +27,14 @@ def coverage_figure(coverage: RunCoverage, path: str | Path, time_s: np.ndarray 
                       label=f'outside the schedule\'s support ({100 * out.mean():.0f} %)')
         sigma = coverage.sigma_pct_fs.get(component)
         if sigma is not None:
-            axes.axhline(float(sigma), color='0.3', linestyle='--', linewidth=0.8, label=f'σ {float(sigma):.3g}')
+            axes.axhline(float(sigma), color='0.3', linestyle='--', linewidth=0.8,
+                         label=f'σ {float(sigma):.3g}')
         axes.set_ylabel(f'{component}\n% FS')
         axes.set_ylim(bottom=0.0)
         axes.legend(loc='upper right', fontsize=7, frameon=False)
     np.atleast_1d(axes_list)[-1].set_xlabel('time, s' if time_s is not None else 'load of the run')
-    figure.suptitle(f'Predicted standard uncertainty (k = 1) along the run, model {coverage.model_name}',
+    figure.suptitle('Predicted standard uncertainty (k = 1) along the run, '
+                    f'model {coverage.model_name}',
                     fontsize=10)
     figure.tight_layout()
     path = Path(path)

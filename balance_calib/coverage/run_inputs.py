@@ -1,5 +1,5 @@
-"""A run's loads from the files `coverage` reads: a CSV of loads, or the /balance/wrench a calibrator
-published into bags (tunnel axes, turned back into balance axes by the installation)."""
+"""A run's loads from the files `coverage` reads: a CSV of loads, or the /balance/wrench a
+calibrator published into bags (tunnel axes, turned back into balance axes by the installation)."""
 from __future__ import annotations
 
 import csv
@@ -29,7 +29,8 @@ def read_loads_csv(path: str | Path, components: Sequence[str]) -> np.ndarray:
     try:
         text = path.read_text(encoding='utf-8-sig')
     except (OSError, UnicodeDecodeError) as err:
-        raise RunInputError(f'{path}: cannot read the loads: {getattr(err, "strerror", None) or err}') from None
+        reason = getattr(err, 'strerror', None) or err
+        raise RunInputError(f'{path}: cannot read the loads: {reason}') from None
     reader = csv.reader(io.StringIO(text))
     header = [h.strip() for h in next(reader, [])]
     if not header:
@@ -46,7 +47,8 @@ def read_loads_csv(path: str | Path, components: Sequence[str]) -> np.ndarray:
         try:
             values = [float(record[i]) for i in columns]
         except (ValueError, IndexError):
-            raise RunInputError(f'{path}: row {number}: a load is missing or not a number') from None
+            raise RunInputError(f'{path}: row {number}: a load is missing or not a number') \
+                from None
         if not all(math.isfinite(v) for v in values):
             raise RunInputError(f'{path}: row {number}: loads must be finite numbers')
         rows.append(values)
@@ -57,14 +59,15 @@ def read_loads_csv(path: str | Path, components: Sequence[str]) -> np.ndarray:
 
 def read_wrench_bags(paths: Sequence[str | Path], installation: Installation,
                      topic: str = WRENCH_TOPIC) -> tuple[np.ndarray, np.ndarray]:
-    """(S,) stamps in s from the first sample and (S, 6) balance-axis loads of the wrenches in the bags.
+    """(S,) stamps in s from the first sample and (S, 6) balance-axis loads of the wrenches in
+    the bags.
 
     BagError (from bags/reader.py) names the files when the topic has no messages. Samples that are
     not finite are kept as NaN rows (their u is not computed and they are counted)."""
     unused = '/balance_calib/coverage/unused'
-    data = read_bags([Path(p) for p in paths],
-                     topics=TopicNames(raw=topic, applied_load=unused + '_a', gravity=unused + '_g',
-                                       temperature=unused + '_t'), required=('raw',))
+    topics = TopicNames(raw=topic, applied_load=unused + '_a', gravity=unused + '_g',
+                        temperature=unused + '_t')
+    data = read_bags([Path(p) for p in paths], topics=topics, required=('raw',))
     order = np.argsort(data.raw.stamps_ns, kind='stable')
     stamps = data.raw.stamps_ns[order]
     loads = installation.from_tunnel(np.asarray(data.raw.values, dtype=float)[order])

@@ -68,8 +68,9 @@ PARAMETERS = {                       # name: default (the type of the default is
     'physical_seconds_per_point': 90.0,   # calibration: the campaign's temperature and drift follow
                                           # a real one of this many seconds a point, however fast it plays
     'points': '',                    # e.g. '1-60,100' (point numbers as printed); '' = all
-    'schedule_file': '',             # calibration: a load schedule CSV (layout of the Appendix A/B sheets,
-                                     # e.g. from balance-calib design) instead of the config's; '' = the config's
+    'schedule_file': '',             # calibration: a load schedule CSV (layout of the
+                                     # Appendix A/B sheets, e.g. from balance-calib design);
+                                     # '' = the config's
     'speed': 1.0,                    # simulated (or recorded) seconds per real second
     'bag': '',                       # replay: bag directory or .mcap; several separated by commas
     'profile_csv': '',               # wind_on: time_s,FX,FY,FZ,MX,MY,MZ (balance axes); '' = α sweep

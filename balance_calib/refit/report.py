@@ -88,12 +88,14 @@ def build_calibration(config, reduction, fits, base_model, diagnosis, sources: S
 
 
 def _support(config, reduction, base) -> dict:
-    """The schedule's support (coverage/support.py) in the base model's terms, for calibration.yaml."""
+    """The schedule's support (coverage/support.py) in the base model's terms, for
+    calibration.yaml."""
     from ..coverage.support import support_of_points
     from ..model.uncertainty import covariance_and_sigma
     covariance, _ = covariance_and_sigma(base)
-    return support_of_points(reduction.corrected.loads, base.design(reduction.corrected.bridge_outputs_mv),
-                             covariance, config.capacity, config.components, base.name).to_dict()
+    corrected = reduction.corrected
+    return support_of_points(corrected.loads, base.design(corrected.bridge_outputs_mv), covariance,
+                             config.capacity, config.components, base.name).to_dict()
 
 
 def build_report(config, points, reduction, fits, base_model, diagnosis, cut, sources) -> dict:
