@@ -350,3 +350,19 @@ def test_reduce_report_carries_the_coverage_of_its_run(tmp_path):
     assert main(['reduce', str(tmp_path / 'run'), '--calibration', 'lmc6522',
                  '--model', 'euler_replica_lmc6522', '--out', str(tmp_path / 'memo')]) == 0
     assert 'carries no coefficient covariance' in (tmp_path / 'memo' / 'report.md').read_text()
+
+
+def test_simulate_and_refit_refuse_a_bad_schedule_with_one_line(tmp_path, capsys):
+    bad = tmp_path / 'schedule.csv'
+    bad.write_text('point,executed,Ig,FX_kgf,FY_kgf,FZ_kgf,MX_kgfm,MY_kgfm,MZ_kgfm,paren_cols\n'
+                   '1,1,2,0,0,0,0,0,0,\n2,1,2,150,0,0,0,0,0,\n')      # 150 kgf: beyond 980 N
+    cases = [(['simulate', '--schedule', str(bad)], 'exactly one --balance'),
+             (['simulate', '--balance', 'lmc6522', '--schedule', str(bad)],
+              f'{bad}: point 2: FX 1471 beyond the capacity 980'),
+             (['refit', str(tmp_path / 'no-bag'), '--balance', 'lmc6522', '--schedule', str(bad),
+               '--out', str(tmp_path / 'r')], f'{bad}: point 2: FX')]
+    for argv, expected in cases:
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and expected in err, err
+    assert not (tmp_path / 'r').exists()
