@@ -99,18 +99,17 @@ def schedule_csv_text(schedule: LoadSchedule) -> str:
     return buffer.getvalue()
 
 
-def schedule_for(config, path: str | Path) -> LoadSchedule:
+def schedule_for(config, path: str | Path, capacity_margin: float) -> LoadSchedule:
     """The schedule in a CSV file, checked against the balance it is to run on: every I_g one the
-    config has a gravity direction for, every applied load within the balance's capacity and the
-    margin the refit's capacity gate allows (refit/gates.py)."""
+    config has a gravity direction for, every applied load within the balance's capacity plus
+    capacity_margin (a fraction: the refit's capacity gate's, refit/gates.acceptance_limits)."""
     schedule = read_schedule_csv(path)
     unknown = sorted(set(int(i) for i in schedule.orientation) - set(config.gravity_directions))
     if unknown:
         raise ConfigError(f'{path}: I_g {", ".join(map(str, unknown))} not among the '
                           f'orientations of '
                           f'{config.path or config.name} (gravity_directions)')
-    from .refit.gates import acceptance_limits     # the capacity gate's margin: one source
-    margin = acceptance_limits(config).capacity_margin
+    margin = float(capacity_margin)
     over = np.abs(schedule.loads) > np.asarray(config.capacity, float) * (1 + margin)
     if over.any():
         row, k = np.argwhere(over)[0]

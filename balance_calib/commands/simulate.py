@@ -40,6 +40,7 @@ def run(args) -> int:
     from ..cli import CommandError
     from ..config import ConfigError, load_balance_config
     from ..refit.pipeline import RefitError, calibrate_points, campaign_points, summary_line
+    from ..refit.gates import acceptance_limits
     from ..schedule_file import schedule_for
     from ..simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
     from ..simulation.effects import parse_effects
@@ -54,7 +55,8 @@ def run(args) -> int:
         try:
             config = load_balance_config(name)
             if args.schedule:     # the campaign's schedule is the one the gates judge it against
-                config = replace(config, schedule=schedule_for(config, args.schedule))
+                margin = acceptance_limits(config).capacity_margin   # the capacity gate's
+                config = replace(config, schedule=schedule_for(config, args.schedule, margin))
         except ConfigError as err:
             raise CommandError(str(err)) from None
         settings = SimulationSettings(samples_per_point=args.samples_per_point, seed=args.seed,

@@ -46,6 +46,7 @@ from balance_calib.bags.errors import BagError
 from balance_calib.config import ConfigError, load_balance_config
 from balance_calib.live import timeline as tl
 from balance_calib.live.replay import read_recorded_messages
+from balance_calib.refit.gates import acceptance_limits
 from balance_calib.schedule_file import schedule_for
 from balance_calib.aero.model_file import load_model
 from balance_calib.live.wind_on import aero_run_profile, aoa_sweep_profile, csv_profile, wind_on_outputs
@@ -160,7 +161,9 @@ class BridgePublisher(Node):
     def _calibration(self):
         config, truth, noise = self._balance()
         schedule_file = str(self._settings['schedule_file'])
-        schedule = schedule_for(config, schedule_file) if schedule_file else config.schedule
+        schedule = config.schedule
+        if schedule_file:     # within capacity as the refit's capacity gate will judge it
+            schedule = schedule_for(config, schedule_file, acceptance_limits(config).capacity_margin)
         schedule = tl.select_points(schedule, self._settings['points'])
         effects = parse_effects(self._settings['effects'])
         rate, duration, transition = float(self._settings['rate_hz']), float(self._settings['point_duration_s']), \

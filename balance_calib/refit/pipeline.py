@@ -243,7 +243,9 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
         config = load_balance_config(balance)
         if schedule is not None:
             _require_regular_file(schedule, 'schedule')
-            config = replace(config, schedule=schedule_for(config, schedule))
+            from .gates import acceptance_limits
+            margin = acceptance_limits(config, model).capacity_margin
+            config = replace(config, schedule=schedule_for(config, schedule, margin))
     except ConfigError as err:
         raise RefitError(str(err)) from None
     active = active_calibration
