@@ -30,10 +30,10 @@ DATA = Path(__file__).resolve().parents[2] / 'shared' / 'data'
 ISSUE_SIGMA_PCT_FS = 0.025        # issue 22's "clean campaign": its calibration quotes 0.025 % FS
 
 
-def refit(schedule, seed, noise):
-    campaign = simulate_campaign(LMC, schedule=schedule,
+def refit(schedule, seed, noise, config=LMC):
+    campaign = simulate_campaign(config, schedule=schedule,
                                  settings=SimulationSettings(seed=seed, noise_sigma_pct_fs=noise))
-    return calibrate_points(campaign_points(campaign), LMC, diagnose=False).calibration
+    return calibrate_points(campaign_points(campaign), config, diagnose=False).calibration
 
 
 def write_loads(path, loads):
@@ -103,28 +103,31 @@ def test_coverage_u_is_the_live_nodes_wrench_uncertainty_at_the_same_outputs():
 
 
 @pytest.mark.parametrize('designed', [False, True], ids=['memo schedule', 'designed schedule'])
-def test_predicted_u_is_honest_at_envelope_loads(designed, capsys):
+@pytest.mark.parametrize('balance', ['lmc6522', 'b660h'])
+def test_predicted_u_is_honest_at_envelope_loads(balance, designed, capsys):
     """RMS error (truth load vs the calibration's reading of the truth outputs + reading noise) at
     held-out envelope loads, over seeds, is 0.5-2x the RMS predicted u of each component."""
-    noise = table17_noise(LMC)
-    truth = LMC.matrices['cubic'].without_constant()
-    held = envelope(LMC.capacity, 300, 2)
+    config = load_balance_config(balance)
+    capacity = config.capacity
+    noise = table17_noise(config)
+    truth = config.matrices['cubic'].without_constant()
+    held = envelope(capacity, 300, 2)
     true_outputs = outputs_for_loads(truth, held)
-    reading_noise_mv = noise_mv_for_load_sigma(truth, LMC.capacity, noise)
-    schedule = design_points(LMC, envelope(LMC.capacity, 400, 1), 12).schedule if designed \
+    reading_noise_mv = noise_mv_for_load_sigma(truth, capacity, noise)
+    schedule = design_points(config, envelope(capacity, 400, 1), 12).schedule if designed \
         else None
     errors, predicted = [], []
     for seed in range(10):
-        calibration = refit(schedule, 100 + seed, noise)
+        calibration = refit(schedule, 100 + seed, noise, config)
         rng = np.random.default_rng(seed)
         read = activate(calibration).model.loads(true_outputs + rng.normal(size=true_outputs.shape)
                                                  * reading_noise_mv)
         errors.append(read - held)
         predicted.append(run_coverage(calibration, held).uncertainty)
-    rms_error = np.sqrt(np.mean(np.concatenate(errors) ** 2, axis=0)) / LMC.capacity * 100
-    rms_u = np.sqrt(np.mean(np.concatenate(predicted) ** 2, axis=0)) / LMC.capacity * 100
+    rms_error = np.sqrt(np.mean(np.concatenate(errors) ** 2, axis=0)) / capacity * 100
+    rms_u = np.sqrt(np.mean(np.concatenate(predicted) ** 2, axis=0)) / capacity * 100
     with capsys.disabled():
-        print(f'\n{"designed" if designed else "memo"} schedule, % FS: RMS error '
+        print(f'\n{config.name}, {"designed" if designed else "memo"} schedule, % FS: RMS error '
               f'{np.round(rms_error, 4)}, RMS predicted u {np.round(rms_u, 4)}, ratio '
               f'{np.round(rms_error / rms_u, 2)}')
     assert np.all(rms_error / rms_u > 0.5) and np.all(rms_error / rms_u < 2.0)
