@@ -246,12 +246,12 @@ def design_points(config: BalanceConfig, envelope_loads, points: int, *,
     chosen = _exchange(_rows(model, candidates) / scales, base_inverse, weight, int(points))
 
     schedule = schedule_with(config, candidates[chosen], combined_limit)
-    added = len(config.schedule)
+    base_points = len(config.schedule)
     total = schedule_total_loads(config, schedule)
-    loaded = ~np.all(schedule.loads[added:] == 0.0, axis=1)
+    loaded = ~np.all(schedule.loads[base_points:] == 0.0, axis=1)
     before = predicted_uncertainty(model, base_rows, sigma, envelope)
     after = predicted_uncertainty(model, _rows(model, total), sigma, envelope)
-    return Design(schedule, total[added:][loaded], before, after, tuple(config.components),
+    return Design(schedule, total[base_points:][loaded], before, after, tuple(config.components),
                   capacity)
 
 
