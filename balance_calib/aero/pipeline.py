@@ -12,6 +12,8 @@ from typing import Sequence
 import numpy as np
 
 from ..calibration_file import Calibration, load_calibration
+from ..coverage.run import RunCoverage, run_coverage
+from ..model.uncertainty import has_uncertainty
 from ..live.calibrator_core import activate, six_axis_loads
 from ..tunnel_axes import Installation, parse_installation
 from .bag_io import DEFAULT_MAX_INPUT_AGE_S, RunSamples, read_run
@@ -42,6 +44,8 @@ class Reduction:
     sigma_source: str
     main: ModelRun
     compared: tuple[ModelRun, ...]
+    coverage: RunCoverage | None = None   # predicted u of the main model at every sample; None:
+                                          # the calibration carries no coefficient covariance
 
     @property
     def runs(self) -> tuple[ModelRun, ...]:
@@ -96,12 +100,15 @@ def reduce_bags(bags: Sequence[str | Path], calibration_path: str, model_path: s
                           f'within {max_input_age_s} s before it')
     sigma, sigma_source = calibration_sigma(calibration, parsed)
     runs = []
+    raw = samples.raw_mv if electrical_zero_mv is None \
+        else samples.raw_mv - np.asarray(electrical_zero_mv, float)
+    coverage = run_coverage(calibration, outputs_mv=raw, model=main_name) \
+        if has_uncertainty(calibration, main_name) else None
     for name in names:
-        raw = samples.raw_mv if electrical_zero_mv is None else samples.raw_mv - np.asarray(electrical_zero_mv, float)
         readings = readings_for(calibration, name, parsed, raw)
         runs.append(ModelRun(name, reduce_run(readings, samples.support_attitude, samples.q_pa, model, settings, sigma)))
     if not runs[0].result.wind_on:
         raise ReduceError(f'{", ".join(map(str, bags))}: no held wind-on attitude found '
                           f'(q∞ ≥ {settings.wind_off_q_pa} Pa held for {settings.min_samples} samples or more)')
     return Reduction(samples, calibration, str(calibration_path), model, parsed, settings, sigma, sigma_source,
-                     runs[0], tuple(runs[1:]))
+                     runs[0], tuple(runs[1:]), coverage)

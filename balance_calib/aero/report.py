@@ -149,10 +149,25 @@ def report_markdown(reduction: Reduction, figures: list[str]) -> str:
             ratio = error / uncertainty
             lines.append(f'| {run.name} | ' + ' | '.join(
                 f'{np.nanmax(error[:, k]):.2e} ({np.nanmax(ratio[:, k]):.1f} u)' for k in range(len(COEFFICIENTS))) + ' |')
+    lines += ['', '## Coverage of this run by the calibration', ''] + coverage_section(reduction)
     lines += ['', '## Figures', ''] + [f'- [{f}]({f})' for f in figures] + ['']
     lines += ['Axes and signs: interfaces.md "Wind-tunnel data reduction"; body coefficients about the moment '
               'reference centre, C_D and C_L in wind axes; α and β are the deflection-corrected angles.', '']
     return '\n'.join(lines)
+
+
+def coverage_section(reduction: Reduction) -> list[str]:
+    """The `coverage` command's summary for every sample of the run (coverage/run.py)."""
+    from ..coverage.run import summary_table
+    coverage = reduction.coverage
+    if coverage is None:
+        return [f'Not available: the calibration\'s {reduction.main.name} model carries no '
+                f'coefficient covariance (the memo\'s published matrices); refit it to have one.']
+    return ['Predicted standard uncertainty (k = 1) of the calibrated load at every sample, from '
+            'the coefficient covariance (as `/balance/wrench_uncertainty`), balance axes, and the '
+            'share of the samples outside the support of the calibration\'s schedule (`coverage` '
+            'command, interfaces.md); figure [coverage.png](coverage.png).', '',
+            '```', summary_table(coverage.summary(), coverage.components), '```']
 
 
 def coefficient_figure(reduction: Reduction, coefficient: str, path: Path) -> Path:
@@ -204,6 +219,11 @@ def write_outputs(reduction: Reduction, out_dir: Path) -> list[Path]:
     with tempfile.TemporaryDirectory(dir=out_dir, prefix='.reduce-') as tmp:
         for coefficient, name in zip(COEFFICIENTS, names):
             coefficient_figure(reduction, coefficient, Path(tmp) / name)
+        if reduction.coverage is not None:
+            from ..coverage.plots import coverage_figure
+            names.append('coverage.png')
+            coverage_figure(reduction.coverage, Path(tmp) / names[-1],
+                            (reduction.samples.stamps_ns - reduction.samples.stamps_ns[0]) / 1e9)
         csv_text = coefficients_csv(reduction)
         report = report_markdown(reduction, names)
         for name in names:

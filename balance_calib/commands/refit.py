@@ -27,6 +27,10 @@ def register(subparsers) -> None:
                         help='read what is intact of damaged bags; the report says exactly what was lost')
     parser.add_argument('--active', metavar='CAL.yaml', default=None,
                         help='the calibration in use: the new sensitivities must stay near its ones')
+    parser.add_argument('--schedule', metavar='FILE', default=None,
+                        help='the load schedule the campaign ran (layout of the Appendix A/B '
+                             'sheets, e.g. from balance-calib design) when it is not the balance '
+                             'config\'s own; the gates judge the campaign against it')
     parser.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                         help='progress lines on stderr (default: when stderr is a terminal)')
     parser.set_defaults(func=run)
@@ -44,7 +48,7 @@ def run(args) -> int:
         result = run_refit(args.bags, args.balance, Path(args.out), model=args.model,
                            diagnose=not args.no_diagnosis, estimate_body=not args.declared_body,
                            progress=progress, force=args.force, salvage=args.salvage,
-                           active_calibration=args.active)
+                           active_calibration=args.active, schedule=args.schedule)
     except RefitError as err:
         raise CommandError(_one_line(str(err))) from None
     except OSError as err:  # the disk filled, a file vanished: still one line naming it

@@ -3,6 +3,7 @@ Table 17 (the memo's numbers beside ours) and the cubic matrix in the memo's lay
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,10 @@ def register(subparsers) -> None:
     parser.add_argument('--no-diagnosis', action='store_true',
                         help='do not examine the residuals for effects the base model lacks')
     parser.add_argument('--matrix', action='store_true', help='print the fitted cubic matrix (memo layout)')
+    parser.add_argument('--schedule', metavar='FILE',
+                        help='run the campaign on this load schedule (layout of the Appendix A/B '
+                             'sheets, e.g. from balance-calib design) instead of the balance '
+                             'config\'s; needs one --balance')
     parser.set_defaults(func=run)
 
 
@@ -35,6 +40,8 @@ def run(args) -> int:
     from ..cli import CommandError
     from ..config import ConfigError, load_balance_config
     from ..refit.pipeline import RefitError, calibrate_points, campaign_points, summary_line
+    from ..refit.gates import acceptance_limits
+    from ..schedule_file import schedule_for
     from ..simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
     from ..simulation.effects import parse_effects
 
@@ -42,16 +49,25 @@ def run(args) -> int:
         effects = parse_effects(args.effects)
     except ValueError as err:
         raise CommandError(str(err)) from None
+    if args.schedule and len(args.balance or []) != 1:
+        raise CommandError('--schedule runs on one balance: give exactly one --balance')
     for name in args.balance or ['lmc6522', 'b660h']:
         try:
             config = load_balance_config(name)
+            if args.schedule:     # the campaign's schedule is the one the gates judge it against
+                margin = acceptance_limits(config).capacity_margin   # the capacity gate's
+                config = replace(config, schedule=schedule_for(config, args.schedule, margin))
         except ConfigError as err:
             raise CommandError(str(err)) from None
         settings = SimulationSettings(samples_per_point=args.samples_per_point, seed=args.seed,
                                       noise_sigma_pct_fs=table17_noise(config),
                                       transition_samples=2 if args.bag else 0)
-        campaign = simulate_campaign(config, settings=settings, effects=effects)
+        try:
+            campaign = simulate_campaign(config, settings=settings, effects=effects)
+        except ArithmeticError as err:       # Newton's inverse: a load the truth model cannot give
+            raise CommandError(f'{args.schedule or config.name}: {err}') from None
         print(f'\n=== {config.name}: simulated campaign of {len(campaign.point)} points '
+              f'{"on " + str(args.schedule) + " " if args.schedule else ""}'
               f'(truth: memo cubic matrix; noise: Table 17 cubic row; effects: {", ".join(campaign.effects) or "none"})')
         try:
             result = calibrate_points(campaign_points(campaign), config, diagnose=not args.no_diagnosis)

@@ -1,7 +1,8 @@
 """bridge_publisher: a simulated balance (or a recorded bag) on /balance/raw, in real time.
 
 Modes (parameter `mode`):
-  calibration   plays the balance config's load schedule (Appendix A/B) like a real campaign:
+  calibration   plays the balance config's load schedule (Appendix A/B), or the one of parameter
+                `schedule_file`, like a real campaign:
                 /calibration/gravity when the body is rotated, /calibration/applied_load when a
                 point settles (all NaN while weights are changed), /balance/raw (mV) and
                 /balance/temperature (°C). Simulated by simulation.balance_sim.simulate_campaign.
@@ -45,6 +46,8 @@ from balance_calib.bags.errors import BagError
 from balance_calib.config import ConfigError, load_balance_config
 from balance_calib.live import timeline as tl
 from balance_calib.live.replay import read_recorded_messages
+from balance_calib.refit.gates import acceptance_limits
+from balance_calib.schedule_file import schedule_for
 from balance_calib.aero.model_file import load_model
 from balance_calib.live.wind_on import aero_run_profile, aoa_sweep_profile, csv_profile, wind_on_outputs
 from balance_calib.simulation.balance_sim import (noise_mv_for_load_sigma, paced_settings,
@@ -66,6 +69,9 @@ PARAMETERS = {                       # name: default (the type of the default is
     'physical_seconds_per_point': 90.0,   # calibration: the campaign's temperature and drift follow
                                           # a real one of this many seconds a point, however fast it plays
     'points': '',                    # e.g. '1-60,100' (point numbers as printed); '' = all
+    'schedule_file': '',             # calibration: a load schedule CSV (layout of the
+                                     # Appendix A/B sheets, e.g. from balance-calib design);
+                                     # '' = the config's
     'speed': 1.0,                    # simulated (or recorded) seconds per real second
     'bag': '',                       # replay: bag directory or .mcap; several separated by commas
     'profile_csv': '',               # wind_on: time_s,FX,FY,FZ,MX,MY,MZ (balance axes); '' = α sweep
@@ -154,7 +160,11 @@ class BridgePublisher(Node):
 
     def _calibration(self):
         config, truth, noise = self._balance()
-        schedule = tl.select_points(config.schedule, self._settings['points'])
+        schedule_file = str(self._settings['schedule_file'])
+        schedule = config.schedule
+        if schedule_file:     # within capacity as the refit's capacity gate will judge it
+            schedule = schedule_for(config, schedule_file, acceptance_limits(config).capacity_margin)
+        schedule = tl.select_points(schedule, self._settings['points'])
         effects = parse_effects(self._settings['effects'])
         rate, duration, transition = float(self._settings['rate_hz']), float(self._settings['point_duration_s']), \
             float(self._settings['transition_s'])

@@ -14,7 +14,7 @@ import os
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
@@ -27,6 +27,7 @@ from ..fit.crossval import press_residuals
 from ..fit.least_squares import FitResult, UnexcitedTermsError, fit_model
 from ..model.inverse import InverseDidNotConverge
 from ..model.tm663 import MODEL_ORDERS, tm663_terms
+from ..schedule_file import schedule_for
 from ..reduction import LoadPoints, Reduction, reduce_points, retare_with_model
 from ..zero_points import ZeroPointError
 from .load_points import CutSummary, LoadPointError, cut_load_points
@@ -215,14 +216,17 @@ def _run_diagnosis(reduction, config, base_model, base_fit, say, cut=None):
 def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str | Path, *,
               model: str = 'cubic', diagnose: bool = True, estimate_body: bool = True,
               progress: Progress | None = None, plots: bool = True, force: bool = False,
-              salvage: bool = False, active_calibration: Calibration | str | Path | None = None) -> RefitResult:
+              salvage: bool = False, active_calibration: Calibration | str | Path | None = None,
+              schedule: str | Path | None = None) -> RefitResult:
     """Refit from bags and write calibration.yaml, report.json, report.md and plots into out_dir.
 
     Every input error, integrity failure (bags/reader.py) and failed acceptance gate raises
     RefitError with one line naming the file; `out_dir` is checked before any work. force writes
     a calibration that failed a gate (marked in the report); salvage reads what is intact of a
     damaged bag and the report says what was lost; active_calibration (a Calibration or a file)
-    is the calibration in use, which the new one's sensitivities must stay near.
+    is the calibration in use, which the new one's sensitivities must stay near; schedule (a CSV in
+    the layout of ../data/*_schedule.csv) the schedule the campaign ran when it is not the balance
+    config's own: it replaces config.schedule, which the gates judge the campaign against.
     """
     from ..bags.errors import BagError
     from ..bags.reader import read_bags
@@ -237,6 +241,11 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
     _require_regular_file(balance, 'balance config')
     try:
         config = load_balance_config(balance)
+        if schedule is not None:
+            _require_regular_file(schedule, 'schedule')
+            from .gates import acceptance_limits
+            margin = acceptance_limits(config, model).capacity_margin
+            config = replace(config, schedule=schedule_for(config, schedule, margin))
     except ConfigError as err:
         raise RefitError(str(err)) from None
     active = active_calibration
