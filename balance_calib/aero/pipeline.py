@@ -5,7 +5,7 @@ and turned into the installation's tunnel axes as `balance_calibrator` does, the
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Sequence
 
@@ -17,7 +17,7 @@ from ..tunnel_axes import Installation, parse_installation
 from .bag_io import DEFAULT_MAX_INPUT_AGE_S, RunSamples, read_run
 from .held_points import HoldSettings
 from .model_file import ModelDescription, load_model
-from .run import FALLBACK_SIGMA_PCT_FS, RunResult, reduce_run, sigma_loads_tunnel
+from .run import FALLBACK_SIGMA_PCT_FS, RunResult, offset_warnings, reduce_run, sigma_loads_tunnel
 
 
 class ReduceError(ValueError):
@@ -99,7 +99,11 @@ def reduce_bags(bags: Sequence[str | Path], calibration_path: str, model_path: s
     for name in names:
         raw = samples.raw_mv if electrical_zero_mv is None else samples.raw_mv - np.asarray(electrical_zero_mv, float)
         readings = readings_for(calibration, name, parsed, raw)
-        runs.append(ModelRun(name, reduce_run(readings, samples.support_attitude, samples.q_pa, model, settings, sigma)))
+        result = reduce_run(readings, samples.support_attitude, samples.q_pa, model, settings,
+                            sigma)
+        capacity = parsed.to_tunnel(np.asarray(calibration.capacity, float))
+        extra = offset_warnings(result.tares, capacity, name, electrical_zero_mv is not None)
+        runs.append(ModelRun(name, replace(result, warnings=result.warnings + tuple(extra))))
     if not runs[0].result.wind_on:
         raise ReduceError(f'{", ".join(map(str, bags))}: no held wind-on attitude found '
                           f'(q∞ ≥ {settings.wind_off_q_pa} Pa held for {settings.min_samples} samples or more)')
