@@ -242,6 +242,7 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
     from ..bags.errors import BagError
     from ..bags.reader import read_bags
     from ..calibration_file import load_calibration
+    from ..simulation.campaign_bag import SIMULATION_TOPIC
     say = progress or (lambda message: None)
     started = time.monotonic()
     paths = [Path(p) for p in bag_paths]
@@ -273,7 +274,7 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
 
     try:
         bag = read_bags(paths, required=('raw', 'applied_load', 'gravity'), progress=bag_progress,
-                        salvage=salvage)
+                        salvage=salvage, extra_topics=(SIMULATION_TOPIC,))
     except BagError as err:
         raise RefitError(str(err)) from None
     for loss in bag.losses:
@@ -294,6 +295,10 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
     result.report['bag_integrity'] = {'salvaged': bool(salvage and bag.losses), 'lost': list(bag.losses),
                                       'messages_read': dict(bag.message_counts)}
     result.report['wall_time_s'] = round(time.monotonic() - started, 3)
+    simulated = bag.extra.get(SIMULATION_TOPIC)
+    if simulated is not None and len(simulated.messages) and 'record' in result.report:
+        # the stamps are a simulator's clock: the report must not date a campaign by them
+        result.report['record']['campaign']['clock'] = str(simulated.messages[0].data)
     say(f'writing calibration.yaml, report.json, report.md{" and plots" if plots else ""} into {out_dir}')
     out = write_outputs(result, out_dir, plots=plots, overwrite=overwrite)
     say(f'wrote {out}')
