@@ -161,32 +161,40 @@ def _zeroed_run_bag(path, electrical_zero_mv, **truth):
     from balance_calib.live.wind_on import wind_on_outputs
     from test_aero_core import CONFIG
     profile, _ = simulated_run()
-    raw = wind_on_outputs(CONFIG.matrices['cubic'], profile.loads_balance, electrical_zero_mv=electrical_zero_mv)
+    raw = wind_on_outputs(CONFIG.matrices['cubic'], profile.loads_balance,
+                          electrical_zero_mv=electrical_zero_mv)
     stamps = START_NS + np.round(profile.times_s * 1e9).astype(np.int64)
     write_run_bag(path, stamps, raw, profile.support_attitude, profile.q_pa, **truth)
     return profile
 
 
+def _reduce(bag, out, *extra):
+    return main(['reduce', str(bag), '--calibration', 'lmc6522', '--model',
+                 'euler_replica_lmc6522', '--out', str(out), *extra])
+
+
 @pytest.mark.filterwarnings('error::RuntimeWarning')
-def test_offsets_beyond_one_percent_of_capacity_are_a_warning_on_the_console_and_in_the_report(tmp_path, capsys):
+def test_offsets_beyond_one_percent_of_capacity_are_a_console_and_report_warning(tmp_path, capsys):
     from balance_calib.model.inverse import linear_part
     from test_aero_core import CONFIG
     _zeroed_run_bag(tmp_path / 'run', 0.04)
-    reduce = ['reduce', str(tmp_path / 'run'), '--calibration', 'lmc6522', '--model', 'euler_replica_lmc6522']
-    assert main(reduce + ['--out', str(tmp_path / 'out')]) == 0
+    assert _reduce(tmp_path / 'run', tmp_path / 'out') == 0
     console = capsys.readouterr().out
-    # 0.04 mV on every bridge through the linear part of the calibration (N per mV), F_Z of the
-    # balance upright is -F_Z of the tunnel (§10.2.1): about +313 N x -1; the sweep's offset takes it
+    # 0.04 mV on every bridge through the calibration's linear part (N per mV) is ~ +313 N of the
+    # balance's F_Z, -F_Z of the tunnel upright (§10.2.1); the wind-off sweep's offset takes it
     expected_fz = -(linear_part(CONFIG.matrices['cubic']) @ np.full(6, 0.04))[2]
     assert abs(expected_fz) / 9800 > 0.01
-    warning = next(line for line in console.splitlines() if line.startswith('warning: cubic: wind-off offsets'))
+    warning = next(line for line in console.splitlines()
+                   if line.startswith('warning: cubic: wind-off offsets'))
     value = float(warning.split('F_Z ')[1].split(' N')[0])
     assert value == pytest.approx(expected_fz, rel=0.02)
-    assert f'{100 * abs(value) / 9800:.1f} % of its rated load 9800 N' in warning and '--electrical-zero-mv' in warning
+    assert f'{100 * abs(value) / 9800:.1f} % of its rated load 9800 N' in warning
+    assert '--electrical-zero-mv' in warning
     report = (tmp_path / 'out' / 'report.md').read_text()
     assert warning[len('warning: '):] in report.split('## Warnings')[1]
     # the zero given: no offset beyond 1 %, no warning
-    assert main(reduce + ['--out', str(tmp_path / 'zeroed'), '--electrical-zero-mv', ','.join(['0.04'] * 6)]) == 0
+    zero = ','.join(['0.04'] * 6)
+    assert _reduce(tmp_path / 'run', tmp_path / 'zeroed', '--electrical-zero-mv', zero) == 0
     assert 'warning' not in capsys.readouterr().out
     assert '## Warnings\n\n- none' in (tmp_path / 'zeroed' / 'report.md').read_text()
 
@@ -194,20 +202,20 @@ def test_offsets_beyond_one_percent_of_capacity_are_a_warning_on_the_console_and
 @pytest.mark.filterwarnings('error::RuntimeWarning')
 def test_an_electrical_zero_below_one_percent_of_capacity_is_no_warning(tmp_path, capsys):
     _zeroed_run_bag(tmp_path / 'run', 0.004)          # ~31 N on F_Z: 0.3 % of 9800 N
-    assert main(['reduce', str(tmp_path / 'run'), '--calibration', 'lmc6522', '--model', 'euler_replica_lmc6522',
-                 '--out', str(tmp_path / 'out')]) == 0
+    assert _reduce(tmp_path / 'run', tmp_path / 'out') == 0
     assert 'warning' not in capsys.readouterr().out
 
 
 @pytest.mark.filterwarnings('error::RuntimeWarning')
 def test_a_truth_without_its_wind_axis_part_says_so_instead_of_nan(tmp_path, capsys):
-    profile, _ = simulated_run()                      # deterministic: the profile the bag is written from
-    _zeroed_run_bag(tmp_path / 'run', 0.0, truth_body=profile.body_coefficients)   # no /aero/truth_wind
-    assert main(['reduce', str(tmp_path / 'run'), '--calibration', 'lmc6522', '--model', 'euler_replica_lmc6522',
-                 '--out', str(tmp_path / 'out')]) == 0
+    profile, _ = simulated_run()              # deterministic: the profile the bag is written from
+    _zeroed_run_bag(tmp_path / 'run', 0.0, truth_body=profile.body_coefficients)  # no truth_wind
+    assert _reduce(tmp_path / 'run', tmp_path / 'out') == 0
     capsys.readouterr()
-    section = (tmp_path / 'out' / 'report.md').read_text().split('## Against the simulation')[1].split('\n## ')[0]
+    report = (tmp_path / 'out' / 'report.md').read_text()
+    section = report.split('## Against the simulation')[1].split('\n## ')[0]
     row = next(line for line in section.splitlines() if line.startswith('| cubic |'))
     cells = [c.strip() for c in row.strip('|').split('|')][1:]
     assert cells[6:] == ['no truth', 'no truth'] and all(' u)' in c for c in cells[:6]), row
-    assert 'nan' not in section.lower() and 'C_D, C_L (the bag has no /aero/truth_wind)' in section
+    assert 'nan' not in section.lower()
+    assert 'C_D, C_L (the bag has no /aero/truth_wind)' in section

@@ -25,18 +25,21 @@ def _error(tmp_path, text):
 
 
 def _line_of(text, needle, after=0):
-    return next(i + 1 for i, line in enumerate(text.splitlines()) if i + 1 > after and needle in line)
+    return next(i + 1 for i, line in enumerate(text.splitlines())
+                if i + 1 > after and needle in line)
 
 
 def test_a_typo_in_a_coefficient_names_its_line(tmp_path, text):
     models = _line_of(text, 'models:')
-    coefficients = _line_of(text, 'coefficients:', after=_line_of(text, '  quadratic:', after=models))
+    quadratic = _line_of(text, '  quadratic:', after=models)
+    coefficients = _line_of(text, 'coefficients:', after=quadratic)
     typo = _line_of(text, '- ', after=coefficients + 1)          # a number under FX:
     lines = text.splitlines()
     value = lines[typo - 1].split('- ')[1]
     lines[typo - 1] = lines[typo - 1].split('- ')[0] + f'- {value}x'
     message, path = _error(tmp_path, '\n'.join(lines) + '\n')
-    assert message.startswith(f'{path}, line {typo}: models.quadratic: ') and f"'{value}x'" in message
+    assert message.startswith(f'{path}, line {typo}: models.quadratic: ')
+    assert f"'{value}x'" in message
 
 
 def test_a_truncated_file_names_the_model_and_its_line(tmp_path, text):
@@ -51,7 +54,8 @@ def test_broken_yaml_names_the_line_of_the_problem(tmp_path, text):
     at = _line_of(text, 'capacity:') + 1
     lines[at - 1] = '  FX: [1, 2'
     message, path = _error(tmp_path, '\n'.join(lines) + '\n')
-    assert message.startswith(f'{path}, line {at + 1}: not valid YAML: ') and 'flow sequence' in message
+    assert message.startswith(f'{path}, line {at + 1}: not valid YAML: ')
+    assert 'flow sequence' in message
 
 
 def test_a_model_that_is_not_a_mapping(tmp_path, text, capsys):
@@ -59,9 +63,10 @@ def test_a_model_that_is_not_a_mapping(tmp_path, text, capsys):
     lines = text.splitlines()
     lines[cubic - 1] = '  cubic: 3'
     message, path = _error(tmp_path, '\n'.join(lines[:cubic]) + '\n')
-    assert message == f'{path}, line {cubic}: models.cubic: expected a mapping (form, terms, coefficients), not int 3'
+    assert message == (f'{path}, line {cubic}: models.cubic: expected a mapping (form, terms, '
+                       f'coefficients), not int 3')
     # as a command prints it: the file once
-    assert main(['reduce', str(tmp_path / 'none'), '--calibration', str(path), '--model', 'euler_replica',
-                 '--out', str(tmp_path / 'out')]) == 2
+    assert main(['reduce', str(tmp_path / 'none'), '--calibration', str(path), '--model',
+                 'euler_replica', '--out', str(tmp_path / 'out')]) == 2
     error = capsys.readouterr().err
     assert error.count(str(path)) == 1 and error.count('\n') == 1, error

@@ -283,7 +283,8 @@ def _without_markers(events, share, seed, *, component=None):
     return [e for i, e in enumerate(events) if i not in drop], len(drop)
 
 
-def test_a_campaign_that_lost_30_percent_of_its_points_is_refused_with_the_counts(clean, tmp_path, capsys):
+def test_a_campaign_that_lost_30_percent_of_its_points_is_refused_with_counts(clean, tmp_path,
+                                                                               capsys):
     from balance_calib.cli import main
     events, dropped = _without_markers(clean[1], 0.30, seed=1)
     expected = len(load_balance_config('lmc6522').schedule)
@@ -293,15 +294,16 @@ def test_a_campaign_that_lost_30_percent_of_its_points_is_refused_with_the_count
     error = capsys.readouterr().err.strip()
     assert status == 2 and '\n' not in error, error
     assert 'damaged.mcap' in error and 'acceptance gate schedule' in error
-    assert f'{expected - dropped} of the {expected} scheduled points found ({dropped} missing, 30 %' in error
+    found = expected - dropped
+    assert f'{found} of the {expected} scheduled points found ({dropped} missing, 30 %' in error
     assert 'lost coverage: FX' in error and '--force' in error
     assert not out.exists()
     # --force writes it, and the report keeps the counts
     result = _refit(tmp_path, events, force=True)
     gate = _gates(result)['schedule']
     assert not gate['passed'] and gate['missing'] == dropped and gate['expected'] == expected
-    assert gate['coverage']['FX']['expected'] == sum(1 for row in load_balance_config('lmc6522').schedule.loads
-                                                     if abs(row[0]) > 0)
+    loads_fx = load_balance_config('lmc6522').schedule.loads[:, 0]
+    assert gate['coverage']['FX']['expected'] == np.count_nonzero(loads_fx)
 
 
 def test_two_percent_lost_passes_with_a_warning_and_a_complete_campaign_without(clean, tmp_path):
@@ -310,18 +312,20 @@ def test_two_percent_lost_passes_with_a_warning_and_a_complete_campaign_without(
     result = _refit(tmp_path, events)
     gate = _gates(result)['schedule']
     assert gate['passed'] and gate['missing'] == dropped
-    assert any(f'{dropped} of the schedule\'s 328 points are missing' in w for w in result.report['warnings'])
+    warning = f'{dropped} of the schedule\'s 328 points are missing'
+    assert any(warning in w for w in result.report['warnings'])
     complete = _refit(tmp_path / 'complete', clean[1])
     assert _gates(complete)['schedule']['missing'] == 0
     assert not any('missing' in w for w in complete.report['warnings'])
 
 
-def test_a_component_that_lost_its_loads_is_named_although_few_points_are_missing(clean, tmp_path):
+def test_a_component_that_lost_its_loads_is_named_though_few_points_are_missing(clean, tmp_path):
     config = load_balance_config('lmc6522')
     mz = config.components.index('MZ')
     # 40 % of the points loading MZ lost: under 10 % of the campaign, beyond 20 % of MZ's coverage
     events, dropped = _without_markers(clean[1], 0.4, seed=3, component=mz)
-    expected_mz = _gates(_refit(tmp_path / 'full', clean[1]))['schedule']['coverage']['MZ']['expected']
+    full = _gates(_refit(tmp_path / 'full', clean[1]))['schedule']
+    expected_mz = full['coverage']['MZ']['expected']
     assert dropped / 328 < 0.10 and dropped == round(0.4 * expected_mz)
     result = _refit(tmp_path, events, force=True)
     gate = _gates(result)['schedule']
@@ -351,15 +355,16 @@ def test_no_runtime_warning_reaches_the_user_of_a_refit(clean, tmp_path):
     loads = _load_events(events)
     events[loads[40]].values[2] = -1e300                 # a flipped exponent bit in one weight
     bag = write_mcap(events, tmp_path / 'absurd.mcap')
-    done = subprocess.run([sys.executable, '-W', 'error', '-m', 'balance_calib.cli', 'refit', str(bag), '--balance',
-                           'lmc6522', '--out', str(tmp_path / 'out'), '--no-diagnosis'],
+    strict = [sys.executable, '-W', 'error', '-m', 'balance_calib.cli', 'refit', '--balance',
+              'lmc6522']
+    done = subprocess.run(strict + [str(bag), '--out', str(tmp_path / 'out'), '--no-diagnosis'],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 2 and done.stderr.count('\n') == 1, done.stderr
     assert 'FZ -1e+300 is beyond 1000x its rated load 9800' in done.stderr
     # and a clean campaign, damaged by 2 %, refits under -W error (a warning would be an error)
     damaged, _ = _without_markers(clean[1], 0.02, seed=4)
     bag = write_mcap(damaged, tmp_path / 'two_percent.mcap')
-    done = subprocess.run([sys.executable, '-W', 'error', '-m', 'balance_calib.cli', 'refit', str(bag), '--balance',
-                           'lmc6522', '--out', str(tmp_path / 'out2')], capture_output=True, text=True, timeout=600)
+    done = subprocess.run(strict + [str(bag), '--out', str(tmp_path / 'out2')],
+                          capture_output=True, text=True, timeout=600)
     assert done.returncode == 0 and done.stderr == '', done.stderr
     assert 'points are missing from the campaign' in done.stdout
