@@ -219,3 +219,22 @@ def test_a_truth_without_its_wind_axis_part_says_so_instead_of_nan(tmp_path, cap
     assert cells[6:] == ['no truth', 'no truth'] and all(' u)' in c for c in cells[:6]), row
     assert 'nan' not in section.lower()
     assert 'C_D, C_L (the bag has no /aero/truth_wind)' in section
+
+
+@pytest.mark.filterwarnings('error::RuntimeWarning')
+def test_a_raw_sample_of_minus_1e300_is_left_out_and_said_not_spread_as_nan(tmp_path, capsys):
+    profile, raw = simulated_run()                    # noise-free: a hold's samples are equal
+    stamps = START_NS + np.round(profile.times_s * 1e9).astype(np.int64)
+    write_run_bag(tmp_path / 'clean', stamps, raw, profile.support_attitude, profile.q_pa)
+    flipped = raw.copy()
+    flipped[500, 2] = -1e300                          # a flipped exponent bit in one F_Z sample
+    write_run_bag(tmp_path / 'run', stamps, flipped, profile.support_attitude, profile.q_pa)
+    assert _reduce(tmp_path / 'clean', tmp_path / 'clean_out') == 0
+    capsys.readouterr()
+    assert _reduce(tmp_path / 'run', tmp_path / 'out') == 0
+    console = capsys.readouterr().out
+    assert ('warning: 1 raw sample(s) with a bridge output beyond 1000x its rated output left out '
+            '(first: FZV -1e+300 mV)') in console
+    _, values = read_csv(tmp_path / 'out' / 'coefficients.csv')
+    _, clean = read_csv(tmp_path / 'clean_out' / 'coefficients.csv')
+    assert np.all(np.isfinite(values)) and np.allclose(values, clean, rtol=0, atol=1e-9)
