@@ -218,7 +218,9 @@ def _line_of_key(text: str, keys: list[str]) -> int | None:
     for key in keys:
         if not isinstance(node, yaml.MappingNode):
             return line
-        match = next(((k, v) for k, v in node.value if getattr(k, 'value', None) == key), None)
+        # the last of repeated keys: the one the loader keeps
+        match = next(((k, v) for k, v in reversed(node.value) if getattr(k, 'value', None) == key),
+                     None)
         if match is None:
             return line
         line, node = match[0].start_mark.line + 1, match[1]

@@ -70,3 +70,14 @@ def test_a_model_that_is_not_a_mapping(tmp_path, text, capsys):
                  'euler_replica', '--out', str(tmp_path / 'out')]) == 2
     error = capsys.readouterr().err
     assert error.count(str(path)) == 1 and error.count('\n') == 1, error
+
+
+def test_refit_names_a_broken_active_calibration_once(tmp_path, text, capsys):
+    cubic = _line_of(text, '  cubic:', after=_line_of(text, 'models:'))
+    path = tmp_path / 'active.yaml'
+    path.write_text('\n'.join(text.splitlines()[:cubic]) + '\n  cubic: 3\n')
+    assert main(['refit', str(tmp_path / 'none.mcap'), '--balance', 'lmc6522', '--out',
+                 str(tmp_path / 'out'), '--active', str(path)]) == 2
+    error = capsys.readouterr().err
+    assert error.count(str(path)) == 1 and error.count('\n') == 1, error
+    assert f'active calibration {path}, line {cubic + 1}: models.cubic:' in error

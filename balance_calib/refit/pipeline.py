@@ -260,8 +260,9 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
         _require_regular_file(active, 'active calibration')
         try:
             active = load_calibration(active)
-        except (ConfigError, OSError) as err:
-            raise RefitError(f'active calibration {active}: {err}') from None
+        except (ConfigError, OSError) as err:     # ConfigError names the file (and line) itself
+            text = str(err) if str(err).startswith(str(active)) else f'{active}: {err}'
+            raise RefitError(f'active calibration {text}') from None
     say(f'reading {len(paths)} bag(s)...')
 
     said = ['']
