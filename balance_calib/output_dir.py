@@ -174,8 +174,9 @@ def _alive(pid: int) -> bool:
 def install_outputs(staging: Path, out_dir: str | Path, *, overwrite: bool) -> Path:
     """Move the complete staging directory's files into out_dir; remove staging.
 
-    With `overwrite`, the earlier run's own outputs that this run did not write are removed
-    first (never other files: check_out_dir refused those). Files end 0644, a new DIR 0755.
+    With `overwrite`, when out_dir holds an earlier run's record and nothing but this tool's
+    outputs (check_out_dir refused anything else), the outputs this run did not write again are
+    removed first; otherwise nothing is removed. Files end 0644, a new DIR 0755.
     """
     out_dir = Path(out_dir)
     try:
@@ -189,10 +190,13 @@ def install_outputs(staging: Path, out_dir: str | Path, *, overwrite: bool) -> P
             pass
         out_dir.mkdir(parents=True, exist_ok=True)
         new = {p.name for p in staging.iterdir()}
-        if overwrite:
+        present = _names_in(out_dir)
+        earlier_run = any(n in present for n in CALIBRATION_RECORD)
+        if overwrite and earlier_run and all(is_own_output(n) for n in present):
+            # an earlier run's directory (a record, nothing but outputs): its files not written
+            # again go; a *.png beside a user's files without a record is not ours to judge
             for old in out_dir.iterdir():
-                stale = old.name not in new and is_own_output(old.name)
-                if stale and not old.is_dir():       # staging directories: make_staging's care
+                if old.name not in new and not old.is_dir():   # staging: make_staging's care
                     old.unlink()
         # calibration.yaml last: whoever watches it sees the report of the same run
         for item in sorted(staging.iterdir(), key=lambda p: p.name == 'calibration.yaml'):

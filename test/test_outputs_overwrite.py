@@ -76,8 +76,10 @@ def test_refit_into_a_directory_without_a_record_keeps_other_files(bag, tmp_path
     out = tmp_path / 'shared'
     out.mkdir()
     (out / 'notes.txt').write_text('kept')
-    assert _refit(bag, out) == 0
+    (out / 'photo.png').write_bytes(b'\x89PNG the crew\'s')      # a name like a plot's, not ours
+    assert _refit(bag, out, '--overwrite') == 0
     assert (out / 'notes.txt').read_text() == 'kept' and (out / 'calibration.yaml').exists()
+    assert (out / 'photo.png').read_bytes() == b'\x89PNG the crew\'s'
 
 
 def test_nothing_is_written_beside_the_balance_configs(bag, tmp_path, capsys):
