@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..calibration_file import write_text_atomically
+from .bag_io import TRUTH_WIND_TOPIC
 from .pipeline import Reduction
 
 COEFFICIENTS = ('CAF', 'CY', 'CN', 'Cl', 'Cm', 'Cn', 'CD', 'CL')
@@ -80,6 +81,20 @@ def truth_by_point(reduction: Reduction) -> np.ndarray | None:
     return np.array(rows)
 
 
+NO_TRUTH = 'no truth'
+
+
+def _largest_error(error: np.ndarray, ratio: np.ndarray) -> str:
+    """'largest error (largest ratio u)' over the finite entries of (R,) arrays; NO_TRUTH if
+    there are none."""
+    error, ratio = error[np.isfinite(error)], ratio[np.isfinite(ratio)]
+    if not error.size:
+        return NO_TRUTH
+    if not ratio.size:
+        return f'{error.max():.2e} (u unknown)'
+    return f'{error.max():.2e} ({ratio.max():.1f} u)'
+
+
 def _fmt(value: float, digits: int = 5) -> str:
     return 'NaN' if not np.isfinite(value) else f'{value:.{digits}f}'
 
@@ -144,11 +159,21 @@ def report_markdown(reduction: Reduction, figures: list[str]) -> str:
                   'Largest |reduced − true| over the α sweep, and in units of the point\'s uncertainty u:', '',
                   '| model | ' + ' | '.join(NICE[c] for c in COEFFICIENTS) + ' |',
                   '|---|' + '---:|' * len(COEFFICIENTS)]
+        absent = []
         for run in reduction.runs:
             error = np.abs(values[run.name] - truth)
-            ratio = error / uncertainty
-            lines.append(f'| {run.name} | ' + ' | '.join(
-                f'{np.nanmax(error[:, k]):.2e} ({np.nanmax(ratio[:, k]):.1f} u)' for k in range(len(COEFFICIENTS))) + ' |')
+            with np.errstate(divide='ignore', invalid='ignore'):
+                ratio = error / uncertainty
+            cells = [_largest_error(error[:, k], ratio[:, k]) for k in range(len(COEFFICIENTS))]
+            absent += [NICE[c] for c, cell in zip(COEFFICIENTS, cells)
+                       if cell == NO_TRUTH and NICE[c] not in absent]
+            lines.append(f'| {run.name} | ' + ' | '.join(cells) + ' |')
+        if absent:
+            wind_only = samples.truth_wind is None and set(absent) <= {NICE['CD'], NICE['CL']}
+            why = (f'the bag has no {TRUTH_WIND_TOPIC}' if wind_only
+                   else 'the truth or the reduced value is missing at every point')
+            lines += ['', f'{NO_TRUTH}: no point with both a reduced value and the truth for '
+                          f'{", ".join(absent)} ({why})']
     lines += ['', '## Coverage of this run by the calibration', ''] + coverage_section(reduction)
     lines += ['', '## Figures', ''] + [f'- [{f}]({f})' for f in figures] + ['']
     lines += ['Axes and signs: interfaces.md "Wind-tunnel data reduction"; body coefficients about the moment '
