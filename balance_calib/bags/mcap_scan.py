@@ -214,7 +214,7 @@ class _Reader:
         data_end = summary['summary_start'] if summary and summary['summary_start'] else size
         # a file still being written (its bag has no metadata.yaml yet) ends at the last record
         # flushed so far, maybe half-way through one: that end is where its writer is, not damage
-        open_end = False and summary is None and self.unfinished
+        open_end = summary is None and self.unfinished
         if summary is None and not open_end:
             problem = (f'{path}: truncated or damaged: no valid footer and summary at the end '
                        f'(file is {size} bytes); the messages it should hold cannot be counted')
