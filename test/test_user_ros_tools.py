@@ -94,16 +94,17 @@ def test_bag_info_counts_what_the_writer_wrote(tmp_path):
     assert f'Duration:          {(max(log_times) - min(log_times)) / 1e9:.3f}s' in info
 
 
-def _wait_for_service(domain, name, timeout=60.0):
+def _wait_for_service(domain, name, kind='Trigger', timeout=60.0):
     """Until `name` answers (the node is up): the lists after it must not grow any more."""
     from rclpy.context import Context
     import rclpy
+    from rcl_interfaces.srv import ListParameters
     from std_srvs.srv import Trigger
     context = Context()
     rclpy.init(context=context, domain_id=domain)
     try:
         node = rclpy.create_node('probe_wait', context=context)
-        client = node.create_client(Trigger, name)
+        client = node.create_client({'Trigger': Trigger, 'ListParameters': ListParameters}[kind], name)
         assert client.wait_for_service(timeout_sec=timeout), name
         node.destroy_node()
     finally:
@@ -129,7 +130,8 @@ def test_node_list_info_and_a_stable_service_list(tmp_path):
     try:
         # right after start: discovery of the two nodes' endpoints is under way
         listings = [ros(domain, 'service', 'list', '--timeout', 20)]
-        _wait_for_service(domain, '/balance_calibrator/refit')
+        _wait_for_service(domain, '/balance_calibrator/refit')       # both nodes are up
+        _wait_for_service(domain, '/balance_recorder/list_parameters', 'ListParameters')
         listings += [ros(domain, 'service', 'list', '--timeout', 20) for _ in range(3)]
         nodes = ros(domain, 'node', 'list', '--timeout', 20)
         info = ros(domain, 'node', 'info', '/balance_calibrator', '--timeout', 20)

@@ -40,8 +40,9 @@ import time
 from pathlib import Path
 
 DEFAULT_TIMEOUT_S = 10.0
-SETTLE_S = 0.0          # a listing unchanged this long is the graph as discovery has it
-MIN_LISTING_S = 0.0     # and it is looked at for at least this long
+SETTLE_S = 1.5          # a listing unchanged this long is the graph as discovery has it
+MIN_LISTING_S = 1.0     # and it is looked at for at least this long
+EMPTY_WAIT_S = 5.0      # an empty one this long (a loaded machine discovers slowly) before saying so
 
 
 class ToolError(Exception):
@@ -216,9 +217,10 @@ def _node_name(name: str) -> str:
 
 
 def settled(session, listing, timeout: float, *, settle_s: float = SETTLE_S,
-            min_s: float = MIN_LISTING_S):
-    """listing() once it has not changed for settle_s (looked at for at least min_s), or at the
-    timeout: DDS discovers a graph's endpoints one by one, so one early look shows only a part."""
+            min_s: float = MIN_LISTING_S, empty_s: float = EMPTY_WAIT_S):
+    """listing() once it has not changed for settle_s (looked at for at least min_s; while it is
+    empty, for at least empty_s), or at the timeout: DDS discovers the other participants and then
+    their endpoints one by one, so one early look shows only a part."""
     start = time.monotonic()
     last, changed = listing(), start
     while True:
@@ -227,7 +229,9 @@ def settled(session, listing, timeout: float, *, settle_s: float = SETTLE_S,
         current = listing()
         if current != last:
             last, changed = current, now
-        if (now - changed >= settle_s and now - start >= min_s) or now - start >= timeout:
+        looked = now - start
+        if looked >= timeout or (now - changed >= settle_s and looked >= min_s
+                                 and (last or looked >= empty_s)):
             return last
 
 
@@ -673,7 +677,7 @@ def main(argv=None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
-    except ZeroDivisionError:
+    except BrokenPipeError:
         # whoever read our output is gone (`ros topic echo ... | head`): nothing more to say, and
         # the interpreter must not fail again flushing stdout at exit
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
