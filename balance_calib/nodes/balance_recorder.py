@@ -8,7 +8,9 @@ Parameters:
 Each topic's type and its publishers' QoS come from the graph; topics without publishers yet are
 looked up again every half second. Messages are recorded as serialized bytes (raw subscriptions)
 through the pure BagWriter. SIGINT and SIGTERM both end the recording cleanly: the bag's MCAP
-summary and metadata.yaml are complete afterwards.
+summary and metadata.yaml are complete afterwards. While it records, what it received is put into
+the file every FLUSH_PERIOD_S (one chunk each), so a refit of the bag still being recorded reads it
+up to a second ago.
 """
 import importlib
 import signal
@@ -28,6 +30,7 @@ DEFAULT_TOPICS = ['/balance/raw', '/balance/temperature', '/calibration/applied_
                   '/balance/overload', '/diagnostics', '/model/attitude', '/tunnel/dynamic_pressure',
                   '/aero/coefficients', '/aero/wind_coefficients']
 DISCOVERY_PERIOD_S = 0.5
+FLUSH_PERIOD_S = 1.0  # the file holds what was received up to this long ago
 QUEUE_DEPTH = 1000  # a recorder would rather buffer than drop
 
 
@@ -80,7 +83,15 @@ class BalanceRecorder(Node):
         # spin() for a signal *before* it shuts the context down, so without a periodic wakeup
         # spin() could sleep through the shutdown until the next message.
         self.create_timer(DISCOVERY_PERIOD_S, self._discover)
+        self._flushed = 0
+        self.create_timer(FLUSH_PERIOD_S, self._flush)
         self._discover()
+
+    def _flush(self):
+        written = sum(self._writer.message_counts.values())
+        if self._writer.is_open and written != self._flushed:
+            self._writer.flush()
+            self._flushed = written
 
     def _discover(self):
         if not self._pending:
