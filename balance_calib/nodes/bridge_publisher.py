@@ -96,6 +96,8 @@ PARAMETERS = {                       # name: default (the type of the default is
     'wait_for_subscribers': 0,       # start only when /balance/raw has this many subscribers (with aero_model
                                      # /model/attitude and /tunnel/dynamic_pressure too) ...
     'start_delay_s': 0.5,            # ... and this long after, so their other topics are matched too
+    'wait_for_subscribers_timeout_s': 30.0,   # give up (exit status 1) after waiting this long for
+                                              # them, s; 0 = wait for ever
 }
 RAW_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 # timeline kinds of the physical wind-on run, after live/timeline.py's
@@ -132,8 +134,9 @@ class BridgePublisher(Node):
         self._start = None
         self._last_time_s = None
         self._stamp_ns = 0
-        self._waiting_logged = False
+        self._waiting_since = None
         self._ready_at = None
+        self.failure = ''                       # why the run gave up (then done completes too)
         tick_hz = min(max(float(self._settings['rate_hz']), 20.0), 250.0)
         self._timer = self.create_timer(1.0 / tick_hz, self._on_tick)
         self.get_logger().info(f'{self.mode}: {len(self._timeline)} events over '
@@ -319,10 +322,12 @@ class BridgePublisher(Node):
                       if k in self._outputs and self.mode == 'calibration']
             if wanted > 0 and raw is not None and (min(p.get_subscription_count() for p in gated) < wanted
                                                    or any(p.get_subscription_count() < 1 for p in events)):
-                if not self._waiting_logged:
-                    self.get_logger().info(f'waiting for {wanted} subscriber(s) on /balance/raw'
-                                           + (' and the attitude and dynamic pressure' if len(gated) > 1 else ''))
-                    self._waiting_logged = True
+                what = (f'{wanted} subscriber(s) on /balance/raw'
+                        + (' and the attitude and dynamic pressure' if len(gated) > 1 else ''))
+                if self._waiting_since is None:
+                    self.get_logger().info(f'waiting for {what}')
+                    self._waiting_since = now
+                self._give_up_if_waited_too_long(now, what, gated, events)
                 return
             self._ready_at = self._ready_at or now
             if (now - self._ready_at).nanoseconds * 1e-9 < float(self._settings['start_delay_s']):
@@ -335,6 +340,19 @@ class BridgePublisher(Node):
         self._cursor = end
         if self._cursor >= len(self._timeline):
             self._finish(now)
+
+    def _give_up_if_waited_too_long(self, now: Time, what: str, gated, events) -> None:
+        limit = float(self._settings['wait_for_subscribers_timeout_s'])
+        waited = (now - self._waiting_since).nanoseconds * 1e-9
+        if limit <= 0 or waited < limit:
+            return
+        seen = ', '.join(f'{p.topic_name} {p.get_subscription_count()}' for p in gated + events)
+        self.failure = (f'gave up after {limit:g} s waiting for {what} (subscribers seen: {seen}); '
+                        'start the subscribers first, or set wait_for_subscribers or '
+                        'wait_for_subscribers_timeout_s')
+        self._timer.cancel()
+        if not self.done.done():
+            self.done.set_result(False)
 
     def _stamp(self, time_s: float, now: Time):
         if time_s != self._last_time_s:      # a new sampling instant: a new, strictly later stamp
@@ -398,6 +416,9 @@ def main(args=None):
     try:
         node = BridgePublisher()
         rclpy.spin_until_future_complete(node, node.done)
+        if node.failure:
+            rclpy.logging.get_logger('bridge_publisher').error(node.failure)
+            status = 1
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except StartupError as err:
