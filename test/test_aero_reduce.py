@@ -72,7 +72,7 @@ def test_noisy_run_with_estimated_weight_is_within_its_propagated_uncertainty(tm
     sigma = np.array([CALIBRATION.sigma_pct_fs[c] for c in CALIBRATION.components])
     profile, raw = simulated_run(noise_pct_fs=sigma, seed=11)
     if installation is INVERTED:            # the same loads on a balance mounted rolled 180° in the model
-        from balance_calib.live.wind_on import wind_on_outputs
+        from balance_calib.simulation.wind_on import wind_on_outputs
         from test_aero_core import CONFIG
         from balance_calib.simulation.balance_sim import noise_mv_for_load_sigma
         truth_model = CONFIG.matrices['cubic']
@@ -139,7 +139,7 @@ def test_bad_inputs_give_one_line_and_write_nothing(tmp_path, capsys):
 def test_an_electrical_zero_is_taken_in_output_space_before_the_calibration(tmp_path):
     # 0.04 mV on every bridge with nothing on the balance: the load-space offsets of the wind-off sweep
     # absorb it only approximately for the cubic balance; given as --electrical-zero-mv it is exact again
-    from balance_calib.live.wind_on import wind_on_outputs
+    from balance_calib.simulation.wind_on import wind_on_outputs
     from test_aero_core import CONFIG
     profile, _ = simulated_run()
     raw = wind_on_outputs(CONFIG.matrices['cubic'], profile.loads_balance, electrical_zero_mv=0.04)
@@ -158,7 +158,7 @@ def test_an_electrical_zero_is_taken_in_output_space_before_the_calibration(tmp_
 
 
 def _zeroed_run_bag(path, electrical_zero_mv, **truth):
-    from balance_calib.live.wind_on import wind_on_outputs
+    from balance_calib.simulation.wind_on import wind_on_outputs
     from test_aero_core import CONFIG
     profile, _ = simulated_run()
     raw = wind_on_outputs(CONFIG.matrices['cubic'], profile.loads_balance,

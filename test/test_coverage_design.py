@@ -261,7 +261,7 @@ def test_coverage_of_a_memo_campaign_says_the_tunnel_run_is_outside_its_support(
 
 def test_coverage_reads_the_wrenches_of_a_bag_in_tunnel_axes(tmp_path, capsys):
     from balance_calib.bags.writer import BagWriter, qos_profiles_yaml
-    from balance_calib.simulation.campaign_bag import RELIABLE_QOS, _wrench
+    from balance_calib.bags.messages import RELIABLE_QOS, wrench_cdr
     from balance_calib.tunnel_axes import parse_installation
     calibration = refit(None, 5, table17_noise(LMC))
     path = tmp_path / 'cal.yaml'
@@ -274,7 +274,7 @@ def test_coverage_reads_the_wrenches_of_a_bag_in_tunnel_axes(tmp_path, capsys):
                          qos_profiles_yaml(RELIABLE_QOS))
         for i, values in enumerate(tunnel):
             ns = 1_700_000_000 * 10 ** 9 + i * 10 ** 7
-            writer.write('/balance/wrench', ns, _wrench(ns, 'tunnel', values))
+            writer.write('/balance/wrench', ns, wrench_cdr(ns, 'tunnel', values))
     assert main(['coverage', str(path), str(tmp_path / 'run'), '--out', str(tmp_path / 'b')]) == 0
     assert main(['coverage', str(path), str(write_loads(tmp_path / 'l.csv', loads)),
                  '--out', str(tmp_path / 'c')]) == 0
@@ -315,7 +315,7 @@ def test_design_refuses_with_one_line_and_writes_nothing(tmp_path, capsys, case)
 
 def test_coverage_of_a_bag_without_wrenches_says_so_in_one_line(tmp_path, capsys):
     from balance_calib.simulation.campaign_bag import write_campaign_bag
-    from balance_calib.live.timeline import select_points
+    from balance_calib.simulation.timeline import select_points
     calibration_path = tmp_path / 'cal.yaml'
     from balance_calib.calibration_file import save_calibration
     save_calibration(calibration_path, refit(None, 6, table17_noise(LMC)))

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from balance_calib.config import load_balance_config
-from balance_calib.live import timeline as tl
-from balance_calib.live.wind_on import AeroModel, aoa_sweep_profile, csv_profile, sweep_loads_tunnel, wind_on_outputs
+from balance_calib.simulation import timeline as tl
+from balance_calib.simulation.wind_on import AeroModel, aoa_sweep_profile, csv_profile, sweep_loads_tunnel, wind_on_outputs
 from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
 

@@ -12,7 +12,7 @@ from balance_calib.live.calibrator_core import ERROR, OK, STALE, activate, check
 from balance_calib.live.parameters import PARAMETERS, check_parameter, load_calibration_checked
 from balance_calib.live.stream import InputMonitor, LiveCalibrator, LiveSettings, LowPass, OverloadMonitor
 from balance_calib.live.tare_store import TareState, load_tare, save_tare, tare_file_for
-from balance_calib.live.wind_on import aoa_sweep_profile, wind_on_outputs
+from balance_calib.simulation.wind_on import aoa_sweep_profile, wind_on_outputs
 from balance_calib.simulation.balance_sim import noise_mv_for_load_sigma
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
 

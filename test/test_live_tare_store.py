@@ -13,7 +13,7 @@ from balance_calib.live.calibrator_core import OK, WARN
 from balance_calib.live.parameters import PARAMETERS, STRING_ARRAY
 from balance_calib.live.session import CalibratorSession
 from balance_calib.live.tare_store import TareOwner, calibration_sha256, restore_refusal
-from balance_calib.live.wind_on import wind_on_outputs
+from balance_calib.simulation.wind_on import wind_on_outputs
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
 from test_live_stream import CAPACITY, MEMO, NOISE_MV, TRUTH
 

@@ -12,7 +12,7 @@ from sensor_msgs.msg import FluidPressure, Temperature
 
 from balance_calib.bags.writer import BagWriter
 from balance_calib.config import load_balance_config
-from balance_calib.live.timeline import select_points
+from balance_calib.simulation.timeline import select_points
 from balance_calib.nodes.bridge_publisher import BridgePublisher, StartupError
 from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
 from ros_harness import NodeProcess, Probe, new_domain_id, six, wait_for

@@ -14,7 +14,7 @@ import pytest
 from balance_calib.calibration_file import load_calibration, save_calibration
 from balance_calib.config import CONFIG_DIR, load_balance_config
 from balance_calib.launchless.processes import ros_args
-from balance_calib.live.wind_on import aoa_sweep_profile
+from balance_calib.simulation.wind_on import aoa_sweep_profile
 from balance_calib.simulation import campaign_bag
 from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign
 from balance_calib.tunnel_axes import UPRIGHT

@@ -9,7 +9,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 
-from balance_calib.live.wind_on import wind_on_outputs
+from balance_calib.simulation.wind_on import wind_on_outputs
 from ros_harness import wait_for
 from test_live_stream import CAPACITY, NOISE_MV, TRUTH
 from test_ros_calibrator import (calibration_file, connected, probe,  # noqa: F401 (fixtures)

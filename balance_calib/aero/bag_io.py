@@ -123,8 +123,8 @@ def read_run(paths: Sequence[str | Path], *, raw_topic: str = RAW_TOPIC, attitud
 def write_run_bag(path: str | Path, stamps_ns, raw_mv, support_attitude, q_pa, *, frame_id: str = 'balance',
                   truth_body=None, truth_wind=None) -> Path:
     """A run bag as bridge_publisher's wind_on mode publishes it, one attitude and q∞ per raw sample."""
-    from ..simulation.campaign_bag import RELIABLE_QOS, _store, _vector, _wrench
-    store = _store()
+    from ..bags.messages import RELIABLE_QOS, typestore, vector_cdr, wrench_cdr
+    store = typestore()
 
     def fluid_pressure(ns, value):
         header = store.types['std_msgs/msg/Header'](
@@ -144,11 +144,11 @@ def write_run_bag(path: str | Path, stamps_ns, raw_mv, support_attitude, q_pa, *
             writer.add_topic(TRUTH_WIND_TOPIC, 'geometry_msgs/msg/WrenchStamped', qos)
         for i, ns in enumerate(np.asarray(stamps_ns, np.int64)):
             ns = int(ns)
-            writer.write(ATTITUDE_TOPIC, ns, _vector(ns, 'tunnel', support_attitude[i]))
+            writer.write(ATTITUDE_TOPIC, ns, vector_cdr(ns, 'tunnel', support_attitude[i]))
             writer.write(DYNAMIC_PRESSURE_TOPIC, ns, fluid_pressure(ns, q_pa[i]))
-            writer.write(RAW_TOPIC, ns, _wrench(ns, frame_id, raw_mv[i]))
+            writer.write(RAW_TOPIC, ns, wrench_cdr(ns, frame_id, raw_mv[i]))
             if truth_body is not None and np.all(np.isfinite(truth_body[i])):
-                writer.write(TRUTH_TOPIC, ns, _wrench(ns, 'body', truth_body[i]))
+                writer.write(TRUTH_TOPIC, ns, wrench_cdr(ns, 'body', truth_body[i]))
             if truth_wind is not None and np.all(np.isfinite(truth_wind[i])):
-                writer.write(TRUTH_WIND_TOPIC, ns, _wrench(ns, 'wind', truth_wind[i]))
+                writer.write(TRUTH_WIND_TOPIC, ns, wrench_cdr(ns, 'wind', truth_wind[i]))
     return Path(path)

@@ -115,12 +115,12 @@ def _payload(event: Event, frame: str) -> bytes:
 
 
 def _serialize(event: Event, frame: str) -> bytes:
-    from ..simulation.campaign_bag import _temperature, _vector, _wrench
+    from ..bags.messages import temperature_cdr, vector_cdr, wrench_cdr
     if event.topic == GRAVITY:
-        return _vector(event.stamp_ns, frame, event.values)
+        return vector_cdr(event.stamp_ns, frame, event.values)
     if event.topic == TEMPERATURE:
-        return _temperature(event.stamp_ns, frame, float(event.values[0]))
-    return _wrench(event.stamp_ns, frame, event.values)
+        return temperature_cdr(event.stamp_ns, frame, float(event.values[0]))
+    return wrench_cdr(event.stamp_ns, frame, event.values)
 
 
 def write_mcap(events, path: Path, *, frame: str = 'LMC6522', crcs: bool = True,

@@ -6,7 +6,7 @@ Modes (parameter `mode`):
                 /calibration/gravity when the body is rotated, /calibration/applied_load when a
                 point settles (all NaN while weights are changed), /balance/raw (mV) and
                 /balance/temperature (°C). Simulated by simulation.balance_sim.simulate_campaign.
-  wind_on       an angle-of-attack sweep (live/wind_on.py) or a CSV of balance-axis loads; also
+  wind_on       an angle-of-attack sweep (simulation/wind_on.py) or a CSV of balance-axis loads; also
                 /balance/truth: the true aerodynamic load in tunnel axes, N / N·m, stamped like
                 the raw sample it belongs to (a test and diagnostic topic, not a public interface).
                 With `aero_model` (a config/models file) the run is physical (TM-663 §10.3): a
@@ -21,7 +21,7 @@ Modes (parameter `mode`):
                 /thrust_stand/ambient_pressure (sensor_msgs/FluidPressure, Pa), and the
                 calibration weights on /calibration/applied_load (force.x, N).
 
-The node precomputes a timeline of events (live/timeline.py) and a timer publishes the events
+The node precomputes a timeline of events (simulation/timeline.py) and a timer publishes the events
 that are due; events of one sampling instant share the header stamp: the node clock when the
 first of them is published. Parameters are read at start-up.
 """
@@ -44,12 +44,12 @@ from sensor_msgs.msg import FluidPressure, Temperature
 
 from balance_calib.bags.errors import BagError
 from balance_calib.config import ConfigError, load_balance_config
-from balance_calib.live import timeline as tl
-from balance_calib.live.replay import read_recorded_messages
+from balance_calib.simulation import timeline as tl
+from balance_calib.simulation.replay import read_recorded_messages
 from balance_calib.refit.gates import acceptance_limits
 from balance_calib.schedule_file import schedule_for
 from balance_calib.aero.model_file import load_model
-from balance_calib.live.wind_on import aero_run_profile, aoa_sweep_profile, csv_profile, wind_on_outputs
+from balance_calib.simulation.wind_on import aero_run_profile, aoa_sweep_profile, csv_profile, wind_on_outputs
 from balance_calib.simulation.balance_sim import (noise_mv_for_load_sigma, paced_settings,
                                                   simulate_campaign, table17_noise)
 from balance_calib.simulation.effects import parse_effects
@@ -100,7 +100,7 @@ PARAMETERS = {                       # name: default (the type of the default is
                                               # them, s; 0 = wait for ever
 }
 RAW_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-# timeline kinds of the physical wind-on run, after live/timeline.py's
+# timeline kinds of the physical wind-on run, after simulation/timeline.py's
 ATTITUDE, DYNAMIC_PRESSURE, AERO_TRUTH, AERO_TRUTH_WIND = 7, 8, 9, 10
 EVENT_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
 

@@ -12,55 +12,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from rosbags.typesys import Stores, get_typestore
-
+from ..bags.messages import LATCHED_QOS, RELIABLE_QOS, temperature_cdr, typestore, vector_cdr, wrench_cdr
 from ..bags.writer import BagWriter, qos_profiles_yaml
 from .balance_sim import Campaign
 
-_STORE = None
 SIMULATION_TOPIC = '/simulation/campaign'     # std_msgs/String: the stamps are a simulated clock
-RELIABLE_QOS = [{'history': 'keep_last', 'depth': 1000, 'reliability': 'reliable', 'durability': 'volatile'}]
-LATCHED_QOS = [{'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'transient_local'}]
-
-
-def _store():
-    global _STORE
-    if _STORE is None:
-        _STORE = get_typestore(Stores.ROS2_JAZZY)
-    return _STORE
-
-
-def _header(ns: int, frame: str):
-    store = _store()
-    Time = store.types['builtin_interfaces/msg/Time']
-    Header = store.types['std_msgs/msg/Header']
-    return Header(stamp=Time(sec=int(ns // 1_000_000_000), nanosec=int(ns % 1_000_000_000)), frame_id=frame)
-
-
-def _wrench(ns: int, frame: str, values) -> bytes:
-    store = _store()
-    Vector3 = store.types['geometry_msgs/msg/Vector3']
-    Wrench = store.types['geometry_msgs/msg/Wrench']
-    WrenchStamped = store.types['geometry_msgs/msg/WrenchStamped']
-    v = [float(x) for x in values]
-    msg = WrenchStamped(header=_header(ns, frame),
-                        wrench=Wrench(force=Vector3(x=v[0], y=v[1], z=v[2]), torque=Vector3(x=v[3], y=v[4], z=v[5])))
-    return store.serialize_cdr(msg, 'geometry_msgs/msg/WrenchStamped')
-
-
-def _vector(ns: int, frame: str, values) -> bytes:
-    store = _store()
-    Vector3 = store.types['geometry_msgs/msg/Vector3']
-    Vector3Stamped = store.types['geometry_msgs/msg/Vector3Stamped']
-    msg = Vector3Stamped(header=_header(ns, frame), vector=Vector3(x=float(values[0]), y=float(values[1]), z=float(values[2])))
-    return store.serialize_cdr(msg, 'geometry_msgs/msg/Vector3Stamped')
-
-
-def _temperature(ns: int, frame: str, value: float) -> bytes:
-    store = _store()
-    Temperature = store.types['sensor_msgs/msg/Temperature']
-    msg = Temperature(header=_header(ns, frame), temperature=float(value), variance=0.0)
-    return store.serialize_cdr(msg, 'sensor_msgs/msg/Temperature')
 
 
 def simulated_clock_note(start_ns: int) -> str:
@@ -72,7 +28,7 @@ def simulated_clock_note(start_ns: int) -> str:
 
 
 def _note(text: str) -> bytes:
-    store = _store()
+    store = typestore()
     message = store.types['std_msgs/msg/String'](data=text)
     return store.serialize_cdr(message, 'std_msgs/msg/String')
 
@@ -101,17 +57,17 @@ def write_campaign_bag(campaign: Campaign, path: str | Path, *, start_ns: int = 
             previous_end = campaign.end_s[p - 1] if p > 0 else campaign.start_s[0] - gap
             transition_ns = start_ns + int(round(previous_end * 1e9)) + 1
             if campaign.orientation[p] != previous_orientation:
-                events.append((transition_ns, 0, '/calibration/gravity', _vector(transition_ns, frame, campaign.gravity[p])))
+                events.append((transition_ns, 0, '/calibration/gravity', vector_cdr(transition_ns, frame, campaign.gravity[p])))
                 previous_orientation = campaign.orientation[p]
-            events.append((transition_ns, 1, '/calibration/applied_load', _wrench(transition_ns, frame, [np.nan] * 6)))
+            events.append((transition_ns, 1, '/calibration/applied_load', wrench_cdr(transition_ns, frame, [np.nan] * 6)))
             settled_ns = start_ns + int(round(campaign.start_s[p] * 1e9))
-            events.append((settled_ns, 1, '/calibration/applied_load', _wrench(settled_ns, frame, campaign.applied_loads[p])))
+            events.append((settled_ns, 1, '/calibration/applied_load', wrench_cdr(settled_ns, frame, campaign.applied_loads[p])))
         in_sample = (campaign.sample_point < 0) | chosen[np.maximum(campaign.sample_point, 0)]
         for i in np.flatnonzero(in_sample):
             ns = start_ns + int(round(campaign.times_s[i] * 1e9))
-            events.append((ns, 2, '/balance/raw', _wrench(ns, frame, campaign.raw_mv[i])))
+            events.append((ns, 2, '/balance/raw', wrench_cdr(ns, frame, campaign.raw_mv[i])))
             if temperature_every and i % temperature_every == 0:
-                events.append((ns, 3, '/balance/temperature', _temperature(ns, frame, campaign.temperature_c[i])))
+                events.append((ns, 3, '/balance/temperature', temperature_cdr(ns, frame, campaign.temperature_c[i])))
         events.sort(key=lambda e: (e[0], e[1]))
         for ns, _, topic, data in events:
             writer.write(topic, ns, data)

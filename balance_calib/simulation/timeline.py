@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import LoadSchedule
-from ..simulation.balance_sim import Campaign
+from .balance_sim import Campaign
 
 GRAVITY, APPLIED_LOAD, RAW, TRUTH, TEMPERATURE, CHAMBER_PRESSURE, AMBIENT_PRESSURE = range(7)
 KIND_NAMES = ('gravity', 'applied_load', 'raw', 'truth', 'temperature', 'chamber_pressure', 'ambient_pressure')
