@@ -52,6 +52,10 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f'balance-calib {args.command}: interrupted', file=sys.stderr)
         return 130
+    except BrokenPipeError:         # `balance-calib ... | head`: the reader is gone
+        from .closed_pipe import stdout_closed
+        stdout_closed()
+        return 0
 
 
 if __name__ == '__main__':

@@ -32,12 +32,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
-import os
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
+from ..closed_pipe import stdout_closed
 
 DEFAULT_TIMEOUT_S = 10.0
 SETTLE_S = 1.5          # a listing unchanged this long is the graph as discovery has it
@@ -685,7 +685,7 @@ def main(argv=None) -> int:
     except BrokenPipeError:
         # whoever read our output is gone (`ros topic echo ... | head`): nothing more to say, and
         # the interpreter must not fail again flushing stdout at exit
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        stdout_closed()
         return 0
 
 

@@ -130,5 +130,10 @@ def help_text(module_name: str) -> str:
 def exit_if_help(module_name: str, args: Sequence[str] | None = None) -> None:
     """Print the node's help and exit 0 when -h/--help is given; otherwise return."""
     if wants_help(args):
-        print(help_text(module_name))
+        try:
+            print(help_text(module_name))
+            sys.stdout.flush()
+        except BrokenPipeError:     # `NODE --help | head`: the reader is gone
+            from ..closed_pipe import stdout_closed
+            stdout_closed()
         sys.exit(0)
