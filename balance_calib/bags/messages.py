@@ -8,6 +8,8 @@ from __future__ import annotations
 from rosbags.typesys import Stores, get_typestore
 
 _STORE = None
+# std_msgs/String in a simulated campaign's bag: its stamps are the simulator's clock, not a date
+SIMULATION_TOPIC = '/simulation/campaign'
 RELIABLE_QOS = [{'history': 'keep_last', 'depth': 1000, 'reliability': 'reliable', 'durability': 'volatile'}]
 LATCHED_QOS = [{'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'transient_local'}]
 

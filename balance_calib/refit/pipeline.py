@@ -244,7 +244,7 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
     from ..bags.errors import BagError
     from ..bags.reader import read_bags
     from ..calibration_file import load_calibration
-    from ..simulation.campaign_bag import SIMULATION_TOPIC
+    from ..bags.messages import SIMULATION_TOPIC
     say = progress or (lambda message: None)
     started = time.monotonic()
     paths = [Path(p) for p in bag_paths]

@@ -12,11 +12,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from ..bags.messages import LATCHED_QOS, RELIABLE_QOS, temperature_cdr, typestore, vector_cdr, wrench_cdr
+from ..bags.messages import (LATCHED_QOS, RELIABLE_QOS, SIMULATION_TOPIC, temperature_cdr, typestore,
+                             vector_cdr, wrench_cdr)
 from ..bags.writer import BagWriter, qos_profiles_yaml
 from .balance_sim import Campaign
 
-SIMULATION_TOPIC = '/simulation/campaign'     # std_msgs/String: the stamps are a simulated clock
 
 
 def simulated_clock_note(start_ns: int) -> str:
