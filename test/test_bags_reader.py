@@ -180,7 +180,7 @@ def test_a_directory_without_metadata_or_a_foreign_file_is_not_a_bag(tmp_path):
 
 
 def _recording_in_progress(tmp_path, name, content):
-    """A bag directory as a recorder leaves it while it writes: the file so far, no metadata.yaml."""
+    """A bag directory as a recorder leaves it while it writes: the file so far, no metadata."""
     bag = tmp_path / name
     bag.mkdir()
     (bag / f'{name}_0.mcap').write_bytes(content)
@@ -188,7 +188,9 @@ def _recording_in_progress(tmp_path, name, content):
 
 
 def test_a_bag_still_being_recorded_is_read_up_to_what_is_on_disk(tmp_path):
-    records = [('/balance/raw', i, wrench(i, [i, -i, 2 * i, 0.5, i * i, 3.0])) for i in range(3000)]
+    records = [
+        ('/balance/raw', i, wrench(i, [i, -i, 2 * i, 0.5, i * i, 3.0])) for i in range(3000)
+    ]
     with BagWriter(tmp_path / 'done', chunk_size_bytes=8192) as writer:
         writer.add_topic('/balance/raw', WRENCH)
         for topic, time_ns, message in records:
@@ -201,13 +203,15 @@ def test_a_bag_still_being_recorded_is_read_up_to_what_is_on_disk(tmp_path):
         cut = chunks[k].chunk_start_offset + into
         bag = _recording_in_progress(tmp_path, f'live{k}_{into}', finished[:cut])
         data = read_bags(bag)
-        on_disk = chunks[k - 1].message_end_time + 1        # log times are 0, 1, 2, ...: whole chunks
+        on_disk = chunks[k - 1].message_end_time + 1  # log times are 0, 1, 2, ...: whole chunks
         np.testing.assert_array_equal(data.raw.values, expected_raw(records[:on_disk])[1])
         assert len(data.losses) == 1 and 'still being recorded' in data.losses[0]
         assert f'read the {on_disk} messages on disk so far' in data.losses[0]
     # nothing flushed yet: the required topic is missing, and the reason is said
     early = _recording_in_progress(tmp_path, 'early', finished[:chunks[0].chunk_start_offset + 30])
-    with pytest.raises(BagError, match=r'early: no messages on /balance/raw.*still being recorded'):
+    with pytest.raises(
+        BagError, match=r'early: no messages on /balance/raw.*still being recorded'
+    ):
         read_bags(early)
     # the recording closed its file but not (yet) metadata.yaml: the whole file, nothing said
     whole = read_bags(_recording_in_progress(tmp_path, 'whole', finished))
@@ -216,7 +220,9 @@ def test_a_bag_still_being_recorded_is_read_up_to_what_is_on_disk(tmp_path):
     damaged = bytearray(finished[:chunks[4].chunk_start_offset])
     middle = chunks[2].chunk_start_offset + chunks[2].chunk_length // 2
     damaged[middle:middle + 8] = bytes(b ^ 0xA5 for b in damaged[middle:middle + 8])
-    with pytest.raises(BagError, match=f'damaged data at byte offset {chunks[2].chunk_start_offset}'):
+    with pytest.raises(
+        BagError, match=f'damaged data at byte offset {chunks[2].chunk_start_offset}'
+    ):
         read_bags(_recording_in_progress(tmp_path, 'damaged', bytes(damaged)))
 
 

@@ -185,7 +185,9 @@ def test_a_bag_being_recorded_is_read_up_to_the_last_flush(tmp_path, domain_id, 
     assert recorder.returncode == 0, output
     np.testing.assert_array_equal(data.raw.values[:, 0], sent)
     np.testing.assert_array_equal(data.raw.values[:, 5], -0.5 * np.array(sent))
-    assert len(data.losses) == 1 and f'read the {SAMPLES} messages on disk so far' in data.losses[0]
+    assert (
+        len(data.losses) == 1 and f'read the {SAMPLES} messages on disk so far' in data.losses[0]
+    )
     closed = read_bags(bag)                    # and once stopped: the complete bag, nothing to say
     assert len(closed.raw) == SAMPLES and closed.losses == ()
 

@@ -1,6 +1,8 @@
-"""ROS packaging: launch/graph.launch.yaml starts what launchless_scripts/graph starts, with parameters the
-nodes declare; setup.py installs config/models and the launch file; package.xml names a checked key for
-every third-party import (no DDS, no build: launchless_scripts/colcon_check builds for real)."""
+"""ROS packaging: launch/graph.launch.yaml starts what launchless_scripts/graph starts, with
+parameters the nodes declare; setup.py installs config/models and the launch file; package.xml
+names a checked key for every third-party import (no DDS, no build: launchless_scripts/colcon_check
+builds for real)."""
+
 import ast
 import re
 import runpy
@@ -17,32 +19,70 @@ ROOT = Path(__file__).resolve().parent.parent
 LAUNCH = ROOT / 'launch' / 'graph.launch.yaml'
 GRAPH = ROOT / 'launchless_scripts' / 'graph'
 
-# Keys checked by hand against ros/rosdistro at 8468e88ccd52 (2026-08-22): ROS 2 Jazzy packages in
-# jazzy/distribution.yaml, rosdep keys in rosdep/python.yaml. A new key must be checked there first.
-JAZZY_PACKAGES = {'rclpy', 'rcl_interfaces', 'ament_index_python', 'geometry_msgs', 'sensor_msgs', 'std_msgs',
-                  'std_srvs', 'diagnostic_msgs', 'launch_ros', 'launch_yaml'}
-ROSDEP_KEYS = {'python3-numpy', 'python3-scipy', 'python3-yaml', 'python3-matplotlib', 'python3-pytest',
-               'python3-hypothesis', 'python3-rosbags-pip', 'mcap-ros2-support', 'python3-setuptools',
-               'python3-pil'}
-# import name -> the key that installs it (zstandard and lz4 come with mcap, mcap with mcap-ros2-support)
-IMPORTS = {'numpy': 'python3-numpy', 'scipy': 'python3-scipy', 'yaml': 'python3-yaml',
-           'matplotlib': 'python3-matplotlib', 'rosbags': 'python3-rosbags-pip', 'mcap': 'mcap-ros2-support',
-           'mcap_ros2': 'mcap-ros2-support', 'zstandard': 'mcap-ros2-support', 'lz4': 'mcap-ros2-support',
-           'pytest': 'python3-pytest', 'hypothesis': 'python3-hypothesis', 'setuptools': 'python3-setuptools',
-           'PIL': 'python3-pil',
-           **{name: name for name in JAZZY_PACKAGES}}
+# Keys checked by hand against ros/rosdistro at 8468e88ccd52 (2026-08-22): ROS 2 Jazzy packages
+# in jazzy/distribution.yaml, rosdep keys in rosdep/python.yaml. Check a new key there first.
+JAZZY_PACKAGES = {
+    'rclpy',
+    'rcl_interfaces',
+    'ament_index_python',
+    'geometry_msgs',
+    'sensor_msgs',
+    'std_msgs',
+    'std_srvs',
+    'diagnostic_msgs',
+    'launch_ros',
+    'launch_yaml',
+}
+ROSDEP_KEYS = {
+    'python3-numpy',
+    'python3-scipy',
+    'python3-yaml',
+    'python3-matplotlib',
+    'python3-pytest',
+    'python3-hypothesis',
+    'python3-rosbags-pip',
+    'mcap-ros2-support',
+    'python3-setuptools',
+    'python3-pil',
+}
+# import name -> the key that installs it (zstandard and lz4 come with mcap, mcap with
+# mcap-ros2-support)
+IMPORTS = {
+    'numpy': 'python3-numpy',
+    'scipy': 'python3-scipy',
+    'yaml': 'python3-yaml',
+    'matplotlib': 'python3-matplotlib',
+    'rosbags': 'python3-rosbags-pip',
+    'mcap': 'mcap-ros2-support',
+    'mcap_ros2': 'mcap-ros2-support',
+    'zstandard': 'mcap-ros2-support',
+    'lz4': 'mcap-ros2-support',
+    'pytest': 'python3-pytest',
+    'hypothesis': 'python3-hypothesis',
+    'setuptools': 'python3-setuptools',
+    'PIL': 'python3-pil',
+    **{name: name for name in JAZZY_PACKAGES},
+}
 
 
 def console_scripts() -> dict[str, str]:
     """setup.py's console scripts: name -> module (read from the file, not from an install)."""
     tree = ast.parse((ROOT / 'setup.py').read_text())
-    call = next(n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, 'id', '') == 'setup')
-    entry_points = ast.literal_eval(next(k.value for k in call.keywords if k.arg == 'entry_points'))
-    return dict((part.strip() for part in line.split('=')) for line in entry_points['console_scripts'])
+    call = next(
+        n
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Call) and getattr(n.func, 'id', '') == 'setup'
+    )
+    entry_points = ast.literal_eval(
+        next(k.value for k in call.keywords if k.arg == 'entry_points')
+    )
+    return dict(
+        (part.strip() for part in line.split('=')) for line in entry_points['console_scripts']
+    )
 
 
 def setup_keywords(monkeypatch) -> dict:
-    """What setup.py passes to setuptools.setup(), run in the source tree without building anything."""
+    """What setup.py passes to setuptools.setup(), run in the source tree, building nothing."""
     import setuptools
     captured = {}
     monkeypatch.setattr(setuptools, 'setup', lambda **kwargs: captured.update(kwargs))
@@ -77,24 +117,45 @@ def test_launch_file_starts_the_graphs_nodes_with_parameters_they_declare():
     args, nodes = launch_entities()
     scripts = console_scripts()
     executables = [node['exec'] for node in nodes]
-    assert set(executables) == set(graph_nodes()) == {'bridge_publisher', 'balance_calibrator', 'balance_recorder'}
+    assert (
+        set(executables)
+        == set(graph_nodes())
+        == {'bridge_publisher', 'balance_calibrator', 'balance_recorder'}
+    )
     for node in nodes:
         assert node['pkg'] == 'balance_calib' and node['exec'] in scripts, node
-        assert node['name'] == node['exec']          # as the graph runs them: the params file's sections
-        assert 'remap' not in node and 'ros_args' not in node and 'args' not in node   # the graph has none
+        assert node['name'] == node['exec']  # as the graph runs them: the params file's sections
+        assert (
+            'remap' not in node and 'ros_args' not in node and 'args' not in node
+        )  # the graph has none
         files = [p['from'] for p in node['param'] if 'from' in p]
         assert files == ['$(var params_file)'], node
         inline = {p['name'] for p in node['param'] if 'name' in p}
         assert inline <= declared_parameters(node['exec']), (node['exec'], inline)
         used = set(re.findall(r'\$\(var (\w+)\)', yaml.safe_dump(node)))
         assert used <= set(args), (node['exec'], used - set(args))
-        assert set(node) <= {'pkg', 'exec', 'name', 'output', 'param', 'if', 'unless', 'on_exit'}, node
+        assert set(node) <= {
+            'pkg',
+            'exec',
+            'name',
+            'output',
+            'param',
+            'if',
+            'unless',
+            'on_exit',
+        }, node
     # a bridge_publisher for either value of stop_with_campaign, exactly one of them shutting down
     publishers = [n for n in nodes if n['exec'] == 'bridge_publisher']
-    assert sorted((('if' in n), n.get('on_exit')) for n in publishers) == [(False, None), (True, 'shutdown')]
+    assert sorted((('if' in n), n.get('on_exit')) for n in publishers) == [
+        (False, None),
+        (True, 'shutdown'),
+    ]
     assert {n.get('if', n.get('unless')) for n in publishers} == {'$(var stop_with_campaign)'}
     # the same parameters file as the graph's default, from where setup.py installs it
-    assert args['params_file']['default'] == '$(find-pkg-share balance_calib)/config/graph_params.yaml'
+    assert (
+        args['params_file']['default']
+        == '$(find-pkg-share balance_calib)/config/graph_params.yaml'
+    )
     assert 'default=str(root / "config" / "graph_params.yaml")' in GRAPH.read_text()
 
 
@@ -120,7 +181,9 @@ def test_declared_parameters_are_read_from_the_nodes_own_tables():
 
 def test_setup_installs_config_models_and_the_launch_file(monkeypatch):
     data_files = dict(setup_keywords(monkeypatch)['data_files'])
-    models = sorted(p.relative_to(ROOT).as_posix() for p in (ROOT / 'config' / 'models').glob('*.yaml'))
+    models = sorted(
+        p.relative_to(ROOT).as_posix() for p in (ROOT / 'config' / 'models').glob('*.yaml')
+    )
     assert len(models) >= 2
     assert sorted(data_files['share/balance_calib/config/models']) == models
     assert data_files['share/balance_calib/launch'] == ['launch/graph.launch.yaml']
@@ -137,23 +200,35 @@ def test_an_installed_package_finds_its_models_in_its_share_directory(tmp_path, 
     (share / 'balance_calib' / 'config' / 'models').mkdir(parents=True)
     shipped = ROOT / 'config' / 'models' / 'euler_replica_lmc6522.yaml'
     (share / 'balance_calib' / 'config' / 'models' / shipped.name).write_text(shipped.read_text())
-    (share / 'balance_calib' / 'config' / 'lmc6522.yaml').write_text((ROOT / 'config' / 'lmc6522.yaml').read_text())
+    (share / 'balance_calib' / 'config' / 'lmc6522.yaml').write_text(
+        (ROOT / 'config' / 'lmc6522.yaml').read_text()
+    )
     monkeypatch.setenv('AMENT_PREFIX_PATH', str(tmp_path / 'prefix'))
     monkeypatch.setattr(config, 'CONFIG_DIR', tmp_path / 'site-packages' / 'config')   # not there
     model = load_model('euler_replica_lmc6522')
     assert Path(model.path).parent == share / 'balance_calib' / 'config' / 'models'
-    assert config.resolve_config_path('lmc6522') == share / 'balance_calib' / 'config' / 'lmc6522.yaml'
+    assert (
+        config.resolve_config_path('lmc6522')
+        == share / 'balance_calib' / 'config' / 'lmc6522.yaml'
+    )
     with pytest.raises(config.ConfigError, match='no such model file'):
         load_model('no_such_model')
 
 
 def _third_party_imports(directory: Path, local: set[str]) -> dict[str, str]:
-    """Top-level imported names that are neither the standard library nor ours -> a file using it."""
+    """Top-level imported names, neither the standard library nor ours -> a file using it."""
     found = {}
     for path in sorted(directory.rglob('*.py')):
         for node in ast.walk(ast.parse(path.read_text())):
-            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
-                     [node.module] if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module else [])
+            names = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else (
+                    [node.module]
+                    if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module
+                    else []
+                )
+            )
             for name in names:
                 top = name.split('.')[0]
                 if top not in sys.stdlib_module_names and top not in local:
@@ -163,9 +238,13 @@ def _third_party_imports(directory: Path, local: set[str]) -> dict[str, str]:
 
 def test_package_xml_names_a_checked_key_for_every_import():
     package = ElementTree.parse(ROOT / 'package.xml').getroot()
-    run = {e.text for tag in ('exec_depend', 'depend', 'buildtool_depend') for e in package.iter(tag)}
+    run = {
+        e.text for tag in ('exec_depend', 'depend', 'buildtool_depend') for e in package.iter(tag)
+    }
     test = {e.text for e in package.iter('test_depend')}
-    assert (run | test) <= JAZZY_PACKAGES | ROSDEP_KEYS, sorted((run | test) - JAZZY_PACKAGES - ROSDEP_KEYS)
+    assert (run | test) <= JAZZY_PACKAGES | ROSDEP_KEYS, sorted(
+        (run | test) - JAZZY_PACKAGES - ROSDEP_KEYS
+    )
     # the old, unverified keys are gone
     assert not {'python3-rosbags', 'python3-mcap', 'python3-mcap-ros2-support'} & (run | test)
     for directory, keys in ((ROOT / 'balance_calib', run),
@@ -173,4 +252,6 @@ def test_package_xml_names_a_checked_key_for_every_import():
         local = {'balance_calib'} | {p.stem for p in (ROOT / 'test').glob('*.py')}
         for name, where in _third_party_imports(directory, local).items():
             assert name in IMPORTS, f'{where} imports {name}: which rosdep key installs it?'
-            assert IMPORTS[name] in keys, f'{where} imports {name}; package.xml lacks {IMPORTS[name]}'
+            assert (
+                IMPORTS[name] in keys
+            ), f'{where} imports {name}; package.xml lacks {IMPORTS[name]}'

@@ -130,23 +130,32 @@ def run_ros(domain, *args, timeout=300):
 
 @pytest.mark.slow
 def test_graph_as_its_help_says_the_calibrator_outlives_the_campaign_and_refits_its_bag(tmp_path):
-    """The help's recipe: campaign through the graph, then param set calibration_bags to the recorded
-    bag directory and trigger ~/refit, while the graph still runs."""
+    """The help's recipe: campaign through the graph, then param set calibration_bags to the
+    recorded bag directory and trigger ~/refit, while the graph still runs."""
     params = yaml.safe_load((SCRIPTS.parent / 'config' / 'graph_params.yaml').read_text())
-    params['bridge_publisher']['ros__parameters'].update(speed=4.0)        # the shipped campaign, 4x
+    params['bridge_publisher']['ros__parameters'].update(speed=4.0)  # the shipped campaign, 4x
     params['balance_calibrator']['ros__parameters'].update(report_dir=str(tmp_path / 'reports'))
     path = tmp_path / 'params.yaml'
     path.write_text(yaml.safe_dump(params))
     domain = new_domain_id()
-    graph = subprocess.Popen([str(SCRIPTS / 'graph'), str(path), '--bag', str(tmp_path / 'bag')],
-                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                             start_new_session=True, env=dict(os.environ, ROS_DOMAIN_ID=str(domain)))
+    graph = subprocess.Popen(
+        [str(SCRIPTS / 'graph'), str(path), '--bag', str(tmp_path / 'bag')],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+        env=dict(os.environ, ROS_DOMAIN_ID=str(domain)),
+    )
     graph.lines = []
     graph.reader = threading.Thread(target=lambda: graph.lines.extend(graph.stdout), daemon=True)
     graph.reader.start()
     try:
-        wait_for(lambda: any('keeps running' in line for line in graph.lines) or graph.poll() is not None,
-                 150.0, 'the end of the campaign')
+        wait_for(
+            lambda: any('keeps running' in line for line in graph.lines)
+            or graph.poll() is not None,
+            150.0,
+            'the end of the campaign',
+        )
         assert graph.poll() is None, ''.join(graph.lines)           # the calibrator still runs
         assert (tmp_path / 'bag' / 'metadata.yaml').exists()          # the recorder closed the bag
         done = run_ros(domain, 'param', 'set', '/balance_calibrator', 'calibration_bags',

@@ -104,7 +104,9 @@ def _wait_for_service(domain, name, kind='Trigger', timeout=60.0):
     rclpy.init(context=context, domain_id=domain)
     try:
         node = rclpy.create_node('probe_wait', context=context)
-        client = node.create_client({'Trigger': Trigger, 'ListParameters': ListParameters}[kind], name)
+        client = node.create_client(
+            {'Trigger': Trigger, 'ListParameters': ListParameters}[kind], name
+        )
         assert client.wait_for_service(timeout_sec=timeout), name
         node.destroy_node()
     finally:
@@ -147,7 +149,10 @@ def test_node_list_info_and_a_stable_service_list(tmp_path):
         assert listing.returncode == 0, listing.stderr
         assert set(listing.stdout.splitlines()) == expected, sorted(
             set(listing.stdout.splitlines()) ^ expected)
-    assert nodes.returncode == 0 and nodes.stdout.splitlines() == ['/balance_calibrator', '/balance_recorder']
+    assert nodes.returncode == 0 and nodes.stdout.splitlines() == [
+        '/balance_calibrator',
+        '/balance_recorder',
+    ]
     assert info.returncode == 0, info.stderr
     sections = {}
     for line in info.stdout.splitlines()[1:]:
@@ -157,8 +162,11 @@ def test_node_list_info_and_a_stable_service_list(tmp_path):
             current.append(line.strip())
     assert info.stdout.splitlines()[0] == '/balance_calibrator'
     assert '/balance/raw: geometry_msgs/msg/WrenchStamped' in sections['Subscribers'], sections
-    assert {'/balance/wrench: geometry_msgs/msg/WrenchStamped', '/balance/overload: std_msgs/msg/Bool',
-            '/diagnostics: diagnostic_msgs/msg/DiagnosticArray'} <= set(sections['Publishers']), sections
+    assert {
+        '/balance/wrench: geometry_msgs/msg/WrenchStamped',
+        '/balance/overload: std_msgs/msg/Bool',
+        '/diagnostics: diagnostic_msgs/msg/DiagnosticArray',
+    } <= set(sections['Publishers']), sections
     assert {line.replace(' [', ': ').rstrip(']') for line in expected
             if line.startswith('/balance_calibrator/')} == set(sections['Service Servers'])
     missing = ros(domain, 'node', 'info', '/no_such_node', '--timeout', 1)
@@ -171,9 +179,13 @@ def test_topic_echo_into_a_pipe_closed_early_ends_without_a_traceback(tmp_path):
     publisher = NodeProcess('bridge_publisher', domain, tmp_path, {'mode': 'wind_on', 'loop': True,
                                                                     'rate_hz': 100.0})
     try:
-        echo = subprocess.Popen([str(SCRIPTS / 'ros'), 'topic', 'echo', '/balance/raw', '--timeout', '60'],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                env=dict(os.environ, ROS_DOMAIN_ID=str(domain)))
+        echo = subprocess.Popen(
+            [str(SCRIPTS / 'ros'), 'topic', 'echo', '/balance/raw', '--timeout', '60'],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=dict(os.environ, ROS_DOMAIN_ID=str(domain)),
+        )
         head = [echo.stdout.readline() for _ in range(3)]          # what `| head -3` reads
         echo.stdout.close()
         status = echo.wait(60)
@@ -187,16 +199,36 @@ def test_topic_echo_into_a_pipe_closed_early_ends_without_a_traceback(tmp_path):
 @pytest.mark.ros
 def test_bag_play_into_bag_record_gives_back_the_campaign(tmp_path):
     config = load_balance_config('lmc6522')
-    settings = SimulationSettings(samples_per_point=3, transition_samples=1, seed=7, point_duration_s=0.05,
-                                  transition_s=0.02, sample_rate_hz=100.0)
-    original = write_campaign_bag(simulate_campaign(config, settings=settings), tmp_path / 'campaign',
-                                  points=slice(0, 30))
+    settings = SimulationSettings(
+        samples_per_point=3,
+        transition_samples=1,
+        seed=7,
+        point_duration_s=0.05,
+        transition_s=0.02,
+        sample_rate_hz=100.0,
+    )
+    original = write_campaign_bag(
+        simulate_campaign(config, settings=settings), tmp_path / 'campaign', points=slice(0, 30)
+    )
     domain = new_domain_id()
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
     copy = tmp_path / 'copy'
-    record = subprocess.Popen([str(SCRIPTS / 'ros'), 'bag', 'record', str(copy), '/balance/raw',
-                               '/calibration/applied_load', '/calibration/gravity', '/balance/temperature'],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    record = subprocess.Popen(
+        [
+            str(SCRIPTS / 'ros'),
+            'bag',
+            'record',
+            str(copy),
+            '/balance/raw',
+            '/calibration/applied_load',
+            '/calibration/gravity',
+            '/balance/temperature',
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+    )
     try:
         played = ros(domain, 'bag', 'play', original, '--rate', '2', '--wait-for-subscribers', '1')
         assert played.returncode == 0, played.stdout + played.stderr

@@ -272,8 +272,8 @@ class _Reader:
             read = sum(self.scan.counts.values())
             self.scan.losses.append(
                 f'{path}: {STILL_RECORDING}, or its recorder was stopped without closing it '
-                f'(no MCAP summary, no metadata.yaml yet): read the {read} messages on disk so far '
-                f'({at} of {size} bytes); what its writer still buffers is not in the file yet')
+                f'(no MCAP summary, no metadata.yaml yet): read the {read} messages on disk so '
+                f'far ({at} of {size} bytes); what its writer still buffers is not in it yet')
         return self.scan
 
     def _summary(self, data: bytes) -> dict | None:

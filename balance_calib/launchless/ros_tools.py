@@ -42,7 +42,7 @@ from ..closed_pipe import stdout_closed
 DEFAULT_TIMEOUT_S = 10.0
 SETTLE_S = 1.5          # a listing unchanged this long is the graph as discovery has it
 MIN_LISTING_S = 1.0     # and it is looked at for at least this long
-EMPTY_WAIT_S = 5.0      # an empty one this long (a loaded machine discovers slowly) before saying so
+EMPTY_WAIT_S = 5.0      # an empty one this long before it counts (a loaded machine is slow)
 
 
 class ToolError(Exception):
@@ -416,7 +416,8 @@ def node_info(args) -> int:
                         sorted(graph.get_service_names_and_types_by_node(name, namespace)))
             except Exception:       # rclpy's NodeNameNonExistentError: it left meanwhile
                 return ([], [], [])
-        subscribers, publishers, services = settled(session, info, max(deadline - time.monotonic(), 0.0))
+        left = max(deadline - time.monotonic(), 0.0)
+        subscribers, publishers, services = settled(session, info, left)
     print(node)
     for title, entries in (('Subscribers', subscribers), ('Publishers', publishers),
                            ('Service Servers', services)):
@@ -476,8 +477,8 @@ def bag_play(args) -> int:
         raise ToolError(f'--rate {args.rate:g}: give a positive factor')
     for bag in args.bags:
         if ',' in bag:
-            raise ToolError(f'{bag}: a bag path with a comma cannot be replayed (bridge_publisher\'s '
-                            'bag parameter separates paths by commas)')
+            raise ToolError(f'{bag}: a bag path with a comma cannot be replayed '
+                            '(bridge_publisher\'s bag parameter separates paths by commas)')
         if not Path(bag).exists():
             raise ToolError(f'{bag}: no such bag directory or .mcap file')
     parameters = {'mode': 'replay', 'bag': ','.join(args.bags), 'speed': args.rate,
@@ -545,11 +546,12 @@ def _stamp(nanoseconds: int) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog='ros', description='The ros2 CLI verbs a balance_calib user needs (param, topic, service, node, '
-                                'bag info/record/play), '
+        prog='ros', description='The ros2 CLI verbs a balance_calib user needs (param, topic, '
+                                'service, node, bag info/record/play), '
                                 'over rclpy, for environments without ros2cli. Same spelling as ros2.',
         epilog='Examples: ros param set /balance_calibrator calibration_bags "[bags/campaign_1]"; '
-               'ros service call /balance_calibrator/refit; ros topic hz /balance/raw; ros node info /balance_calibrator; ros bag info bags/campaign_1; '
+               'ros service call /balance_calibrator/refit; ros topic hz /balance/raw; '
+               'ros node info /balance_calibrator; ros bag info bags/campaign_1; '
                'ros bag record bags/run2 --duration 10; ros bag play bags/campaign_1')
     verbs = parser.add_subparsers(dest='verb', required=True, metavar='VERB', title='verbs')
 
@@ -622,47 +624,53 @@ def build_parser() -> argparse.ArgumentParser:
                      help='seconds to wait for the service and its reply (default 300: a refit takes a while)')
     sub.set_defaults(func=service_call)
 
-    node = verbs.add_parser('node', help='list nodes, show what one publishes, subscribes and serves',
-                            description='List the nodes on the graph, or show one node\'s publishers, '
-                                        'subscribers and services.')
+    node = verbs.add_parser(
+        'node', help='list nodes, show what one publishes, subscribes and serves',
+        description='List the nodes on the graph, or show one node\'s publishers, subscribers '
+                    'and services.')
     actions = node.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
-    sub = with_timeout(actions.add_parser('list', help='full names of the nodes on the graph',
-                                          description='Print the full names of the nodes on the graph, '
-                                                      'once discovery has settled.'),
-                       'discovery to settle')
+    sub = with_timeout(actions.add_parser(
+        'list', help='full names of the nodes on the graph',
+        description='Print the full names of the nodes on the graph, once discovery has settled.'),
+        'discovery to settle')
     sub.set_defaults(func=node_list)
-    sub = with_timeout(actions.add_parser('info', help='a node\'s subscribers, publishers and services',
-                                          description='Print the topics a node subscribes and publishes '
-                                                      'and the services it serves, with their types.'),
-                       'the node and discovery to settle')
+    sub = with_timeout(actions.add_parser(
+        'info', help='a node\'s subscribers, publishers and services',
+        description='Print the topics a node subscribes and publishes and the services it serves, '
+                    'with their types.'),
+        'the node and discovery to settle')
     sub.add_argument('node', help='node name, e.g. /balance_calibrator')
     sub.set_defaults(func=node_info)
 
-    bag = verbs.add_parser('bag', help='describe, record or play a bag',
-                           description='Describe a recorded bag (no DDS), record topics into a bag with '
-                                       'balance_recorder, or play bags with bridge_publisher\'s replay.')
+    bag = verbs.add_parser(
+        'bag', help='describe, record or play a bag',
+        description='Describe a recorded bag (no DDS), record topics into a bag with '
+                    'balance_recorder, or play bags with bridge_publisher\'s replay.')
     actions = bag.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
     sub = actions.add_parser('info', help='duration, message counts and topic types of a bag',
                              description='Print a bag\'s duration, start and end, message count, compression and '
                                          'topics with types and counts, from its MCAP summaries.')
     sub.add_argument('bag', help='rosbag2 directory (metadata.yaml + *.mcap) or a bare .mcap file')
     sub.set_defaults(func=bag_info)
-    sub = actions.add_parser('record', help='record topics into a new rosbag2 MCAP bag (balance_recorder)',
-                             description='Record topics into a new rosbag2 MCAP bag directory with the '
-                                         'package\'s balance_recorder, until Ctrl-C or --duration; the bag '
-                                         'is closed (metadata.yaml written) when it stops.')
+    sub = actions.add_parser(
+        'record', help='record topics into a new rosbag2 MCAP bag (balance_recorder)',
+        description='Record topics into a new rosbag2 MCAP bag directory with the package\'s '
+                    'balance_recorder, until Ctrl-C or --duration; the bag is closed '
+                    '(metadata.yaml written) when it stops.')
     sub.add_argument('out', help='bag directory to create (it must not exist)')
-    sub.add_argument('topics', nargs='*', help='topics to record (default: every topic of '
-                                               'docs/interfaces.md)')
-    sub.add_argument('--duration', type=float, help='stop after this many seconds (default: at Ctrl-C)')
+    sub.add_argument('topics', nargs='*',
+                     help='topics to record (default: every topic of docs/interfaces.md)')
+    sub.add_argument('--duration', type=float,
+                     help='stop after this many seconds (default: at Ctrl-C)')
     sub.set_defaults(func=bag_record)
-    sub = actions.add_parser('play', help='publish the messages of bags as recorded (bridge_publisher '
-                                          'replay)',
-                             description='Publish every message of the bags in receive-time order, header '
-                                         'stamps as recorded, with bridge_publisher in replay mode (node '
-                                         'name bag_player); ends when the bags are played.')
+    sub = actions.add_parser(
+        'play', help='publish the messages of bags as recorded (bridge_publisher replay)',
+        description='Publish every message of the bags in receive-time order, header stamps as '
+                    'recorded, with bridge_publisher in replay mode (node name bag_player); ends '
+                    'when the bags are played.')
     sub.add_argument('bags', nargs='+', help='rosbag2 directories or bare .mcap files')
-    sub.add_argument('--rate', type=float, default=1.0, help='recorded seconds per real second (default 1)')
+    sub.add_argument('--rate', type=float, default=1.0,
+                     help='recorded seconds per real second (default 1)')
     sub.add_argument('--loop', action='store_true', help='start again at the end, until Ctrl-C')
     sub.add_argument('--wait-for-subscribers', type=int, default=0,
                      help='start when /balance/raw has this many subscribers (default 0: at once; '

@@ -1,7 +1,8 @@
 """`launchless_scripts/windon OUT`: record a simulated wind-on run into the bag `reduce` takes.
 
-    launchless_scripts/windon OUT [--model euler_replica_lmc6522] [--q-pa 50000] [--installation upright]
-                                  [--alpha-deg -2,22,2] [--hold-s 0.5] [--wind-off-hold-s 0.3] ...
+    launchless_scripts/windon OUT [--model euler_replica_lmc6522] [--q-pa 50000]
+                                  [--installation upright] [--alpha-deg=-2,22,2] [--hold-s 0.5]
+                                  [--wind-off-hold-s 0.3] ...
 
 balance_recorder (its default topics: every topic of docs/interfaces.md, plus the simulation's
 /aero/truth and /aero/truth_wind) and bridge_publisher in wind-on mode with a model
@@ -60,8 +61,9 @@ def publisher_parameters(*, model: str, balance: str, q_pa: float, installation:
                          subscriber_timeout_s: float) -> dict:
     """bridge_publisher's parameters for a physical wind-on run (nodes/bridge_publisher.py)."""
     start, end, step = (float(v) for v in alpha_deg)
-    return {'mode': 'wind_on', 'aero_model': model, 'balance': balance, 'dynamic_pressure_pa': q_pa,
-            'installation': installation, 'alpha_start_deg': start, 'alpha_end_deg': end,
+    return {'mode': 'wind_on', 'aero_model': model, 'balance': balance,
+            'dynamic_pressure_pa': q_pa, 'installation': installation,
+            'alpha_start_deg': start, 'alpha_end_deg': end,
             'alpha_step_deg': step, 'hold_s': hold_s, 'wind_off_hold_s': wind_off_hold_s,
             'rate_hz': rate_hz, 'seed': seed, 'noise_sigma_pct_fs': noise_sigma_pct_fs,
             'exit_when_done': True, 'wait_for_subscribers': 1,
@@ -69,7 +71,7 @@ def publisher_parameters(*, model: str, balance: str, q_pa: float, installation:
 
 
 def reduce_command(bag: Path, *, model: str, balance: str, installation: str) -> list[str]:
-    """The `balance-calib reduce` command line for the recorded bag (the balance's shipped matrices)."""
+    """The `balance-calib reduce` command line for the bag (the balance's shipped matrices)."""
     return ['balance-calib', 'reduce', str(bag), '--calibration', balance, '--model', model,
             '--installation', installation, '--out', str(bag.parent / f'{bag.name}_reduce')]
 
@@ -120,7 +122,8 @@ def record_wind_on_run(out: Path, *, model: str = DEFAULT_MODEL, balance: str = 
                                                          env=env, start_new_session=True)
         processes['bridge_publisher'] = subprocess.Popen(['bridge_publisher', *publisher_args],
                                                          env=env, start_new_session=True)
-        say(f'windon: recording {model} on the {balance} ({installation}, q∞ {q_pa:g} Pa) into {out}')
+        say(f'windon: recording {model} on the {balance} ({installation}, q∞ {q_pa:g} Pa) '
+            f'into {out}')
         publisher, recorder = processes['bridge_publisher'], processes['balance_recorder']
         deadline = time.monotonic() + run_timeout_s
         while publisher.poll() is None and not interrupted:
@@ -198,26 +201,31 @@ def build_parser() -> argparse.ArgumentParser:
                '--calibration lmc6522 --model euler_replica_lmc6522 --out OUT_reduce).')
     parser.add_argument('out', help='bag directory to create (it must not exist)')
     parser.add_argument('--model', default=DEFAULT_MODEL,
-                        help=f'model file, config/models/NAME.yaml or a path (default {DEFAULT_MODEL})')
-    parser.add_argument('--balance', default='lmc6522', help='balance config the simulated balance '
-                                                             'follows (default lmc6522)')
+                        help=f'model file, config/models/NAME.yaml or a path '
+                             f'(default {DEFAULT_MODEL})')
+    parser.add_argument('--balance', default='lmc6522',
+                        help='balance config the simulated balance follows (default lmc6522)')
     parser.add_argument('--q-pa', type=_positive, default=50000.0,
                         help='dynamic pressure of the wind-on holds, Pa (default 50000)')
-    parser.add_argument('--installation', default='upright', help='upright or inverted (TM-663 §10.2)')
+    parser.add_argument('--installation', default='upright',
+                        help='upright or inverted (TM-663 §10.2)')
     parser.add_argument('--alpha-deg', type=_alpha, default=(-2.0, 22.0, 2.0),
-                        help='wind-on α sweep START,END,STEP in degrees (default -2,22,2; spell a negative '
-                             'START as --alpha-deg=-4,20,4)')
-    parser.add_argument('--hold-s', type=_positive, default=0.5, help='seconds at each wind-on α (default 0.5)')
+                        help='wind-on α sweep START,END,STEP in degrees (default -2,22,2; '
+                             'spell a negative START as --alpha-deg=-4,20,4)')
+    parser.add_argument('--hold-s', type=_positive, default=0.5,
+                        help='seconds at each wind-on α (default 0.5)')
     parser.add_argument('--wind-off-hold-s', type=_positive, default=0.3,
                         help='seconds at each wind-off attitude (default 0.3)')
     parser.add_argument('--rate-hz', type=_positive, default=200.0,
                         help='bridge samples per second (default 200)')
-    parser.add_argument('--seed', type=int, default=0, help='random seed of the simulated noise (default 0)')
+    parser.add_argument('--seed', type=int, default=0,
+                        help='random seed of the simulated noise (default 0)')
     parser.add_argument('--noise-pct-fs', type=float, default=-1.0,
-                        help="σ of a held point's mean load, %% FS (default -1: Table 17's cubic row)")
+                        help="σ of a held point's mean load, %% FS "
+                             "(default -1: Table 17's cubic row)")
     parser.add_argument('--subscriber-timeout-s', type=_positive, default=30.0,
-                        help='bridge_publisher gives up when the recorder has not subscribed within this '
-                             'time, s (default 30)')
+                        help='bridge_publisher gives up when the recorder has not subscribed '
+                             'within this time, s (default 30)')
     return parser
 
 

@@ -27,8 +27,8 @@ from balance_calib.bags.writer import BagWriter, qos_profiles_yaml
 # every topic of docs/interfaces.md: a calibration campaign, the live calibrator, a wind-on run
 DEFAULT_TOPICS = ['/balance/raw', '/balance/temperature', '/calibration/applied_load',
                   '/calibration/gravity', '/balance/wrench', '/balance/wrench_uncertainty',
-                  '/balance/overload', '/diagnostics', '/model/attitude', '/tunnel/dynamic_pressure',
-                  '/aero/coefficients', '/aero/wind_coefficients']
+                  '/balance/overload', '/diagnostics', '/model/attitude',
+                  '/tunnel/dynamic_pressure', '/aero/coefficients', '/aero/wind_coefficients']
 DISCOVERY_PERIOD_S = 0.5
 FLUSH_PERIOD_S = 1.0  # the file holds what was received up to this long ago
 QUEUE_DEPTH = 1000  # a recorder would rather buffer than drop

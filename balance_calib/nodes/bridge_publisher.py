@@ -347,9 +347,9 @@ class BridgePublisher(Node):
         if limit <= 0 or waited < limit:
             return
         seen = ', '.join(f'{p.topic_name} {p.get_subscription_count()}' for p in gated + events)
-        self.failure = (f'gave up after {limit:g} s waiting for {what} (subscribers seen: {seen}); '
-                        'start the subscribers first, or set wait_for_subscribers or '
-                        'wait_for_subscribers_timeout_s')
+        self.failure = (f'gave up after {limit:g} s waiting for {what} '
+                        f'(subscribers seen: {seen}); start the subscribers first, or set '
+                        'wait_for_subscribers or wait_for_subscribers_timeout_s')
         self._timer.cancel()
         if not self.done.done():
             self.done.set_result(False)
