@@ -345,41 +345,45 @@ def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tare_
     conditions when the zero was taken (for models with temperature or load-direction terms).
     """
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
-    with np.errstate(invalid='ignore', over='ignore'):
-        finite = active.inputs_finite(outputs)       # channels the calibration does not read aside
-        saturated = finite & (np.abs(outputs) > active.output_range_mv).any(axis=1)
+    with np.errstate(invalid='ignore', over='ignore'):     # a sample beyond float range is flagged below
+        return _compute_wrench(active, outputs, zero_mv, tare_load, temperature_c, load_direction,
+                               zero_temperature_c, zero_direction)
+
+
+def _compute_wrench(active, outputs, zero_mv, tare_load, temperature_c, load_direction, zero_temperature_c,
+                    zero_direction) -> WrenchBatch:
+    finite = active.inputs_finite(outputs)           # channels the calibration does not read aside
+    saturated = finite & (np.abs(outputs) > active.output_range_mv).any(axis=1)
     accepted = finite & ~saturated
+    everyone = bool(accepted.all())
     zeroed = outputs if zero_mv is None else outputs - np.asarray(zero_mv, dtype=float)
     name, reason, design = active.model_name, '', None
-    if not active.model.extra_variables:        # the outputs alone: their design rows kept
-        totals = np.full(outputs.shape, np.nan)
-        if accepted.all():
-            totals, design = _plain_loads(active, zeroed)
-        elif accepted.any():
-            totals[accepted], design = _plain_loads(active, zeroed[accepted])
-    elif accepted.all():
+    if everyone and not active.model.extra_variables:     # the outputs alone: their design rows kept
+        totals, design = _plain_loads(active, zeroed)
+    elif everyone:
         totals, name, reason = _loads_with_zero(active, zeroed, temperature_c, load_direction, zero_mv,
                                                 zero_temperature_c, zero_direction)
     else:
         totals = np.full(outputs.shape, np.nan)
-        if accepted.any():
+        if not active.model.extra_variables and accepted.any():
+            totals[accepted], design = _plain_loads(active, zeroed[accepted])
+        elif accepted.any():
             temps = None if temperature_c is None else np.broadcast_to(np.asarray(temperature_c, float),
                                                                         (len(outputs),))[accepted]
             direction = None if load_direction is None else np.broadcast_to(load_direction, outputs.shape)[accepted]
             totals[accepted], name, reason = _loads_with_zero(active, zeroed[accepted], temps, direction, zero_mv,
                                                               zero_temperature_c, zero_direction)
     not_converged = np.zeros(len(outputs), dtype=bool)
-    with np.errstate(invalid='ignore', over='ignore'):
-        overflow = accepted & ~np.isfinite(totals).all(axis=1)    # finite outputs, loads beyond float range
-        if overflow.any():
-            if active.iterative:          # finite outputs without loads: Newton did not converge there
-                not_converged = overflow
-            else:
-                saturated = saturated | overflow
-            accepted = accepted & ~overflow
-            totals[overflow] = np.nan
-            design = None                 # its rows no longer match the published samples
-        outside = accepted & np.any(np.abs(totals) > active.envelope, axis=1)
+    overflow = accepted & ~np.isfinite(totals).all(axis=1)    # finite outputs, loads beyond float range
+    if overflow.any():
+        if active.iterative:          # finite outputs without loads: Newton did not converge there
+            not_converged = overflow
+        else:
+            saturated = saturated | overflow
+        accepted = accepted & ~overflow
+        totals[overflow] = np.nan
+        design = None                 # its rows no longer match the published samples
+    outside = accepted & np.any(np.abs(totals) > active.envelope, axis=1)
     loads = totals if tare_load is None else totals - np.asarray(tare_load, dtype=float)
     wrench = active.installation.to_tunnel(loads)          # TM-663 §10.2
     return WrenchBatch(accepted, loads, wrench, outside, name, reason, totals, saturated, not_converged,
