@@ -39,11 +39,11 @@ def six(data: bytes) -> np.ndarray:
 
 
 def through_kernel(live, data, now_s, encoder, scale=1.0):
-    """One message through LiveCalibrator.process_messages (the live path's one call) -> (wrench bytes,
-    uncertainty bytes or None) when the C kernel took it, else None (the pure core took it in the same
-    call)."""
-    out = live.process_messages([data], now_s=now_s, decode=decode_wrenches, input_scale=scale, encoder=encoder,
-                                uncertainty_wanted=True)
+    """One message through LiveCalibrator.process_messages (the live path's one call) ->
+    (wrench bytes, uncertainty bytes or None) when the C kernel took it, else None (the pure
+    core took it in the same call)."""
+    out = live.process_messages([data], now_s=now_s, decode=decode_wrenches, input_scale=scale,
+                                encoder=encoder, uncertainty_wanted=True)
     if not out.accelerated:
         return None
     uncertainty = out.uncertainty()
@@ -51,12 +51,12 @@ def through_kernel(live, data, now_s, encoder, scale=1.0):
 
 
 def lone_through_kernel(live, messages, scale, encoder):
-    """Each message alone through process_messages, 0.1 s apart; wrench/uncertainty per message (None: not
-    published), and which ones the kernel took."""
+    """Each message alone through process_messages, 0.1 s apart; wrench/uncertainty per message
+    (None: not published), and which ones the kernel took."""
     wrench, uncertainty, by_kernel = [], [], []
     for k, data in enumerate(messages):
-        out = live.process_messages([data], now_s=0.1 * k, decode=decode_wrenches, input_scale=scale,
-                                    encoder=encoder, uncertainty_wanted=True)
+        out = live.process_messages([data], now_s=0.1 * k, decode=decode_wrenches,
+                                    input_scale=scale, encoder=encoder, uncertainty_wanted=True)
         by_kernel.append(out.accelerated == 1)
         values = out.uncertainty()
         wrench.append(six(out.wrench[0]) if out.wrench else None)
@@ -140,7 +140,8 @@ def test_kernel_raises_the_overload_and_a_new_tare_reaches_it():
     before = through_kernel(live, first, 0.0, encoder)
     live.start_window('tare', 20)
     window = quiet[:1] + rng.normal(0.0, 1e-4, (20, 6)) * MEMO.rated_output_mv
-    assert through_kernel(live, serialized(window[:1], stamps[1:2])[0], 0.0, encoder) is None  # the window collects
+    collecting = serialized(window[:1], stamps[1:2])[0]
+    assert through_kernel(live, collecting, 0.0, encoder) is None     # the window collects
     live.process(window[1:], 2 * 10**9 + np.arange(1, 20) * 10**6, now_s=0.0)
     assert live.finish_window().ok
     after = through_kernel(live, serialized(quiet[:1], stamps[2:3] + 3 * 10**9)[0], 0.0, encoder)

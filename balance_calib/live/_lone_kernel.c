@@ -1,10 +1,11 @@
 /* The live calibrator's lone sample in one C call: serialized balance/raw sample in, serialized
  * balance/wrench and balance/wrench_uncertainty out (live/lone_sample.py says when it applies).
  *
- * The pure core's vectorised path (calibrator_core.compute_wrench, stream.wrench_uncertainty) is the
- * specification; this is its only accelerator, for one sample of a direct polynomial model of the
- * bridge outputs, the same steps in the same order (stream.LiveCalibrator.process_messages calls it
- * for the samples it takes); test/test_lone_kernel.py holds the two to 1e-12:
+ * The pure core's vectorised path (calibrator_core.compute_wrench, stream.wrench_uncertainty)
+ * is the specification; this is its only accelerator, for one sample of a direct polynomial
+ * model of the bridge outputs, the same steps in the same order (called by
+ * stream.LiveCalibrator.process_messages for the samples it takes); test/test_lone_kernel.py
+ * holds the two to 1e-12:
  *
  *   x      = outputs * input_scale - zero                     electrical zero, output space (TM-663 §5)
  *   d_t    = prod over the term's columns of [x, 1]           design row, eqs. (1)-(18)

@@ -110,9 +110,9 @@ class ActiveCalibration:
 
     @cached_property
     def one_sample_terms(self) -> tuple[tuple[int, ...], ...] | None:
-        """Per term, the raw-output columns to multiply (with repetition): the C kernel's form of the
-        model (live/lone_sample.py); None when a term has an absolute value or a power beyond 3 (the
-        kernel does not apply then), or for an iterative model."""
+        """Per term, the raw-output columns to multiply (with repetition): the C kernel's form
+        of the model (live/lone_sample.py); None when a term has an absolute value or a power
+        beyond 3 (the kernel does not apply then), or for an iterative model."""
         columns, _, plain, absolute, _ = self.plan
         if plain is None or absolute is not None or plain.size == 0 or plain.max() > 3 or plain.min() < 0:
             return None
@@ -121,8 +121,9 @@ class ActiveCalibration:
 
     @cached_property
     def one_sample_index(self) -> np.ndarray | None:
-        """one_sample_terms as an (n_terms, width) index into the six outputs followed by a 1.0 (index 6):
-        the design row of one sample is the product of each row's entries (the C kernel's plan)."""
+        """one_sample_terms as an (n_terms, width) index into the six outputs followed by a 1.0
+        (index 6): the design row of one sample is the product of each row's entries (the C
+        kernel's plan)."""
         terms = self.one_sample_terms
         if terms is None:
             return None
@@ -292,9 +293,10 @@ class WrenchBatch:
     loads_total: np.ndarray | None = None   # (N, 6) before the tare load: what the balance carries
     saturated: np.ndarray | None = None     # (N,) an output beyond the bridge's range (or a non-finite load)
     not_converged: np.ndarray | None = None  # (N,) iterative model: Newton did not converge (not published)
-    design_row: np.ndarray | None = None    # (M, n_terms) the design rows of the M accepted samples (model
-    #                                         term order), for their uncertainty; None for models with inputs
-    #                                         besides the outputs, iterative ones or a batch with an overflow
+    # (M, n_terms) the design rows of the M accepted samples (model term order), for their
+    # uncertainty; None for models with inputs besides the outputs, iterative ones, or a batch
+    # with an overflow
+    design_row: np.ndarray | None = None
 
     @property
     def nonfinite(self) -> np.ndarray:
@@ -321,7 +323,8 @@ def model_loads(active: ActiveCalibration, outputs_mv, *, temperature_c=None,
     return six_axis_loads(model, outputs, extra or None), name, reason
 
 
-def _plain_loads(active: ActiveCalibration, outputs: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+def _plain_loads(active: ActiveCalibration,
+                 outputs: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """A model of the bridge outputs only: a direct model as one power-product and one matrix product
     (TM-663 eqs. (1)-(18)); an iterative model by its vectorised Newton iteration (AIAA R-091), NaN rows
     where it did not converge. Loads (N, 6) and, for a direct model, its design rows (N, n_terms)
@@ -345,20 +348,20 @@ def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tare_
     conditions when the zero was taken (for models with temperature or load-direction terms).
     """
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
-    with np.errstate(invalid='ignore', over='ignore'):     # a sample beyond float range is flagged below
+    with np.errstate(invalid='ignore', over='ignore'):     # beyond float range: flagged below
         return _compute_wrench(active, outputs, zero_mv, tare_load, temperature_c, load_direction,
                                zero_temperature_c, zero_direction)
 
 
-def _compute_wrench(active, outputs, zero_mv, tare_load, temperature_c, load_direction, zero_temperature_c,
-                    zero_direction) -> WrenchBatch:
+def _compute_wrench(active, outputs, zero_mv, tare_load, temperature_c, load_direction,
+                    zero_temperature_c, zero_direction) -> WrenchBatch:
     finite = active.inputs_finite(outputs)           # channels the calibration does not read aside
     saturated = finite & (np.abs(outputs) > active.output_range_mv).any(axis=1)
     accepted = finite & ~saturated
     everyone = bool(accepted.all())
     zeroed = outputs if zero_mv is None else outputs - np.asarray(zero_mv, dtype=float)
     name, reason, design = active.model_name, '', None
-    if everyone and not active.model.extra_variables:     # the outputs alone: their design rows kept
+    if everyone and not active.model.extra_variables:   # the outputs alone: design rows kept
         totals, design = _plain_loads(active, zeroed)
     elif everyone:
         totals, name, reason = _loads_with_zero(active, zeroed, temperature_c, load_direction, zero_mv,
@@ -374,7 +377,8 @@ def _compute_wrench(active, outputs, zero_mv, tare_load, temperature_c, load_dir
             totals[accepted], name, reason = _loads_with_zero(active, zeroed[accepted], temps, direction, zero_mv,
                                                               zero_temperature_c, zero_direction)
     not_converged = np.zeros(len(outputs), dtype=bool)
-    overflow = accepted & ~np.isfinite(totals).all(axis=1)    # finite outputs, loads beyond float range
+    # finite outputs, loads beyond float range
+    overflow = accepted & ~np.isfinite(totals).all(axis=1)
     if overflow.any():
         if active.iterative:          # finite outputs without loads: Newton did not converge there
             not_converged = overflow
@@ -386,8 +390,8 @@ def _compute_wrench(active, outputs, zero_mv, tare_load, temperature_c, load_dir
     outside = accepted & np.any(np.abs(totals) > active.envelope, axis=1)
     loads = totals if tare_load is None else totals - np.asarray(tare_load, dtype=float)
     wrench = active.installation.to_tunnel(loads)          # TM-663 §10.2
-    return WrenchBatch(accepted, loads, wrench, outside, name, reason, totals, saturated, not_converged,
-                       design)
+    return WrenchBatch(accepted, loads, wrench, outside, name, reason, totals, saturated,
+                       not_converged, design)
 
 
 def _loads_with_zero(active, zeroed, temperature_c, load_direction, zero_mv, zero_temperature_c, zero_direction):

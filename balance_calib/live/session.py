@@ -114,31 +114,33 @@ class CalibratorSession:
             self.temperature_c, self.temperature_s = float(temperature_c), time.monotonic()
 
     def on_samples(self, messages: list[bytes], uncertainty_wanted: bool = True) -> Output | None:
-        """One batch of serialized balance/raw samples -> serialized wrenches (None: nothing can run);
-        the uncertainty only when wanted (someone subscribes to it), computed by Output.uncertainty().
-        One call of the live path (LiveCalibrator.process_messages: the C kernel where it applies, the
-        pure core for the rest)."""
+        """One batch of serialized balance/raw samples -> serialized wrenches (None: nothing can
+        run); the uncertainty only when wanted (someone subscribes to it), computed by
+        Output.uncertainty(). One call of the live path (LiveCalibrator.process_messages: the C
+        kernel where it applies, the pure core for the rest)."""
         now_s = time.monotonic()
         self.last_sample_s = now_s
         fresh = self.temperature_s is not None and now_s - self.temperature_s <= self.stale_after_s
         with self.lock:
             live = self.live
             try:
-                out = live.process_messages(messages, now_s=now_s, decode=self._decode, input_scale=self.input_scale,
-                                            encoder=self.encoder, temperature_c=self.temperature_c if fresh else None,
-                                            uncertainty_wanted=uncertainty_wanted)
+                out = live.process_messages(
+                    messages, now_s=now_s, decode=self._decode, input_scale=self.input_scale,
+                    encoder=self.encoder, temperature_c=self.temperature_c if fresh else None,
+                    uncertainty_wanted=uncertainty_wanted)
             except ConfigError as err:       # neither the model nor its base can run: publish nothing
                 self.log('repeated_error', str(err))
                 return None
-            out.overload = self._say_changes('' if out.batch is None else out.batch.fallback_reason)
+            reason = '' if out.batch is None else out.batch.fallback_reason
+            out.overload = self._say_changes(reason)
             if self.window_complete is not None and live.window is not None and live.window.complete:
                 done, self.window_complete = self.window_complete, None
                 done()
         return out
 
     def _decode(self, messages: list[bytes]):
-        """(stamps_ns, outputs, frame ids) of serialized samples; rclpy's deserializer for bytes the
-        fast decoder does not know."""
+        """(stamps_ns, outputs, frame ids) of serialized samples; rclpy's deserializer for bytes
+        the fast decoder does not know."""
         try:
             return decode_wrenches(messages)
         except ValueError:

@@ -62,8 +62,8 @@ class InputMonitor:
     def update(self, stamps_ns, frame_ids=None) -> None:
         """A batch of stamps (N,) ns in arrival order (array or list) and their frame ids.
 
-        One pass in plain Python: a sequential state machine (the latest stamp so far), and at 1 kHz
-        every batch is one sample, where numpy's per-call cost would be most of the work. The
+        One pass in plain Python: a sequential state machine (the latest stamp so far), and at
+        1 kHz every batch is one sample, where numpy's per-call cost would be most of the work. The
         interval is estimated before the batch's gaps are counted (from the batch's own differences
         when there is none yet) and re-taken after it."""
         if frame_ids is not None:
@@ -162,7 +162,7 @@ class OverloadMonitor:
 
 class LowPass:
     """First-order low-pass on each component, y += a (x - y) with a = 1 - exp(-2π f_c Δt), state carried
-    across batches (scipy.signal.lfilter for a batch)."""
+    across batches (scipy.signal.lfilter)."""
 
     def __init__(self, cutoff_hz: float):
         self.cutoff_hz = cutoff_hz
@@ -187,12 +187,13 @@ class LowPass:
 
 
 class Output:
-    """What one batch of samples gives the node to publish (serialized): the wrenches in arrival order,
-    overload: the new overload state if it changed (None: unchanged; the session sets it, see
-    LiveCalibrator.overload_changed), and uncertainty() -> the uncertainties,
-    computed when asked (after the wrenches went out). accelerated: how many of the leading samples the
-    C kernel took; batch: the pure core's WrenchBatch of the rest (None if the kernel took all)."""
-    __slots__ = ('wrench', 'overload', 'accelerated', 'batch', '_ready', '_later', '_stamps', '_encoder')
+    """What one batch of samples gives the node to publish (serialized): the wrenches in arrival
+    order; overload: the new overload state if it changed (None: unchanged; the session sets it,
+    see LiveCalibrator.overload_changed); uncertainty() -> the uncertainties, computed when asked
+    (after the wrenches went out). accelerated: how many of the leading samples the C kernel took;
+    batch: the pure core's WrenchBatch of the rest (None if the kernel took all)."""
+    __slots__ = ('wrench', 'overload', 'accelerated', 'batch', '_ready', '_later', '_stamps',
+                 '_encoder')
 
     def __init__(self, wrench: list, ready: list, later=None, stamps=None, encoder=None, *,
                  accelerated: int = 0, batch: WrenchBatch | None = None):
@@ -235,10 +236,10 @@ def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, ta
     if (model.extra_variables and extra is None) or not has_uncertainty(model):
         return None
     columns = [BRIDGE_OUTPUTS.index(v) for v in model.inputs]
-    per_component = load_standard_uncertainty(
-        model, zeroed_outputs[:, columns], extra, tare_sigma=tare,
-        loads=None if loads_balance is None or not iterative else np.asarray(loads_balance)[:, positions],
-        design=design)
+    loads = None if loads_balance is None or not iterative else \
+        np.asarray(loads_balance)[:, positions]
+    per_component = load_standard_uncertainty(model, zeroed_outputs[:, columns], extra,
+                                              tare_sigma=tare, loads=loads, design=design)
     six = np.full((len(zeroed_outputs), 6), np.nan)     # NaN: a component the calibration lacks
     six[:, positions] = per_component
     return np.abs(active.installation.to_tunnel(six))       # a signed permutation: magnitudes carry over
@@ -331,42 +332,48 @@ class LiveCalibrator:
             return Published(indices, wrench, batch, uncertainty_later=uncertainty)
         return Published(indices, wrench, batch, uncertainty())
 
-    def process_messages(self, messages: list[bytes], *, now_s: float, decode: Callable, input_scale: float,
-                         encoder: WrenchEncoder, temperature_c: float | None = None,
+    def process_messages(self, messages: list[bytes], *, now_s: float, decode: Callable,
+                         input_scale: float, encoder: WrenchEncoder,
+                         temperature_c: float | None = None,
                          uncertainty_wanted: bool = True) -> Output:
-        """A batch of serialized balance/raw samples -> the serialized wrenches to publish (Output), with
-        the same state as process() on the decoded batch: the one call of the live path.
+        """A batch of serialized balance/raw samples -> the serialized wrenches to publish
+        (Output), with the same state as process() on the decoded batch: the one call of the live
+        path.
 
         The C kernel (lone_sample.py), the pure core's only accelerator, takes the samples from the
-        first while it applies (no tare window, no low-pass, no overload held; a calibration it knows)
-        and accepts them -- 2-3 µs a sample, where the vectorised path costs tens of µs a call, which
-        at 1 kHz (one sample a wake-up) is every sample. The rest of the batch, from the first sample
-        it declines (or the one that raised an overload), goes through process(). decode(messages) ->
-        (stamps_ns (N,), outputs (N, 6) in the input's unit, frame ids); input_scale: to mV."""
-        taken = self._through_kernel(messages, now_s, input_scale, encoder.middle, uncertainty_wanted)
-        wrench, ready = taken[0], taken[1]
+        first while it applies (no tare window, no low-pass, no overload held; a calibration it
+        knows) and accepts them -- 2-3 µs a sample, where the vectorised path costs tens of µs a
+        call, which at 1 kHz (one sample a wake-up) is every sample. The rest of the batch, from
+        the first sample it declines (or the one that raised an overload), goes through process().
+        decode(messages) -> (stamps_ns (N,), outputs (N, 6) in the input's unit, frame ids);
+        input_scale: to mV."""
+        wrench, ready = self._through_kernel(messages, now_s, input_scale, encoder.middle,
+                                             uncertainty_wanted)
         if len(wrench) == len(messages):
             return Output(wrench, ready, accelerated=len(wrench))
         changed = self.overload_changed
         stamps_ns, outputs, frame_ids = decode(messages[len(wrench):] if wrench else messages)
         if input_scale != 1.0:          # ratiometric bridge outputs (input_units) to mV
             outputs = outputs * input_scale
-        published = self.process(outputs, stamps_ns, frame_ids, now_s=now_s, temperature_c=temperature_c,
+        published = self.process(outputs, stamps_ns, frame_ids, now_s=now_s,
+                                 temperature_c=temperature_c,
                                  uncertainty_wanted=uncertainty_wanted, defer_uncertainty=True)
         self.overload_changed = changed or self.overload_changed
         stamps = stamps_ns[published.indices]
-        return Output(wrench + encoder.encode(stamps, published.wrench), ready, published.uncertainty_later,
-                      stamps, encoder, accelerated=len(wrench), batch=published.batch)
+        return Output(wrench + encoder.encode(stamps, published.wrench), ready,
+                      published.uncertainty_later, stamps, encoder, accelerated=len(wrench),
+                      batch=published.batch)
 
-    def _through_kernel(self, messages: list[bytes], now_s: float, input_scale: float, middle: bytes,
-                        uncertainty_wanted: bool) -> tuple[list, list]:
-        """The leading samples the C kernel takes: (wrench bytes, uncertainty bytes), with the input
-        monitor, counters and overload fed as process() feeds them."""
+    def _through_kernel(self, messages: list[bytes], now_s: float, input_scale: float,
+                        middle: bytes, uncertainty_wanted: bool) -> tuple[list, list]:
+        """The leading samples the C kernel takes: (wrench bytes, uncertainty bytes), with the
+        input monitor, counters and overload fed as process() feeds them."""
         self.overload_changed = False
         if not lone_sample.available or self.window is not None or self.lowpass.cutoff_hz > 0 \
                 or self.overload.active:
             return [], []
-        made_for = self._lone_plan_for     # (calibration, zero and tare, input scale, frame): made again on a change
+        # the plan, for (calibration, zero and tare, input scale, frame): made again on a change
+        made_for = self._lone_plan_for
         if made_for is None or made_for[0] is not self.active or made_for[1] is not self.tare \
                 or made_for[2] != input_scale or made_for[3] is not middle:
             self._lone_plan = lone_sample.make_plan(self.active, self.tare, input_scale, middle)
@@ -388,8 +395,9 @@ class LiveCalibrator:
             stamps.append(stamp_ns)
             frames.append(frame_id.decode('utf-8', 'replace'))
             outside += out
-            if exceeds:     # the overload is raised: held from here, so the pure core takes the rest
-                self.overload_changed = overload.update(np.array([loads_total]), np.zeros(1, bool), now_s)
+            if exceeds:     # the overload is raised: held from here, the pure core takes the rest
+                self.overload_changed = overload.update(np.array([loads_total]), np.zeros(1, bool),
+                                                        now_s)
                 break
         if wrench:
             self.uncertainty_wanted = uncertainty_wanted
