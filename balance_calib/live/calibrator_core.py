@@ -612,14 +612,16 @@ class InputCounters:
         self.received += n
         self.period_received += n
         self.published += ok
-        self.rejected_nonfinite += n - ok - saturated - failed
-        self.period_rejected += n - ok - saturated - failed
-        self.saturated += saturated
-        self.period_saturated += saturated
-        self.not_converged += failed
-        self.period_not_converged += failed
-        self.out_of_envelope += out
-        self.period_out_of_envelope += out
+        if ok != n:                 # at 1 kHz almost every call is one published sample
+            self.rejected_nonfinite += n - ok - saturated - failed
+            self.period_rejected += n - ok - saturated - failed
+            self.saturated += saturated
+            self.period_saturated += saturated
+            self.not_converged += failed
+            self.period_not_converged += failed
+        if out:
+            self.out_of_envelope += out
+            self.period_out_of_envelope += out
 
     def start_period(self) -> None:
         self.period_received = self.period_rejected = self.period_out_of_envelope = self.period_saturated = 0

@@ -72,10 +72,12 @@ class InputMonitor:
                 self._add('samples from another balance', len(foreign))
                 if len(self.foreign_frames) < 8:
                     self.foreign_frames.update(foreign[:8])
-        values = stamps_ns.tolist() if isinstance(stamps_ns, np.ndarray) else list(stamps_ns)
-        stamps = [v for v in values if v != 0]
-        self._add('zero stamps', len(values) - len(stamps))
-        if not stamps:
+        stamps = stamps_ns.tolist() if isinstance(stamps_ns, np.ndarray) else stamps_ns
+        if 0 in stamps:
+            nonzero = [v for v in stamps if v != 0]
+            self._add('zero stamps', len(stamps) - len(nonzero))
+            stamps = nonzero
+        if not len(stamps):
             return
         first = self.last_stamp_ns is None
         latest = stamps[0] if first else self.last_stamp_ns
@@ -89,15 +91,18 @@ class InputMonitor:
                 out_of_order += 1
             else:
                 duplicates += 1
-        self._add('stamps out of order', out_of_order)
-        self._add('duplicate stamps', duplicates)
+        if out_of_order or duplicates:
+            self._add('stamps out of order', out_of_order)
+            self._add('duplicate stamps', duplicates)
         self.last_stamp_ns = latest
         if self.interval_ns is None and len(positive) >= 3:     # a first batch: its own median
             self.interval_ns = float(np.median(positive))
         if self.interval_ns is not None and positive:
             interval = self.interval_ns
-            self._add('samples lost (gaps in the stamps)',
-                      sum(round(d / interval) - 1 for d in positive if d > 1.5 * interval))
+            gaps = [d for d in positive if d > 1.5 * interval]
+            if gaps:
+                self._add('samples lost (gaps in the stamps)',
+                          sum(round(d / interval) - 1 for d in gaps))
         ring, filled = self._differences, self._filled
         for difference in positive[-256:]:
             ring[filled % 256] = difference
