@@ -16,10 +16,12 @@ setup(
         ('share/' + package_name + '/config/models', glob('config/models/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.yaml')),
     ],
-    # the live calibrator's lone sample in C (live/lone_sample.py); optional: without a C compiler the
-    # package installs and every sample takes the pure core's path (the node says so at start-up)
+    # the live calibrator's lone sample in C (live/lone_sample.py), the pure core's only
+    # accelerator, warning-free (-Wall -Werror); optional: without a C compiler the package
+    # installs and every sample takes the pure core's path (the node says so at start-up)
     ext_modules=[Extension('balance_calib.live._lone_kernel', ['balance_calib/live/_lone_kernel.c'],
-                           extra_compile_args=['-O2', '-std=c99'], optional=True)],
+                           extra_compile_args=['-O2', '-std=c99', '-Wall', '-Werror'],
+                           optional=True)],
     install_requires=['setuptools'],
     zip_safe=False,
     maintainer='balance_calib maintainers',

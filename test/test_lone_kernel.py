@@ -12,7 +12,7 @@ from balance_calib.calibration_file import load_calibration
 from balance_calib.config import CONFIG_DIR
 from balance_calib.live import _lone_kernel, lone_sample  # noqa: F401  (an import error must fail)
 from balance_calib.live.calibrator_core import activate
-from balance_calib.live.raw_codec import WrenchEncoder
+from balance_calib.live.raw_codec import WrenchEncoder, decode_wrenches
 from balance_calib.live.stream import LiveCalibrator, LiveSettings
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
 from ros_harness import six as wrench_six
@@ -38,25 +38,31 @@ def six(data: bytes) -> np.ndarray:
     return np.array(wrench_six(deserialize_message(data, WrenchStamped)))
 
 
+def through_kernel(live, data, now_s, encoder, scale=1.0):
+    """One message through LiveCalibrator.process_messages (the live path's one call) ->
+    (wrench bytes, uncertainty bytes or None) when the C kernel took it, else None (the pure
+    core took it in the same call)."""
+    out = live.process_messages([data], now_s=now_s, decode=decode_wrenches, input_scale=scale,
+                                encoder=encoder, uncertainty_wanted=True)
+    if not out.accelerated:
+        return None
+    uncertainty = out.uncertainty()
+    return out.wrench[0], uncertainty[0] if uncertainty else None
+
+
 def lone_through_kernel(live, messages, scale, encoder):
-    """Each message alone through process_lone, process() when it declines, 0.1 s apart; wrench/uncertainty
-    per message (None: not published), and which ones the kernel took."""
+    """Each message alone through process_messages, 0.1 s apart; wrench/uncertainty per message
+    (None: not published), and which ones the kernel took."""
     wrench, uncertainty, by_kernel = [], [], []
     for k, data in enumerate(messages):
-        done = live.process_lone(data, now_s=0.1 * k, input_scale=scale, middle=encoder.middle, uncertainty_wanted=True)
-        by_kernel.append(done is not None)
-        if done is not None:
-            wrench.append(six(done[0]))
-            uncertainty.append(None if done[1] is None else six(done[1]))
-            assert deserialize_message(done[0], WrenchStamped).header.frame_id == 'tunnel'
-            continue
-        m = deserialize_message(data, WrenchStamped)
-        values = six(data)[None, :] * scale
-        published = live.process(values, np.array([m.header.stamp.sec * 10**9 + m.header.stamp.nanosec]),
-                                  [m.header.frame_id], now_s=0.1 * k)
-        wrench.append(published.wrench[0] if len(published.indices) else None)
-        uncertainty.append(published.uncertainty[0] if len(published.indices) and published.uncertainty is not None
-                           else None)
+        out = live.process_messages([data], now_s=0.1 * k, decode=decode_wrenches,
+                                    input_scale=scale, encoder=encoder, uncertainty_wanted=True)
+        by_kernel.append(out.accelerated == 1)
+        values = out.uncertainty()
+        wrench.append(six(out.wrench[0]) if out.wrench else None)
+        uncertainty.append(six(values[0]) if values else None)
+        if out.wrench:
+            assert deserialize_message(out.wrench[0], WrenchStamped).header.frame_id == 'tunnel'
     return wrench, uncertainty, by_kernel
 
 
@@ -120,10 +126,7 @@ def test_kernel_raises_the_overload_and_a_new_tare_reaches_it():
     for k, row in enumerate(rows):
         data = serialized(row[None, :], stamps[k:k + 1])[0]
         now_s = 0.1 * k
-        done = kernel_live.process_lone(data, now_s=now_s, input_scale=1.0, middle=encoder.middle,
-                                        uncertainty_wanted=True)
-        if done is None:
-            kernel_live.process(row[None, :], stamps[k:k + 1], now_s=now_s)
+        done = through_kernel(kernel_live, data, now_s, encoder)
         assert (done is None) == (k > 2)                 # held overload: the pure core's turn
         core_live.process(row[None, :], stamps[k:k + 1], now_s=now_s)
         changes.append((kernel_live.overload_changed, kernel_live.overload.active))
@@ -134,15 +137,14 @@ def test_kernel_raises_the_overload_and_a_new_tare_reaches_it():
 
     live = LiveCalibrator(active)
     first = serialized(quiet[:1], stamps[:1])[0]
-    before = live.process_lone(first, now_s=0.0, input_scale=1.0, middle=encoder.middle, uncertainty_wanted=True)
+    before = through_kernel(live, first, 0.0, encoder)
     live.start_window('tare', 20)
     window = quiet[:1] + rng.normal(0.0, 1e-4, (20, 6)) * MEMO.rated_output_mv
-    assert live.process_lone(serialized(window[:1], stamps[1:2])[0], now_s=0.0, input_scale=1.0,
-                             middle=encoder.middle, uncertainty_wanted=True) is None   # the window collects
-    live.process(window, 2 * 10**9 + np.arange(20) * 10**6, now_s=0.0)
+    collecting = serialized(window[:1], stamps[1:2])[0]
+    assert through_kernel(live, collecting, 0.0, encoder) is None     # the window collects
+    live.process(window[1:], 2 * 10**9 + np.arange(1, 20) * 10**6, now_s=0.0)
     assert live.finish_window().ok
-    after = live.process_lone(serialized(quiet[:1], stamps[2:3] + 3 * 10**9)[0], now_s=0.0, input_scale=1.0,
-                              middle=encoder.middle, uncertainty_wanted=True)
+    after = through_kernel(live, serialized(quiet[:1], stamps[2:3] + 3 * 10**9)[0], 0.0, encoder)
     reference = live.process(quiet[:1], stamps[3:4] + 4 * 10**9, now_s=0.0)
     np.testing.assert_allclose(six(after[0]), reference.wrench[0], rtol=1e-12, atol=1e-9)
     np.testing.assert_allclose(six(after[1]), reference.uncertainty[0], rtol=1e-12)
@@ -154,16 +156,14 @@ def test_what_the_kernel_does_not_take():
     encoder = WrenchEncoder('tunnel')
     memo_live = LiveCalibrator(activate(MEMO, 'cubic', UPRIGHT))      # the memo's matrices: no covariance
     data = serialized(np.full((1, 6), 0.1), [10**9])[0]
-    done = memo_live.process_lone(data, now_s=0.0, input_scale=1.0, middle=encoder.middle, uncertainty_wanted=True)
+    done = through_kernel(memo_live, data, 0.0, encoder)
     assert done is not None and done[1] is None
+    plan = lone_sample.make_plan(memo_live.active, memo_live.tare, 1.0, encoder.middle)
     big_endian = b'\x00\x00' + data[2:]
-    assert memo_live.process_lone(big_endian, now_s=0.0, input_scale=1.0, middle=encoder.middle,
-                                  uncertainty_wanted=True) is None
-    assert memo_live.process_lone(data[:-8], now_s=0.0, input_scale=1.0, middle=encoder.middle,
-                                  uncertainty_wanted=True) is None
+    assert lone_sample.run(plan, big_endian, True, 1.0, np.zeros(6)) is None
+    assert lone_sample.run(plan, data[:-8], True, 1.0, np.zeros(6)) is None
     filtered = LiveCalibrator(activate(MEMO, 'cubic', UPRIGHT), LiveSettings(lowpass_hz=10.0))
-    assert filtered.process_lone(data, now_s=0.0, input_scale=1.0, middle=encoder.middle,
-                                 uncertainty_wanted=True) is None
+    assert through_kernel(filtered, data, 0.0, encoder) is None
     with pytest.raises(ValueError, match='covariance'):
         _lone_kernel.plan(1.0, *[np.zeros(6)] * 5, np.arange(6), np.ones(6), 2, 1, np.zeros((2, 1), np.intp),
                           np.zeros((6, 2)), np.zeros(3), np.zeros(6), np.zeros(6), np.ones(6, np.int64), b'')

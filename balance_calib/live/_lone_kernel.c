@@ -1,9 +1,10 @@
 /* The live calibrator's lone sample in one C call: serialized balance/raw sample in, serialized
  * balance/wrench and balance/wrench_uncertainty out (live/lone_sample.py says when it applies).
  *
- * The same steps, in the same order, as the pure core's path for one sample of a direct polynomial
- * model of the bridge outputs (calibrator_core._one_plain_sample / _one_polynomial_sample,
- * stream.wrench_uncertainty, model/uncertainty.design_row_uncertainty); test/test_lone_kernel.py
+ * The pure core's vectorised path (calibrator_core.compute_wrench, stream.wrench_uncertainty)
+ * is the specification; this is its only accelerator, for one sample of a direct polynomial
+ * model of the bridge outputs, the same steps in the same order (called by
+ * stream.LiveCalibrator.process_messages for the samples it takes); test/test_lone_kernel.py
  * holds the two to 1e-12:
  *
  *   x      = outputs * input_scale - zero                     electrical zero, output space (TM-663 §5)

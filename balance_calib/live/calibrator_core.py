@@ -31,7 +31,6 @@ model runs instead, and the result says why (`WrenchBatch.fallback_reason`).
 from __future__ import annotations
 
 import datetime as _dt
-import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -111,9 +110,9 @@ class ActiveCalibration:
 
     @cached_property
     def one_sample_terms(self) -> tuple[tuple[int, ...], ...] | None:
-        """Per term, the raw-output columns to multiply (with repetition), for one sample in plain
-        Python; None when a term has an absolute value or a power beyond 3 (then numpy's path), or
-        for an iterative model."""
+        """Per term, the raw-output columns to multiply (with repetition): the C kernel's form
+        of the model (live/lone_sample.py); None when a term has an absolute value or a power
+        beyond 3 (the kernel does not apply then), or for an iterative model."""
         columns, _, plain, absolute, _ = self.plan
         if plain is None or absolute is not None or plain.size == 0 or plain.max() > 3 or plain.min() < 0:
             return None
@@ -122,8 +121,9 @@ class ActiveCalibration:
 
     @cached_property
     def one_sample_index(self) -> np.ndarray | None:
-        """one_sample_terms as an (n_terms, width) index into the six outputs followed by a 1.0 (index 6):
-        the design row of one sample is then one fancy index and one product."""
+        """one_sample_terms as an (n_terms, width) index into the six outputs followed by a 1.0
+        (index 6): the design row of one sample is the product of each row's entries (the C
+        kernel's plan)."""
         terms = self.one_sample_terms
         if terms is None:
             return None
@@ -137,14 +137,6 @@ class ActiveCalibration:
         six = np.zeros((6, coefficients.shape[1]))
         six[positions] = coefficients
         return six
-
-    @cached_property
-    def envelope_list(self) -> list[float]:
-        return np.asarray(self.envelope, dtype=float).tolist()
-
-    @cached_property
-    def output_range_list(self) -> list[float]:
-        return self.output_range_mv.tolist()
 
     @cached_property
     def unused_inputs(self) -> np.ndarray | None:
@@ -301,8 +293,10 @@ class WrenchBatch:
     loads_total: np.ndarray | None = None   # (N, 6) before the tare load: what the balance carries
     saturated: np.ndarray | None = None     # (N,) an output beyond the bridge's range (or a non-finite load)
     not_converged: np.ndarray | None = None  # (N,) iterative model: Newton did not converge (not published)
-    design_row: np.ndarray | None = None    # (n_terms,) a lone sample's design row (model term order), for its
-    #                                         uncertainty; None for batches and other paths
+    # (M, n_terms) the design rows of the M accepted samples (model term order), for their
+    # uncertainty; None for models with inputs besides the outputs, iterative ones, or a batch
+    # with an overflow
+    design_row: np.ndarray | None = None
 
     @property
     def nonfinite(self) -> np.ndarray:
@@ -316,7 +310,7 @@ def model_loads(active: ActiveCalibration, outputs_mv, *, temperature_c=None,
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
     n = outputs.shape[0]
     if not active.model.extra_variables:
-        return _plain_loads(active, outputs), active.model_name, ''
+        return _plain_loads(active, outputs)[0], active.model_name, ''
     model, name, reason = active.model, active.model_name, ''
     extra = _extra_variables(model, n, None if temperature_c is None else np.asarray(temperature_c, float),
                              active.calibration.reference_temperature_c, load_direction)
@@ -329,17 +323,20 @@ def model_loads(active: ActiveCalibration, outputs_mv, *, temperature_c=None,
     return six_axis_loads(model, outputs, extra or None), name, reason
 
 
-def _plain_loads(active: ActiveCalibration, outputs: np.ndarray) -> np.ndarray:
+def _plain_loads(active: ActiveCalibration,
+                 outputs: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """A model of the bridge outputs only: a direct model as one power-product and one matrix product
     (TM-663 eqs. (1)-(18)); an iterative model by its vectorised Newton iteration (AIAA R-091), NaN rows
-    where it did not converge."""
+    where it did not converge. Loads (N, 6) and, for a direct model, its design rows (N, n_terms)
+    (None for an iterative one)."""
     columns, positions, plain, absolute, coefficients = active.plan
     loads = np.zeros((outputs.shape[0], 6))
     if plain is None:
         loads[:, positions] = active.model.loads_and_status(outputs[:, columns])[0]
-    else:
-        loads[:, positions] = power_products(outputs[:, columns], plain, absolute) @ coefficients.T
-    return loads
+        return loads, None
+    design = power_products(outputs[:, columns], plain, absolute)
+    loads[:, positions] = design @ coefficients.T
+    return loads, design
 
 
 def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tare_load=None, temperature_c=None,
@@ -351,93 +348,50 @@ def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tare_
     conditions when the zero was taken (for models with temperature or load-direction terms).
     """
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
-    if outputs.shape[0] == 1 and not active.model.extra_variables:
-        return _one_plain_sample(active, outputs, zero_mv, tare_load)
-    with np.errstate(invalid='ignore', over='ignore'):
-        finite = active.inputs_finite(outputs)       # channels the calibration does not read aside
-        saturated = finite & (np.abs(outputs) > active.output_range_mv).any(axis=1)
+    with np.errstate(invalid='ignore', over='ignore'):     # beyond float range: flagged below
+        return _compute_wrench(active, outputs, zero_mv, tare_load, temperature_c, load_direction,
+                               zero_temperature_c, zero_direction)
+
+
+def _compute_wrench(active, outputs, zero_mv, tare_load, temperature_c, load_direction,
+                    zero_temperature_c, zero_direction) -> WrenchBatch:
+    finite = active.inputs_finite(outputs)           # channels the calibration does not read aside
+    saturated = finite & (np.abs(outputs) > active.output_range_mv).any(axis=1)
     accepted = finite & ~saturated
+    everyone = bool(accepted.all())
     zeroed = outputs if zero_mv is None else outputs - np.asarray(zero_mv, dtype=float)
-    name, reason = active.model_name, ''
-    if accepted.all():
+    name, reason, design = active.model_name, '', None
+    if everyone and not active.model.extra_variables:   # the outputs alone: design rows kept
+        totals, design = _plain_loads(active, zeroed)
+    elif everyone:
         totals, name, reason = _loads_with_zero(active, zeroed, temperature_c, load_direction, zero_mv,
                                                 zero_temperature_c, zero_direction)
     else:
         totals = np.full(outputs.shape, np.nan)
-        if accepted.any():
+        if not active.model.extra_variables and accepted.any():
+            totals[accepted], design = _plain_loads(active, zeroed[accepted])
+        elif accepted.any():
             temps = None if temperature_c is None else np.broadcast_to(np.asarray(temperature_c, float),
                                                                         (len(outputs),))[accepted]
             direction = None if load_direction is None else np.broadcast_to(load_direction, outputs.shape)[accepted]
             totals[accepted], name, reason = _loads_with_zero(active, zeroed[accepted], temps, direction, zero_mv,
                                                               zero_temperature_c, zero_direction)
     not_converged = np.zeros(len(outputs), dtype=bool)
-    with np.errstate(invalid='ignore', over='ignore'):
-        overflow = accepted & ~np.isfinite(totals).all(axis=1)    # finite outputs, loads beyond float range
-        if overflow.any():
-            if active.iterative:          # finite outputs without loads: Newton did not converge there
-                not_converged = overflow
-            else:
-                saturated = saturated | overflow
-            accepted = accepted & ~overflow
-            totals[overflow] = np.nan
-        outside = accepted & np.any(np.abs(totals) > active.envelope, axis=1)
+    # finite outputs, loads beyond float range
+    overflow = accepted & ~np.isfinite(totals).all(axis=1)
+    if overflow.any():
+        if active.iterative:          # finite outputs without loads: Newton did not converge there
+            not_converged = overflow
+        else:
+            saturated = saturated | overflow
+        accepted = accepted & ~overflow
+        totals[overflow] = np.nan
+        design = None                 # its rows no longer match the published samples
+    outside = accepted & np.any(np.abs(totals) > active.envelope, axis=1)
     loads = totals if tare_load is None else totals - np.asarray(tare_load, dtype=float)
     wrench = active.installation.to_tunnel(loads)          # TM-663 §10.2
-    return WrenchBatch(accepted, loads, wrench, outside, name, reason, totals, saturated, not_converged)
-
-
-def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv, tare_load) -> WrenchBatch:
-    """compute_wrench for one sample of a model of the bridge outputs only: the live path at low rates,
-    where every sample comes alone (the same steps as the batch, with fewer numpy calls)."""
-    row = outputs[0]
-    values = row.tolist()
-    rejected = not all(map(math.isfinite, values)) and not active.inputs_finite(outputs)[0]
-    saturated = not rejected and any(abs(v) > r for v, r in zip(values, active.output_range_list))
-    index = active.one_sample_index
-    if index is not None and not (rejected or saturated) and max(map(abs, values)) < 1e30:
-        fast = _one_polynomial_sample(active, row, zero_mv, tare_load, index)
-        if fast is not None:
-            return fast
-    loads = np.full((1, 6), np.nan)
-    not_converged = False
-    if not (rejected or saturated):      # other polynomials, an iterative model, or the fast path's leftovers
-        columns, positions, plain, absolute, coefficients = active.plan
-        with np.errstate(invalid='ignore', over='ignore'):
-            loads[0] = 0.0
-            zeroed = row if zero_mv is None else row - zero_mv
-            if plain is None:        # AIAA R-091: the model's own Newton iteration
-                loads[0, positions] = active.model.loads_and_status(zeroed[columns][None, :])[0][0]
-            else:
-                loads[0, positions] = coefficients @ power_products(zeroed[columns][None, :], plain, absolute)[0]
-            failed = not all(map(math.isfinite, loads[0].tolist()))     # beyond float range / no convergence
-        if failed:
-            loads[:] = np.nan
-            if plain is None:
-                not_converged = True
-            else:
-                saturated = True
-    accepted = not (rejected or saturated or not_converged)
-    outside = accepted and bool((np.abs(loads[0]) > active.envelope).any())
-    tared = loads if tare_load is None or not accepted else loads - tare_load
-    return WrenchBatch(np.array([accepted]), tared, active.installation.to_tunnel(tared), np.array([outside]),
-                       active.model_name, '', loads, np.array([saturated]), np.array([not_converged]))
-
-
-def _one_polynomial_sample(active: ActiveCalibration, row: np.ndarray, zero_mv, tare_load, index) -> WrenchBatch | None:
-    """The common case of the live path: one finite, unsaturated sample of a polynomial model of at most
-    third degree (TM-663 eqs. (1)-(18)); outputs below 1e30 mV, so no product can overflow. None if
-    the loads are not finite all the same (the general path then says why)."""
-    padded = np.ones(7)
-    padded[:6] = row if zero_mv is None else row - zero_mv
-    design_row = padded[index].prod(axis=1)
-    loads = (active.coefficients_six @ design_row)[None, :]
-    values = loads[0].tolist()
-    if not all(map(math.isfinite, values)):
-        return None
-    outside = any(abs(v) > e for v, e in zip(values, active.envelope_list))
-    tared = loads if tare_load is None else loads - tare_load
-    return WrenchBatch(np.array([True]), tared, active.installation.to_tunnel(tared), np.array([outside]),
-                       active.model_name, '', loads, np.array([False]), np.array([False]), design_row)
+    return WrenchBatch(accepted, loads, wrench, outside, name, reason, totals, saturated,
+                       not_converged, design)
 
 
 def _loads_with_zero(active, zeroed, temperature_c, load_direction, zero_mv, zero_temperature_c, zero_direction):
@@ -645,34 +599,29 @@ class InputCounters:
     period_out_of_envelope: int = 0
     period_not_converged: int = 0
 
-    def count_one(self, out_of_envelope: bool) -> None:
-        """count() for one accepted sample (the live path at low rates)."""
-        self.received += 1
-        self.period_received += 1
-        self.published += 1
-        if out_of_envelope:
-            self.out_of_envelope += 1
-            self.period_out_of_envelope += 1
-
     def count(self, batch: WrenchBatch) -> None:
-        if len(batch.accepted) == 1 and batch.accepted[0]:
-            self.count_one(bool(batch.out_of_envelope[0]))
-            return
-        n, ok = len(batch.accepted), int(np.count_nonzero(batch.accepted))
+        """Count a batch the pure core computed."""
         saturated = 0 if batch.saturated is None else int(np.count_nonzero(batch.saturated))
         failed = 0 if batch.not_converged is None else int(np.count_nonzero(batch.not_converged))
-        out = int(np.count_nonzero(batch.out_of_envelope))
+        self.add(len(batch.accepted), int(np.count_nonzero(batch.accepted)), saturated, failed,
+                 int(np.count_nonzero(batch.out_of_envelope)))
+
+    def add(self, n: int, ok: int, saturated: int = 0, failed: int = 0, out: int = 0) -> None:
+        """n samples received, ok of them published, saturated / failed (Newton) not, out of the
+        envelope (published, flagged); the rest were rejected as not finite."""
         self.received += n
         self.period_received += n
         self.published += ok
-        self.rejected_nonfinite += n - ok - saturated - failed
-        self.period_rejected += n - ok - saturated - failed
-        self.saturated += saturated
-        self.period_saturated += saturated
-        self.not_converged += failed
-        self.period_not_converged += failed
-        self.out_of_envelope += out
-        self.period_out_of_envelope += out
+        if ok != n:                 # at 1 kHz almost every call is one published sample
+            self.rejected_nonfinite += n - ok - saturated - failed
+            self.period_rejected += n - ok - saturated - failed
+            self.saturated += saturated
+            self.period_saturated += saturated
+            self.not_converged += failed
+            self.period_not_converged += failed
+        if out:
+            self.out_of_envelope += out
+            self.period_out_of_envelope += out
 
     def start_period(self) -> None:
         self.period_received = self.period_rejected = self.period_out_of_envelope = self.period_saturated = 0

@@ -4,7 +4,9 @@ At 1 kHz each sample wakes the node by itself, so the per-call cost of Python an
 caches gone cold between samples -- is what a sample costs: about 190 µs of the calibrator's CPU per
 sample went to decoding, the dozen numpy calls of the one-sample path, the uncertainty and encoding.
 `_lone_kernel.c` does those steps for one serialized sample in one call and returns the serialized
-wrench and uncertainty; the bookkeeping (input monitor, counters, overload) stays in stream.py.
+wrench and uncertainty: the pure core's only accelerator, called by the live path's one entry point
+(stream.LiveCalibrator.process_messages) for the leading samples of a batch it takes; the
+bookkeeping (input monitor, counters, overload) is the pure core's, fed once per batch.
 
 It applies only where its result is the pure core's (test/test_lone_kernel.py holds them equal to
 1e-12): a direct polynomial model of the bridge outputs alone (no temperature or load-history

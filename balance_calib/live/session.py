@@ -25,7 +25,7 @@ from .parameters import (check_input_units, check_parameter, input_scale_mv,
                          load_calibration_checked)
 from .raw_codec import WrenchEncoder, decode_wrenches
 from .refit_process import RefitJob, is_balance_config, make_refit_job, run_refit_job
-from .stream import LiveCalibrator, LiveSettings
+from .stream import LiveCalibrator, LiveSettings, Output
 from .tare_store import (TareOwner, calibration_sha256, load_tare, restore_refusal, save_tare,
                          tare_file_for)
 
@@ -55,29 +55,6 @@ def activate_file(path: str, value: Callable[[str], object]) -> ActiveCalibratio
         message = str(err)
         named = message if message.startswith(f'{path}: ') else f'{path}: {message}'
         raise ConfigError(named) from None
-
-
-class Output:
-    """What one batch of samples gives the node to publish (serialized): the wrenches, the overload state
-    if it changed, and uncertainty() -> the uncertainties, computed when asked (after the wrenches went
-    out), after those `ready` already (the C kernel's samples, which come first in the batch)."""
-    __slots__ = ('wrench', 'overload', '_later', '_stamps', '_encoder', '_ready')
-
-    def __init__(self, wrench: list, overload: bool | None, later=None, stamps=None, encoder=None, ready=None):
-        self.wrench, self.overload = wrench, overload
-        self._later, self._stamps, self._encoder, self._ready = later, stamps, encoder, ready
-
-    def after(self, wrench: list, ready: list, overload: bool | None) -> Output:
-        """This output preceded by the C kernel's samples of the same batch (wrench and uncertainty bytes)."""
-        return Output(wrench + self.wrench, overload if self.overload is None else self.overload,
-                      self._later, self._stamps, self._encoder, ready=ready)
-
-    def uncertainty(self) -> list:
-        values = None if self._later is None else self._later()
-        later = [] if values is None else self._encoder.encode(self._stamps, values)
-        if self._ready is None:
-            return later
-        return self._ready + later if later else self._ready
 
 
 class CalibratorSession:
@@ -137,70 +114,39 @@ class CalibratorSession:
             self.temperature_c, self.temperature_s = float(temperature_c), time.monotonic()
 
     def on_samples(self, messages: list[bytes], uncertainty_wanted: bool = True) -> Output | None:
-        """One batch of serialized balance/raw samples -> serialized wrenches (None: nothing can run);
-        the uncertainty only when wanted (someone subscribes to it), computed by Output.uncertainty().
-
-        Sample by sample through the C kernel (lone_sample.py) while it takes them -- cheaper than the
-        vectorised path per sample even in a batch, and a batch of two or three after a scheduling
-        hiccup must not cost more than the hiccup -- and the rest of the batch, from the first sample it
-        declines, through the pure core's vectorised path."""
-        wrench, ready, overload, taken = [], [], None, 0
-        if lone_sample.available:
-            now_s = time.monotonic()
-            with self.lock:
-                live, scale, middle = self.live, self.input_scale, self.encoder.middle
-                for data in messages:
-                    done = live.process_lone(data, now_s=now_s, input_scale=scale, middle=middle,
-                                             uncertainty_wanted=uncertainty_wanted)
-                    if done is None:
-                        break
-                    wrench.append(done[0])
-                    if done[1] is not None:
-                        ready.append(done[1])
-                    taken += 1
-                if taken:
-                    self.last_sample_s = now_s
-                    # an overload raised stops the kernel (it declines while one is held): the last sample
-                    # it took is the only one that can have changed the state
-                    overload = self._say_changes('')
-            if taken == len(messages):
-                return Output(wrench, overload, ready=ready)
-        rest = self._through_core(messages[taken:] if taken else messages, uncertainty_wanted)
-        if not taken:
-            return rest
-        if rest is None:
-            return Output(wrench, overload, ready=ready)
-        return rest.after(wrench, ready, overload)
-
-    def _through_core(self, messages: list[bytes], uncertainty_wanted: bool) -> Output | None:
-        """on_samples() by the pure core's vectorised path."""
-        try:
-            stamps_ns, outputs, frame_ids = decode_wrenches(messages)
-        except ValueError:
-            if self.fallback_decode is None:
-                raise
-            stamps_ns, outputs, frame_ids = self.fallback_decode(messages)
-        if self.input_scale != 1.0:          # ratiometric bridge outputs (input_units) to mV
-            outputs = outputs * self.input_scale
+        """One batch of serialized balance/raw samples -> serialized wrenches (None: nothing can
+        run); the uncertainty only when wanted (someone subscribes to it), computed by
+        Output.uncertainty(). One call of the live path (LiveCalibrator.process_messages: the C
+        kernel where it applies, the pure core for the rest)."""
         now_s = time.monotonic()
         self.last_sample_s = now_s
         fresh = self.temperature_s is not None and now_s - self.temperature_s <= self.stale_after_s
         with self.lock:
             live = self.live
             try:
-                published = live.process(outputs, stamps_ns, frame_ids, now_s=now_s,
-                                         temperature_c=self.temperature_c if fresh else None,
-                                         uncertainty_wanted=uncertainty_wanted, defer_uncertainty=True)
+                out = live.process_messages(
+                    messages, now_s=now_s, decode=self._decode, input_scale=self.input_scale,
+                    encoder=self.encoder, temperature_c=self.temperature_c if fresh else None,
+                    uncertainty_wanted=uncertainty_wanted)
             except ConfigError as err:       # neither the model nor its base can run: publish nothing
                 self.log('repeated_error', str(err))
                 return None
-            overload = self._say_changes(published.batch.fallback_reason)
+            reason = '' if out.batch is None else out.batch.fallback_reason
+            out.overload = self._say_changes(reason)
             if self.window_complete is not None and live.window is not None and live.window.complete:
                 done, self.window_complete = self.window_complete, None
                 done()
-            encoder = self.encoder
-        stamps = stamps_ns[published.indices]
-        return Output(encoder.encode(stamps, published.wrench), overload, published.uncertainty_later, stamps, encoder)
+        return out
+
+    def _decode(self, messages: list[bytes]):
+        """(stamps_ns, outputs, frame ids) of serialized samples; rclpy's deserializer for bytes
+        the fast decoder does not know."""
+        try:
+            return decode_wrenches(messages)
+        except ValueError:
+            if self.fallback_decode is None:
+                raise
+            return self.fallback_decode(messages)
 
     def _say_changes(self, fallback_reason: str) -> bool | None:
         """Log overload and model fallback changes; the new overload state if it changed."""

@@ -19,6 +19,7 @@ from .calibrator_core import (ActiveCalibration, InputCounters, LiveState, LoadH
                               TareWindow, WrenchBatch, _extra_variables, compute_wrench, diagnostics, evaluate_window,
                               six_axis_loads)
 from . import lone_sample
+from .raw_codec import WrenchEncoder
 from .tare_store import TareState, now_iso
 
 
@@ -49,7 +50,7 @@ class InputMonitor:
         self.foreign_frames: set[str] = set()
         self.last_stamp_ns: int | None = None
         self.interval_ns: float | None = None
-        self._differences = np.zeros(256, dtype=np.int64)
+        self._differences = [0] * 256             # the last 256 positive differences, a ring
         self._filled = 0
         self._since_estimate = 0
 
@@ -58,72 +59,58 @@ class InputMonitor:
             self.total[kind] += count
             self.period[kind] += count
 
-    def update(self, stamps_ns: np.ndarray, frame_ids=None) -> None:
-        if len(stamps_ns) == 1:
-            self.update_one(int(stamps_ns[0]), frame_ids[0] if frame_ids else '')
-            return
-        stamps = np.asarray(stamps_ns, dtype=np.int64)
+    def update(self, stamps_ns, frame_ids=None) -> None:
+        """A batch of stamps (N,) ns in arrival order (array or list) and their frame ids.
+
+        One pass in plain Python: a sequential state machine (the latest stamp so far), and at
+        1 kHz every batch is one sample, where numpy's per-call cost would be most of the work. The
+        interval is estimated before the batch's gaps are counted (from the batch's own differences
+        when there is none yet) and re-taken after it."""
         if frame_ids is not None:
             foreign = [f for f in frame_ids if f and f.lower() != self.balance]
             if foreign:
                 self._add('samples from another balance', len(foreign))
                 if len(self.foreign_frames) < 8:
                     self.foreign_frames.update(foreign[:8])
-        zero = stamps == 0
-        self._add('zero stamps', int(np.count_nonzero(zero)))
-        stamps = stamps[~zero]
+        stamps = stamps_ns.tolist() if isinstance(stamps_ns, np.ndarray) else stamps_ns
+        if 0 in stamps:
+            nonzero = [v for v in stamps if v != 0]
+            self._add('zero stamps', len(stamps) - len(nonzero))
+            stamps = nonzero
         if not len(stamps):
             return
         first = self.last_stamp_ns is None
-        prior = int(stamps[0]) if first else self.last_stamp_ns
-        before = np.maximum.accumulate(np.concatenate([[prior], stamps]))[:-1]
-        differences = stamps - before
-        if first:
-            differences = differences[1:]
-        self._add('stamps out of order', int(np.count_nonzero(differences < 0)))
-        self._add('duplicate stamps', int(np.count_nonzero(differences == 0)))
-        self.last_stamp_ns = int(max(prior, stamps.max()))
-        positive = differences[differences > 0]
+        latest = stamps[0] if first else self.last_stamp_ns
+        positive, out_of_order, duplicates = [], 0, 0
+        for stamp in stamps[1:] if first else stamps:     # each against the latest stamp before it
+            difference = stamp - latest
+            if difference > 0:
+                positive.append(difference)
+                latest = stamp
+            elif difference < 0:
+                out_of_order += 1
+            else:
+                duplicates += 1
+        if out_of_order or duplicates:
+            self._add('stamps out of order', out_of_order)
+            self._add('duplicate stamps', duplicates)
+        self.last_stamp_ns = latest
         if self.interval_ns is None and len(positive) >= 3:     # a first batch: its own median
             self.interval_ns = float(np.median(positive))
-        if self.interval_ns is not None and len(positive):
-            gaps = positive[positive > 1.5 * self.interval_ns]
-            if len(gaps):
-                self._add('samples lost (gaps in the stamps)', int(np.sum(np.rint(gaps / self.interval_ns) - 1)))
-        take = positive[-256:]
-        start = self._filled % 256
-        indices = (start + np.arange(len(take))) % 256
-        self._differences[indices] = take
-        self._filled += len(take)
-        self._since_estimate += len(take)
-        if self._filled and (self.interval_ns is None or self._since_estimate >= 64):
-            self.interval_ns = float(np.median(self._differences[:min(self._filled, 256)]))
-            self._since_estimate = 0
-
-    def update_one(self, stamp: int, frame_id: str) -> None:
-        """update() for one sample, in plain Python (the live path at low rates)."""
-        if frame_id and frame_id.lower() != self.balance:
-            self._add('samples from another balance', 1)
-            if len(self.foreign_frames) < 8:
-                self.foreign_frames.add(frame_id)
-        if stamp == 0:
-            self._add('zero stamps', 1)
-            return
-        if self.last_stamp_ns is None:
-            self.last_stamp_ns = stamp
-            return
-        difference = stamp - self.last_stamp_ns
-        if difference <= 0:
-            self._add('stamps out of order' if difference < 0 else 'duplicate stamps', 1)
-            return
-        if self.interval_ns is not None and difference > 1.5 * self.interval_ns:
-            self._add('samples lost (gaps in the stamps)', int(round(difference / self.interval_ns)) - 1)
-        self.last_stamp_ns = stamp
-        self._differences[self._filled % 256] = difference
-        self._filled += 1
-        self._since_estimate += 1
-        if self.interval_ns is None or self._since_estimate >= 64:
-            self.interval_ns = float(np.median(self._differences[:min(self._filled, 256)]))
+        if self.interval_ns is not None and positive:
+            interval = self.interval_ns
+            gaps = [d for d in positive if d > 1.5 * interval]
+            if gaps:
+                self._add('samples lost (gaps in the stamps)',
+                          sum(round(d / interval) - 1 for d in gaps))
+        ring, filled = self._differences, self._filled
+        for difference in positive[-256:]:
+            ring[filled % 256] = difference
+            filled += 1
+        self._since_estimate += filled - self._filled
+        self._filled = filled
+        if filled and (self.interval_ns is None or self._since_estimate >= 64):
+            self.interval_ns = float(np.median(ring[:min(filled, 256)]))
             self._since_estimate = 0
 
     def problems(self) -> tuple[tuple[str, int, int], ...]:
@@ -138,7 +125,7 @@ class OverloadMonitor:
     again once the samples have stayed inside for clear_s."""
 
     def __init__(self, capacity: np.ndarray, fraction: float, clear_s: float):
-        self.capacity = capacity
+        self.capacity = np.asarray(capacity, dtype=float)
         self.fraction = fraction
         self.clear_s = clear_s
         self.active = False
@@ -147,28 +134,8 @@ class OverloadMonitor:
         self.peak_fraction = np.zeros(6)
         self.events = 0
 
-    @property
-    def capacity(self) -> np.ndarray:
-        return self._capacity
-
-    @capacity.setter
-    def capacity(self, value) -> None:
-        self._capacity = np.asarray(value, dtype=float)
-        self.capacity_list = self._capacity.tolist()
-
-    def _exceeds_one(self, loads: list | tuple) -> bool:
-        """One sample's loads (6 floats): its peak noted; True if any exceeds the limit."""
-        ratios = [abs(v) / c for v, c in zip(loads, self.capacity_list)]
-        peak = self.peak_fraction
-        if any(r > p for r, p in zip(ratios, peak.tolist())):
-            np.maximum(peak, ratios, out=peak)
-        return any(r > self.fraction for r in ratios)
-
     def update(self, loads_total: np.ndarray, saturated: np.ndarray, now_s: float) -> bool:
         """Feed a batch (loads of the accepted samples (N, 6), saturated flags); True if the state changed."""
-        if len(loads_total) == 1 and len(saturated) == 1 and not self.active and not saturated[0]:   # lone sample
-            if not self._exceeds_one(loads_total[0].tolist()):
-                return False
         if len(loads_total):
             ratio = np.abs(loads_total).max(axis=0) / self.capacity
             np.maximum(self.peak_fraction, ratio, out=self.peak_fraction)
@@ -200,7 +167,7 @@ class OverloadMonitor:
 
 class LowPass:
     """First-order low-pass on each component, y += a (x - y) with a = 1 - exp(-2π f_c Δt), state carried
-    across batches (scipy.signal.lfilter for a batch)."""
+    across batches (scipy.signal.lfilter)."""
 
     def __init__(self, cutoff_hz: float):
         self.cutoff_hz = cutoff_hz
@@ -218,13 +185,31 @@ class LowPass:
             self.state = values[-1].copy()
             return values
         a = 1.0 - np.exp(-2.0 * np.pi * self.cutoff_hz * interval_s)
-        if len(values) == 1:
-            self.state = self.state + a * (values[0] - self.state)
-            return self.state[None, :].copy()
         from scipy.signal import lfilter
         out, _ = lfilter([a], [1.0, a - 1.0], values, axis=0, zi=((1.0 - a) * self.state)[None, :])
         self.state = out[-1].copy()
         return out
+
+
+class Output:
+    """What one batch of samples gives the node to publish (serialized): the wrenches in arrival
+    order; overload: the new overload state if it changed (None: unchanged; the session sets it,
+    see LiveCalibrator.overload_changed); uncertainty() -> the uncertainties, computed when asked
+    (after the wrenches went out). accelerated: how many of the leading samples the C kernel took;
+    batch: the pure core's WrenchBatch of the rest (None if the kernel took all)."""
+    __slots__ = ('wrench', 'overload', 'accelerated', 'batch', '_ready', '_later', '_stamps',
+                 '_encoder')
+
+    def __init__(self, wrench: list, ready: list, later=None, stamps=None, encoder=None, *,
+                 accelerated: int = 0, batch: WrenchBatch | None = None):
+        self.wrench, self.accelerated, self.batch, self.overload = wrench, accelerated, batch, None
+        self._ready, self._later, self._stamps, self._encoder = ready, later, stamps, encoder
+
+    def uncertainty(self) -> list:
+        values = None if self._later is None else self._later()
+        if values is None:
+            return self._ready
+        return self._ready + self._encoder.encode(self._stamps, values)
 
 
 @dataclass
@@ -248,23 +233,18 @@ def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, ta
     solved twice; `design` (M, n_terms): its design rows, if computed already. None when the model has no covariance (the memo's matrices) or needs an input it
     was not given. A component the calibration lacks (a 1-, 3- or 5-component balance) is NaN:
     its 0 is not a measurement."""
-    from ..model.uncertainty import design_row_uncertainty, has_uncertainty, load_standard_uncertainty
+    from ..model.uncertainty import has_uncertainty, load_standard_uncertainty
     model = active.model if model is None else model
     positions = [COMPONENTS.index(c) for c in model.components]
     tare = None if tare_sigma is None else np.asarray(tare_sigma)[positions]
     iterative = getattr(model, 'form', 'direct') == 'iterative'
-    if design is not None and len(zeroed_outputs) == 1 and not iterative and not model.extra_variables:
-        per_component = design_row_uncertainty(model, design, tare)      # a lone sample: its row is known
-        if per_component is None:
-            return None
-    else:
-        if (model.extra_variables and extra is None) or not has_uncertainty(model):
-            return None
-        columns = [BRIDGE_OUTPUTS.index(v) for v in model.inputs]
-        per_component = load_standard_uncertainty(
-            model, zeroed_outputs[:, columns], extra, tare_sigma=tare,
-            loads=None if loads_balance is None or not iterative else np.asarray(loads_balance)[:, positions],
-            design=design)
+    if (model.extra_variables and extra is None) or not has_uncertainty(model):
+        return None
+    columns = [BRIDGE_OUTPUTS.index(v) for v in model.inputs]
+    loads = None if loads_balance is None or not iterative else \
+        np.asarray(loads_balance)[:, positions]
+    per_component = load_standard_uncertainty(model, zeroed_outputs[:, columns], extra,
+                                              tare_sigma=tare, loads=loads, design=design)
     six = np.full((len(zeroed_outputs), 6), np.nan)     # NaN: a component the calibration lacks
     six[:, positions] = per_component
     return np.abs(active.installation.to_tunnel(six))       # a signed permutation: magnitudes carry over
@@ -295,7 +275,7 @@ class LiveCalibrator:
         """A new calibration (refit, parameters), between two samples; zero and tare stay."""
         self.active = active
         self.history = LoadHistory(active.capacity)
-        self.overload.capacity = active.capacity
+        self.overload.capacity = np.asarray(active.capacity, dtype=float)
         self.inputs.balance = active.calibration.balance.lower()
 
     def set_settings(self, settings: LiveSettings) -> None:
@@ -357,32 +337,79 @@ class LiveCalibrator:
             return Published(indices, wrench, batch, uncertainty_later=uncertainty)
         return Published(indices, wrench, batch, uncertainty())
 
-    def process_lone(self, data: bytes, *, now_s: float, input_scale: float, middle: bytes,
-                     uncertainty_wanted: bool) -> tuple[bytes, bytes | None] | None:
-        """One serialized sample by the C kernel (lone_sample.py) -> (wrench bytes, uncertainty bytes or
-        None), with the same bookkeeping as process(); None: process() must take it (the kernel does not
-        apply here, or declined this sample)."""
-        if self.window is not None or self.lowpass.cutoff_hz > 0 or self.overload.active:
-            return None
-        made_for = self._lone_plan_for     # (calibration, zero and tare, input scale, frame): made again on a change
+    def process_messages(self, messages: list[bytes], *, now_s: float, decode: Callable,
+                         input_scale: float, encoder: WrenchEncoder,
+                         temperature_c: float | None = None,
+                         uncertainty_wanted: bool = True) -> Output:
+        """A batch of serialized balance/raw samples -> the serialized wrenches to publish
+        (Output), with the same state as process() on the decoded batch: the one call of the live
+        path.
+
+        The C kernel (lone_sample.py), the pure core's only accelerator, takes the samples from the
+        first while it applies (no tare window, no low-pass, no overload held; a calibration it
+        knows) and accepts them -- 2-3 µs a sample, where the vectorised path costs tens of µs a
+        call, which at 1 kHz (one sample a wake-up) is every sample. The rest of the batch, from
+        the first sample it declines (or the one that raised an overload), goes through process().
+        decode(messages) -> (stamps_ns (N,), outputs (N, 6) in the input's unit, frame ids);
+        input_scale: to mV."""
+        wrench, ready = self._through_kernel(messages, now_s, input_scale, encoder.middle,
+                                             uncertainty_wanted)
+        if len(wrench) == len(messages):
+            return Output(wrench, ready, accelerated=len(wrench))
+        changed = self.overload_changed
+        stamps_ns, outputs, frame_ids = decode(messages[len(wrench):] if wrench else messages)
+        if input_scale != 1.0:          # ratiometric bridge outputs (input_units) to mV
+            outputs = outputs * input_scale
+        published = self.process(outputs, stamps_ns, frame_ids, now_s=now_s,
+                                 temperature_c=temperature_c,
+                                 uncertainty_wanted=uncertainty_wanted, defer_uncertainty=True)
+        self.overload_changed = changed or self.overload_changed
+        stamps = stamps_ns[published.indices]
+        return Output(wrench + encoder.encode(stamps, published.wrench), ready,
+                      published.uncertainty_later, stamps, encoder, accelerated=len(wrench),
+                      batch=published.batch)
+
+    def _through_kernel(self, messages: list[bytes], now_s: float, input_scale: float,
+                        middle: bytes, uncertainty_wanted: bool) -> tuple[list, list]:
+        """The leading samples the C kernel takes: (wrench bytes, uncertainty bytes), with the
+        input monitor, counters and overload fed as process() feeds them."""
+        self.overload_changed = False
+        if not lone_sample.available or self.window is not None or self.lowpass.cutoff_hz > 0 \
+                or self.overload.active:
+            return [], []
+        # the plan, for (calibration, zero and tare, input scale, frame): made again on a change
+        made_for = self._lone_plan_for
         if made_for is None or made_for[0] is not self.active or made_for[1] is not self.tare \
                 or made_for[2] != input_scale or made_for[3] is not middle:
             self._lone_plan = lone_sample.make_plan(self.active, self.tare, input_scale, middle)
             self._lone_plan_for = (self.active, self.tare, input_scale, middle)
-        if self._lone_plan is None:
-            return None
-        overload = self.overload
-        result = lone_sample.run(self._lone_plan, data, uncertainty_wanted and self.settings.publish_uncertainty,
-                                 overload.fraction, overload.peak_fraction)
-        if result is None:
-            return None
-        stamp_ns, frame_id, loads_total, outside, exceeds, wrench, uncertainty = result
-        self.uncertainty_wanted = uncertainty_wanted
-        self.inputs.update_one(stamp_ns, frame_id.decode('utf-8', 'replace'))
-        self.counters.count_one(outside)
-        self.fallback_reason = ''
-        self.overload_changed = exceeds and overload.update(np.array([loads_total]), np.zeros(1, bool), now_s)
-        return wrench, uncertainty
+        plan = self._lone_plan
+        if plan is None:
+            return [], []
+        overload, run = self.overload, lone_sample.run
+        want = uncertainty_wanted and self.settings.publish_uncertainty
+        wrench, ready, stamps, frames, outside = [], [], [], [], 0
+        for data in messages:
+            result = run(plan, data, want, overload.fraction, overload.peak_fraction)
+            if result is None:
+                break
+            stamp_ns, frame_id, loads_total, out, exceeds, wrench_bytes, uncertainty_bytes = result
+            wrench.append(wrench_bytes)
+            if uncertainty_bytes is not None:
+                ready.append(uncertainty_bytes)
+            stamps.append(stamp_ns)
+            frames.append(frame_id.decode('utf-8', 'replace'))
+            outside += out
+            if exceeds:     # the overload is raised: held from here, the pure core takes the rest
+                self.overload_changed = overload.update(np.array([loads_total]), np.zeros(1, bool),
+                                                        now_s)
+                break
+        if wrench:
+            self.uncertainty_wanted = uncertainty_wanted
+            self.inputs.update(stamps, frames)
+            self.counters.add(len(wrench), len(wrench), out=outside)
+            self.fallback_reason = ''
+        return wrench, ready
 
     # --- ~/tare, ~/zero, ~/clear_tare ------------------------------------------------------------
     def start_window(self, kind: str, samples: int) -> TareWindow:

@@ -70,7 +70,7 @@ def load_standard_uncertainty(calibration_or_model, outputs_mv, extra: Mapping[s
     the model has no stored covariance or the outputs are not finite. loads: optional (N, n_components)
     the model's loads at these outputs if the caller has them already (an iterative model then skips
     its Newton solve). design: optional (N, n_terms) design rows of a direct model at these outputs,
-    if the caller has them already (the live calibrator's lone sample).
+    if the caller has them already (the live calibrator: those its loads came from).
     """
     chosen = _resolve(calibration_or_model, model)
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
@@ -104,20 +104,6 @@ def _direct_variance(design: np.ndarray, covariance: np.ndarray, sigma: np.ndarr
     """(N, n_components) u² = σ² (1 + x (XᵀX)⁻¹ xᵀ) for design rows x (N, n_terms) of a direct model."""
     h = np.einsum('ij,jk,ik->i', design, covariance, design)
     return sigma[None, :] ** 2 * (1.0 + h)[:, None]
-
-
-def design_row_uncertainty(model, design_row: np.ndarray, tare_sigma=None) -> np.ndarray | None:
-    """load_standard_uncertainty for one sample of a direct model whose design row (n_terms,) the caller
-    has (the live calibrator's lone sample): (n_components,), or None without a stored covariance."""
-    pieces = covariance_and_sigma(model)
-    if pieces is None:
-        return None
-    covariance, sigma = pieces
-    h = float(design_row @ covariance @ design_row)
-    variance = sigma ** 2 * (1.0 + h)
-    if tare_sigma is not None:
-        variance = variance + np.asarray(tare_sigma, dtype=float) ** 2
-    return np.sqrt(variance)
 
 
 def with_fitted_covariance(model, bridge_outputs_mv, residuals, extra: Mapping[str, np.ndarray] | None = None):
