@@ -8,7 +8,8 @@ import pytest
 
 from balance_calib.calibration_file import ConfigError, load_calibration
 from balance_calib.config import CONFIG_DIR
-from balance_calib.live.calibrator_core import ERROR, OK, STALE, activate, check_steady, compute_wrench
+from balance_calib.active_calibration import activate
+from balance_calib.live.calibrator_core import ERROR, OK, STALE, check_steady, compute_wrench
 from balance_calib.live.parameters import PARAMETERS, check_parameter, load_calibration_checked
 from balance_calib.live.stream import InputMonitor, LiveCalibrator, LiveSettings, LowPass, OverloadMonitor
 from balance_calib.live.tare_store import TareState, load_tare, save_tare, tare_file_for

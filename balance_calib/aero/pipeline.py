@@ -14,7 +14,7 @@ import numpy as np
 from ..calibration_file import Calibration, load_calibration
 from ..coverage.run import RunCoverage, run_coverage
 from ..model.uncertainty import has_uncertainty
-from ..live.calibrator_core import activate, six_axis_loads
+from ..active_calibration import activate, six_axis_loads
 from ..tunnel_axes import Installation, parse_installation
 from .bag_io import DEFAULT_MAX_INPUT_AGE_S, RunSamples, read_run
 from .held_points import HoldSettings

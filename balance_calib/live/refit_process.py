@@ -22,7 +22,7 @@ from typing import Callable
 
 from ..calibration_file import Calibration, calibration_from_dict, save_calibration, write_text_atomically
 from ..tunnel_axes import Installation
-from .calibrator_core import activate
+from ..active_calibration import activate
 from .parameters import check_regular_file
 
 

@@ -14,10 +14,11 @@ from typing import Callable
 
 import numpy as np
 
+from ..active_calibration import ActiveCalibration, six_axis_loads
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
-from .calibrator_core import (ActiveCalibration, InputCounters, LiveState, LoadHistory, StatusReport, TareResult,
-                              TareWindow, WrenchBatch, _extra_variables, compute_wrench, diagnostics, evaluate_window,
-                              six_axis_loads)
+from .calibrator_core import (InputCounters, LiveState, LoadHistory, StatusReport, TareResult,
+                              TareWindow, WrenchBatch, _extra_variables, compute_wrench,
+                              diagnostics, evaluate_window)
 from . import lone_sample
 from .raw_codec import WrenchEncoder
 from .tare_store import TareState, now_iso
