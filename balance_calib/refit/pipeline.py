@@ -131,10 +131,12 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
         diagnosis = _run_diagnosis(reduction, config, base_model, fits[base_model], say, cut)
         if diagnosis is not None:
             # σ and outliers of the model that will be adopted (effects found included)
+            from ..diagnosis.coherence import diagnosis_structure
             unexplained = {c: u.tracks for u in diagnosis.unexplained for c in u.components}
             extra = fit_gates(config, points, diagnosis.sigma_pct_fs['after'], diagnosis.residuals_after,
                               diagnosis.press_residuals_after, limits,
-                              'adopted model' if diagnosis.effects else 'base model', unexplained)
+                              'adopted model' if diagnosis.effects else 'base model', unexplained,
+                              diagnosis_structure(diagnosis, points, config))
         else:
             residuals, press = base_fit_arrays(reduction, fits[base_model])
             extra = fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits)
