@@ -5,8 +5,15 @@ Hysteresis loops
     preisach   a Preisach loop: a field of relay hysterons, each switching up at α and down at
                β ≤ α on the bridge's output over its rated output, weighted by a Gaussian in
                (α - β, α + β); the widest loop is at zero and narrows towards the extremes
-    masing     a Masing (Iwan) loop: a tanh backbone, each branch from a turning point the
-               backbone scaled by two (the joints of a flexure slipping one after another)
+    bouc_wen   a Bouc-Wen loop (a smooth, rate-independent loop of a structural joint): the
+               offset z follows dz = du - β|du||z|^(n-1)z - γ du|z|^n on the bridge's output u,
+               saturating within `knee` of travel after each reversal
+    masing     a Masing (Iwan) loop with memory: a tanh backbone, each branch from a turning point
+               the backbone scaled by two, inner loops closing where they started
+    reseating  a joint that re-seats at every reversal: Masing branches without memory, the slip
+               saturating at full slip; its offset ratchets with the small reversals
+    ratchet    the same joint whose slip does not saturate (ratcheting: slip accumulating with
+               every unequal cycle), outside every family
     friction   friction in the loading path: the load reaching the balance falls short of the
                applied one by μ |L| while the weights rise and exceeds it while they fall, with a
                stick band (the pulley turns only once the rope's tension has changed by 2δ)
@@ -77,6 +84,64 @@ class PreisachLoop(Effect):
 
 
 @dataclass(frozen=True)
+class BoucWenLoop(Effect):
+    size: float = 0.0               # offset at saturation, x rated output
+    bridges: str = 'all'
+    knee: float = 0.15              # travel (x rated output) over which the offset saturates
+    exponent: float = 1.0
+    name = 'bouc_wen'
+
+    def outputs(self, outputs_mv, ctx):
+        # dz = A du - β |du| |z|^(n-1) z - γ du |z|^n with A = 1, β = γ = 1 / (2 knee^n): z
+        # saturates at ±knee; integrated in small steps of u (the offset is size x z / knee)
+        u = ctx.outputs_mv / ctx.rated_output_mv
+        n = self.exponent
+        beta = gamma = 1.0 / (2.0 * self.knee ** n)
+        z = np.zeros(u.shape[1])
+        out = np.empty_like(u)
+        previous = u[0].copy()
+        for i, row in enumerate(u):
+            travel = row - previous
+            steps = max(1, int(np.ceil(np.max(np.abs(travel)) / (0.02 * self.knee))))
+            du = travel / steps
+            for _ in range(steps):
+                z = z + du - beta * np.abs(du) * np.abs(z) ** (n - 1) * z - gamma * du * np.abs(z) ** n
+            out[i] = z
+            previous = row
+        return outputs_mv + self.size * ctx.rated_output_mv * _where(self.bridges) * out / self.knee
+
+
+def _masing(u: np.ndarray, backbone) -> np.ndarray:
+    """Masing's rules with memory (the Iwan model of joints slipping one after another) on one
+    series u (S,): the virgin curve is the backbone f; after a reversal at (u_r, y_r) the branch
+    is y_r + 2 f((u - u_r) / 2); a branch that reaches the turning point it started from closes
+    that inner loop and the response continues on the branch it interrupted (or the backbone)."""
+    y = np.empty_like(u)
+    stack = []                                  # turning points (u_r, y_r), oldest first
+    going, previous, current = 0.0, u[0], float(backbone(u[0]))
+    for i, x in enumerate(u):
+        step = np.sign(x - previous)
+        if step != 0 and going != 0 and step != going:
+            stack.append((previous, current))
+        if step != 0:
+            going = step
+        # close inner loops: passing the turning point before the last one resumes its branch
+        while len(stack) >= 2 and (x - stack[-2][0]) * going >= 0:
+            stack.pop()
+            stack.pop()
+        if len(stack) == 1 and (x - (-stack[0][0])) * going >= 0 and abs(x) >= abs(stack[0][0]):
+            stack.pop()                         # beyond the largest excursion: the backbone again
+        if stack:
+            u_r, y_r = stack[-1]
+            current = y_r + 2.0 * float(backbone((x - u_r) / 2.0))
+        else:
+            current = float(backbone(x))
+        y[i] = current
+        previous = x
+    return y
+
+
+@dataclass(frozen=True)
 class MasingLoop(Effect):
     size: float = 0.0               # backbone saturation, x rated output
     bridges: str = 'all'
@@ -86,24 +151,46 @@ class MasingLoop(Effect):
     def outputs(self, outputs_mv, ctx):
         u = ctx.outputs_mv / ctx.rated_output_mv
         backbone = lambda x: np.tanh(x / self.knee)               # noqa: E731
+        mask = _where(self.bridges)
+        loop = np.zeros_like(u)
+        for j in np.flatnonzero(mask):
+            # the loop only: the mean response is the backbone, which the cubic takes
+            loop[:, j] = _masing(u[:, j], backbone) - backbone(u[:, j])
+        return outputs_mv + self.size * ctx.rated_output_mv * loop
+
+
+@dataclass(frozen=True)
+class ReseatingJoint(Effect):
+    """A joint that re-seats at every reversal and so forgets the earlier cycles: each branch is
+    the doubled tanh backbone from the last turning point, no inner loop closes, and the slip
+    saturates at full slip (|y| <= 1): the offset ratchets with the history of small reversals."""
+
+    size: float = 0.0               # full slip, x rated output
+    bridges: str = 'all'
+    knee: float = 0.3
+    saturate: bool = True           # False: the slip accumulates without bound (ratcheting)
+    name = 'reseating'
+
+    def outputs(self, outputs_mv, ctx):
+        u = ctx.outputs_mv / ctx.rated_output_mv
+        backbone = lambda x: np.tanh(x / self.knee)               # noqa: E731
         y = np.empty_like(u)
-        turn_u, turn_y = np.zeros(6), np.zeros(6)
-        going = np.zeros(6)
-        virgin = np.ones(6, bool)
+        turn_u, turn_y, going = np.zeros(u.shape[1]), np.zeros(u.shape[1]), np.zeros(u.shape[1])
+        virgin = np.ones(u.shape[1], bool)
         previous = u[0].copy()
         for i, row in enumerate(u):
             step = np.sign(row - previous)
-            reversed_ = (step != 0) & (going != 0) & (step != going)
-            if np.any(reversed_):
-                turn_u = np.where(reversed_, previous, turn_u)
-                turn_y = np.where(reversed_, y[i - 1], turn_y)
-                virgin = virgin & ~reversed_
+            reversal = (step != 0) & (going != 0) & (step != going)
+            turn_u = np.where(reversal, previous, turn_u)
+            turn_y = np.where(reversal, y[i - 1] if i else 0.0, turn_y)
+            virgin &= ~reversal
             going = np.where(step != 0, step, going)
             branch = turn_y + 2.0 * backbone((row - turn_u) / 2.0)
+            branch = np.clip(branch, -1.0, 1.0) if self.saturate else branch
             y[i] = np.where(virgin, backbone(row), branch)
             previous = row
-        # the loop only: the branches' mean response is the backbone, which the cubic takes
-        return outputs_mv + self.size * ctx.rated_output_mv * _where(self.bridges) * (y - backbone(u))
+        loop = (y - backbone(u)) * _where(self.bridges)
+        return outputs_mv + self.size * ctx.rated_output_mv * loop
 
 
 @dataclass(frozen=True)
@@ -190,16 +277,19 @@ class PowerCreep(Effect):
         return outputs_mv + self.creep * _where(self.bridges) * gained
 
 
-SHAPES = {'preisach': (PreisachLoop, 'size'), 'masing': (MasingLoop, 'size'),
+SHAPES = {'preisach': (PreisachLoop, 'size'), 'bouc_wen': (BoucWenLoop, 'size'),
+          'masing': (MasingLoop, 'size'), 'reseating': (ReseatingJoint, 'size'),
           'friction': (LoadPathFriction, 'friction'), 'sign_step': (SensitivityStep, 'step'),
           'negative_curvature': (NegativeCurvature, 'curvature'),
           'lagged_temperature': (LaggedTemperature, 'zero'), 'power_creep': (PowerCreep, 'creep')}
-FAMILY = {'preisach': 'hysteresis', 'masing': 'hysteresis', 'friction': 'hysteresis',
+FAMILY = {'preisach': 'hysteresis', 'bouc_wen': 'hysteresis', 'masing': 'hysteresis', 'reseating': 'hysteresis', 'friction': 'hysteresis',
           'sign_step': 'bidirectional', 'negative_curvature': 'bidirectional',
           'lagged_temperature': 'temperature', 'power_creep': 'creep'}
 
 
 def make(shape: str, size: float, bridges: str) -> Effect:
+    if shape == 'ratchet':          # the re-seating joint whose slip never saturates
+        return ReseatingJoint(size=size, bridges=bridges, saturate=False)
     cls, parameter = SHAPES[shape]
     return cls(**{parameter: size, 'bridges': bridges})
 
@@ -227,18 +317,19 @@ def added_rms_pct_fs(balance: str, effects) -> np.ndarray:
 
 
 @lru_cache(maxsize=None)
-def scaled_size(balance: str, shape: str, bridges: str, component: str, floors: float = 1.0) -> float:
-    """The size parameter of `shape` adding `floors` x the cubic σ floor to `component`."""
+def scaled_size(balance: str, shape: str, bridges: str, component: str | None, floors: float = 1.0) -> float:
+    """The size parameter of `shape` adding `floors` x the cubic σ floor to `component` (None:
+    on average over the six components, for an effect on every bridge)."""
     config = load_balance_config(balance)
-    k = config.components.index(component)
-    target = floors * noise_floor_pct_fs(config)[k]
+    floor = noise_floor_pct_fs(config)
     size = 1e-3
     for _ in range(4):                      # the sizes are near-linear in the parameter
-        got = added_rms_pct_fs(balance, [make(shape, size, bridges)])[k]
+        added = added_rms_pct_fs(balance, [make(shape, size, bridges)]) / floor
+        got = float(np.mean(added)) if component is None else float(added[config.components.index(component)])
         if got <= 0:
             break
-        size *= target / got
-        if abs(got / target - 1.0) < 0.03:
+        size *= floors / got
+        if abs(got / floors - 1.0) < 0.03:
             break
     return float(size)
 
@@ -246,8 +337,9 @@ def scaled_size(balance: str, shape: str, bridges: str, component: str, floors: 
 def scaled(balance: str, shape: str, bridges: str, component: str | None = None,
            floors: float = 1.0) -> Effect:
     """`shape` on `bridges` ('all' or one component), `floors` x the floor on `component`
-    (default: the bridge's own, FX for 'all')."""
-    component = component or (bridges if bridges != 'all' else 'FX')
+    (default: the bridge's own; for 'all', on average over the components)."""
+    if component is None and bridges != 'all':
+        component = bridges
     return make(shape, scaled_size(balance, shape, bridges, component, floors), bridges)
 
 

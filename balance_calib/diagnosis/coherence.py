@@ -22,9 +22,9 @@ column of the target would fit part of a typo. Only components on which the diag
 effect or reported `unexplained` structure are examined (`diagnosis_structure`): elsewhere the
 residuals are at the repeatability and a flagged point has nothing to belong to.
 
-Limit (measured, test/test_diagnosis_gate.py): a loop 4x the issue's size (1 % of rated output at
-its widest, Masing shape, on every bridge of LMC6522) still leaves 1-2 points per campaign that no
-other point's history predicts closely enough; those stay refused.
+Limit (measured on test/diagnosis_physics.py's ratcheting joint on every bridge of LMC6522): at
+0.5 % of rated output at its widest every flagged point is explained; at 1 % one or two points
+per campaign are predicted too loosely by the others and stay refused.
 """
 from __future__ import annotations
 
