@@ -378,8 +378,9 @@ def write_outputs(result: CalibrationResult, out_dir: Path, *, plots: bool = Tru
         figures = []
         if plots:
             from .plots import residual_figures
-            from ..diagnosis.plots import unexplained_figures
-            figures = residual_figures(result, staging) + unexplained_figures(result.diagnosis, staging)
+            from ..diagnosis.plots import contrast_figures, unexplained_figures
+            figures = (residual_figures(result, staging) + unexplained_figures(result.diagnosis, staging)
+                       + contrast_figures(result.diagnosis, staging))
         result.report.setdefault('plots', [f.name for f in figures])
         (staging / 'report.json').write_text(json.dumps(result.report, indent=2, allow_nan=False) + '\n')
         (staging / 'report.md').write_text(report_markdown(result.report, result))
