@@ -17,8 +17,11 @@ excitation. Per round, for every family and component:
    between the campaign's halves (a Chow test: something the family only resembles would);
 3. families are ranked by the gain in BIC, Σ_k [n ln(RSS_before/RSS_after) - q_k ln n] (whitened,
    n loaded points); a generic family (cross_terms, zero_drift) winning by less than `equal_score`
-   yields to the specific one. A runner-up about as good as the winner that no longer passes once
-   the winner is in explained the same residual: a warning ("cannot separate"), not a second name.
+   yields to the specific one. Hysteresis and bidirectional keep only the components their contrast
+   explains (loop_or_sign.py: the loading and unloading branches at equal load differ for a loop,
+   not for a sensitivity keyed to the load's sign). A runner-up about as good as the winner that
+   no longer passes once the winner is in explained the same residual: a warning ("cannot
+   separate"), not a second name.
 
 The best family is added (its terms only for its components), everything refitted, and the search
 repeats until no family passes. Then leftovers.py tests what remains against the repeatability of
@@ -49,6 +52,7 @@ from .candidates import (EFFECT_NAMES, GENERIC_FAMILIES, NUISANCE_EFFECTS, STATI
                          cross_terms_family, direction_variables, drift_family, drift_frequencies,
                          drift_variables, excitation_basis, excitation_family, excitation_variables,
                          own_terms_only, without_base_terms, hysteresis_family, temperature_family)
+from .loop_or_sign import components_to_drop, direction_pairs
 from .leftovers import Leftovers, examine_leftovers
 from .statistics import ComponentFit, ZeroPointWhitening, fit_columns, forward_select, partial_f, sigma_pct_fs
 from .tare_refit import refit_body
@@ -347,6 +351,8 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
     base_coefficients = np.array([f.ols.coefficients for f in fits])
     body, body_source = reduction.body, reduction.body_source
 
+    # the schedule's own pairs (contrasts.py): equal load reached rising and falling
+    pairs = direction_pairs(corrected, points.orientation, raw_direction, capacity)
     effects: list[dict] = []
     adopted_families: set[str] = set()
     warnings: list[str] = []
@@ -367,6 +373,7 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
                                       capacity, components, outputs_names)
             if candidate:
                 candidates.append(candidate)
+        candidates = _told_apart_by_direction(candidates, fits, pairs)
         present = {c.family for c in candidates}
         for won, runner in close_runners:
             if runner.family not in present:
@@ -580,6 +587,32 @@ def _examine_excitation(family, fits, comp_terms, problem, capacity, settings):
     if len(accepted) < 2:
         return None
     return _Candidate(family.name, accepted, score)
+
+
+def _told_apart_by_direction(candidates, fits, pairs) -> list:
+    """Hysteresis and bidirectional keep only the components their contrast explains
+    (loop_or_sign.py); a candidate left with none is dropped, the others rescored."""
+    by_family = {c.family: c for c in candidates}
+    loop, sign = by_family.get('hysteresis'), by_family.get('bidirectional')
+    if loop is None:
+        return candidates
+    residuals = {name: {k: s['fit'].ols.residuals for k, s in c.components.items()}
+                 for name, c in (('hysteresis', loop), ('bidirectional', sign)) if c is not None}
+    loop_drop, sign_drop = components_to_drop(residuals['hysteresis'],
+                                              residuals.get('bidirectional', {}),
+                                              [f.ols.residuals for f in fits], pairs)
+    drop = {'hysteresis': loop_drop, 'bidirectional': sign_drop}
+    kept = []
+    for candidate in candidates:
+        gone = drop.get(candidate.family, set()) & set(candidate.components)
+        if gone:
+            components = {k: s for k, s in candidate.components.items() if k not in gone}
+            if not components:
+                continue
+            candidate = _Candidate(candidate.family, components,
+                                   sum(s['bic_gain'] for s in components.values()))
+        kept.append(candidate)
+    return kept
 
 
 def _inseparable_warning(winner, runner, components) -> str:

@@ -139,3 +139,43 @@ def unexplained_figures(diagnosis: Diagnosis | None, directory) -> list[Path]:
         return []
     return [plot_unexplained(diagnosis, entry, Path(directory) / f'unexplained_{entry.components[0]}.png')
             for entry in diagnosis.unexplained]
+
+
+def plot_contrasts(diagnosis: Diagnosis, path, contrasts=None) -> Path | None:
+    """Direction contrast (falling - rising at equal load, left) and sign contrast (r(+L) + r(-L),
+    right) of the base model's residual (% FS) against the load (fraction of capacity), one row per
+    component (diagnosis/contrasts.py), with the ±2√2 s band of two points' repeatability.
+    None when the schedule offers no pair."""
+    from .contrasts import schedule_contrasts
+    contrasts = contrasts if contrasts is not None else schedule_contrasts(diagnosis)
+    if not any(c.count for pair in contrasts.values() for c in pair):
+        return None
+    figure = Figure(figsize=(9, 11.5))          # two panels wide, one row per component
+    figure.suptitle(f'{diagnosis.balance} — what the schedule tells: loop (direction) vs sign '
+                    f'(base model residuals, % F.S.)')
+    for k, component in enumerate(diagnosis.components):
+        s = float(diagnosis.repeatability_pct_fs.get(component, float('nan')))
+        for row, contrast in enumerate(contrasts[component]):
+            axes = figure.add_subplot(len(diagnosis.components), 2, 2 * k + row + 1)
+            axes.axhline(0.0, color='0.6', linewidth=0.8)
+            if np.isfinite(s) and s > 0:
+                axes.axhspan(-2 * np.sqrt(2) * s, 2 * np.sqrt(2) * s, color='0.9')
+            axes.plot(contrast.load_fraction, contrast.value_pct_fs, 'o', markersize=3,
+                      color='C3' if contrast.kind == 'direction' else 'C0')
+            what = 'falling − rising' if contrast.kind == 'direction' else 'r(+L) + r(−L)'
+            ratio = f'{contrast.ratio:.1f}' if np.isfinite(contrast.ratio) else '–'
+            axes.set_title(f'{component} {contrast.kind}: {contrast.count} pairs, {ratio}× s²',
+                           fontsize=8)
+            axes.set_xlabel('|L| / capacity', fontsize=7)
+            axes.set_ylabel(what, fontsize=7)
+            axes.tick_params(labelsize=7)
+    figure.tight_layout()
+    return _save(figure, path)
+
+
+def contrast_figures(diagnosis: Diagnosis | None, directory) -> list[Path]:
+    """contrasts.png (none without a diagnosis or without pairs)."""
+    if diagnosis is None:
+        return []
+    path = plot_contrasts(diagnosis, Path(directory) / 'contrasts.png')
+    return [path] if path is not None else []

@@ -7,7 +7,11 @@ calibration.yaml is written or swapped in:
                        balance to its capacity): outputs recorded in V, or µV, cannot pass
     sigma              σ of the base model per component (TM-663 eqs. (44)-(49)) within its limit
     outliers           no load point whose loads disagree with its outputs (leave-one-out residual
-                       beyond k robust σ): a weight typo, a misplaced marker, a clipped point
+                       beyond k robust σ): a weight typo, a misplaced marker, a clipped point;
+                       after the diagnosis, against the adopted model, and a point that the
+                       campaign's structure predicts from the other points on a component where
+                       the diagnosis found something is explained, not refused
+                       (diagnosis/coherence.py)
     sensitivity        fitted linear sensitivities (N per mV) near the balance's nominal ones
                        (config Table 10/14 linear matrix, else capacity / rated output): loads
                        recorded in kgf or the wrong --balance cannot pass
@@ -158,13 +162,16 @@ def data_gates(config: BalanceConfig, points, reduction, fits, cut=None, active=
 
 def fit_gates(config: BalanceConfig, points, sigma_pct_fs: Mapping[str, float], residuals: np.ndarray,
               press: np.ndarray, limits: AcceptanceLimits | None = None, what: str = 'base model',
-              unexplained: Mapping[str, str] | None = None) -> list[Gate]:
+              unexplained: Mapping[str, str] | None = None, structure=None) -> list[Gate]:
     """σ and outlier gates on the model to be adopted: its σ (% FS), residuals and leave-one-out
     residuals (P, 6) N, N·m. unexplained: component -> what the diagnosis's unexplained structure
-    there tracks (the outlier gate then names it as a cause besides a weight or marker error)."""
+    there tracks (the outlier gate then names it as a cause besides a weight or marker error).
+    structure: diagnosis.coherence.CampaignStructure or None; a flagged point that the campaign's
+    structure on a component the diagnosis found something on predicts from the other points is
+    not an outlier (it is reported as explained)."""
     limits = limits or acceptance_limits(config)
     return [_sigma_gate(config, sigma_pct_fs, limits, what),
-            _outlier_gate(config, points, residuals, press, limits, what, unexplained or {})]
+            _outlier_gate(config, points, residuals, press, limits, what, unexplained or {}, structure)]
 
 
 def base_fit_arrays(reduction, base_fit) -> tuple[np.ndarray, np.ndarray]:
@@ -217,7 +224,8 @@ def _sigma_gate(config, sigma, limits, what) -> Gate:
                                f'{limits.sigma_limit_pct_fs[worst]:.3g} % FS)', details)
 
 
-def _outlier_gate(config, points, residuals, press, limits, what, unexplained=None) -> Gate:
+def _outlier_gate(config, points, residuals, press, limits, what, unexplained=None,
+                  structure=None) -> Gate:
     press_pct = press / config.capacity * 100.0
     # r / sqrt(1 - h): the same variance for every point whatever its leverage
     with np.errstate(divide='ignore', invalid='ignore'):
@@ -230,6 +238,8 @@ def _outlier_gate(config, points, residuals, press, limits, what, unexplained=No
     threshold = np.maximum(limits.outlier_robust_sigmas * robust, limits.outlier_floor_pct_fs)
     finite = np.all(np.isfinite(standardized), axis=1)
     flagged = (np.abs(standardized) > threshold) | ~finite[:, None]
+    explained = _explained_by_structure(config, standardized, flagged, threshold, structure)
+    flagged &= ~explained
     rows = np.flatnonzero(np.any(flagged, axis=1))
     severity = np.max(np.where(flagged, np.nan_to_num(np.abs(standardized) / threshold, nan=np.inf), 0.0), axis=1)
     rows = rows[np.argsort(-severity[rows], kind='stable')]   # the worst point first
@@ -244,7 +254,12 @@ def _outlier_gate(config, points, residuals, press, limits, what, unexplained=No
         largest = float(np.nanmax(np.abs(standardized) / np.maximum(robust, 1e-12)))
     details = {'threshold_pct_fs': dict(zip(config.components, threshold)), 'points': entries,
                'count': int(len(rows)), 'largest_robust_sigmas': largest, 'model': what}
+    coherent = _explained_text(config, points, explained, structure)
+    if coherent:
+        details['explained_by_structure'] = coherent[1]
     if not len(rows):
+        if coherent:
+            return Gate('outliers', True, f'no point wrong on its own: {coherent[0]}', details)
         return Gate('outliers', True, f'no point beyond {limits.outlier_robust_sigmas:g} robust σ '
                                       f'(largest {largest:.1f}; leave-one-out residuals of the {what})', details)
     first = entries[0]
@@ -256,10 +271,44 @@ def _outlier_gate(config, points, residuals, press, limits, what, unexplained=No
         cause = (f'a weight, unit or marker error, or the structure the diagnosis left unexplained on '
                  f'{first["component"]} (it tracks {tracks}): an effect the model lacks?')
         details['unexplained_tracks'] = tracks
+    besides = f'; besides, {coherent[0]}' if coherent else ''
     return Gate('outliers', False,
                 f'point {first["point"]} (I_g {first["orientation"]}): its {first["component"]} load '
                 f'disagrees with its outputs by {first["residual_pct_fs"]:+.3g} % FS '
-                f'({first["robust_sigmas"]:.0f} robust σ; {cause}){more}', details)
+                f'({first["robust_sigmas"]:.0f} robust σ; {cause}){more}{besides}', details)
+
+
+def _explained_by_structure(config, standardized, flagged, threshold, structure) -> np.ndarray:
+    """(P, 6) flagged residuals that the campaign's structure predicts from the other points, on
+    components where the diagnosis adopted an effect or left structure unexplained."""
+    explained = np.zeros_like(flagged)
+    if structure is None:
+        return explained
+    from ..diagnosis.coherence import fit_structure
+    for k, component in enumerate(config.components):
+        if component not in structure.covered or not np.any(flagged[:, k]):
+            continue
+        fit = fit_structure(standardized[:, k], structure.basis, k, flagged[:, k])
+        if fit.explains:
+            explained[:, k] = flagged[:, k] & (np.abs(fit.out_of_sample) <= threshold[k])
+    return explained
+
+
+def _explained_text(config, points, explained, structure):
+    """(one line, details) on the flagged points a structure explains, or None."""
+    if structure is None or not np.any(explained):
+        return None
+    parts, details = [], {}
+    for k, component in enumerate(config.components):
+        rows = np.flatnonzero(explained[:, k])
+        if len(rows):
+            labels = [int(points.label[i]) for i in rows]
+            details[component] = {'points': labels, 'structure': structure.covered[component]}
+            listed = ', '.join(str(x) for x in labels[:5]) + ('…' if len(labels) > 5 else '')
+            parts.append(f'{len(rows)} point(s) beyond the threshold on {component} '
+                         f'(points {listed}) follow {structure.covered[component]}, which the '
+                         f'other points share')
+    return '; '.join(parts) + ' (an effect the model lacks, not a weight or marker error)', details
 
 
 def _nominal_sensitivity(config) -> tuple[np.ndarray, str]:

@@ -133,10 +133,12 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
         diagnosis = _run_diagnosis(reduction, config, base_model, fits[base_model], say, cut)
         if diagnosis is not None:
             # σ and outliers of the model that will be adopted (effects found included)
+            from ..diagnosis.coherence import diagnosis_structure
             unexplained = {c: u.tracks for u in diagnosis.unexplained for c in u.components}
             extra = fit_gates(config, points, diagnosis.sigma_pct_fs['after'], diagnosis.residuals_after,
                               diagnosis.press_residuals_after, limits,
-                              'adopted model' if diagnosis.effects else 'base model', unexplained)
+                              'adopted model' if diagnosis.effects else 'base model', unexplained,
+                              diagnosis_structure(diagnosis, points, config))
         else:
             residuals, press = base_fit_arrays(reduction, fits[base_model])
             extra = fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits)
@@ -363,8 +365,9 @@ def write_outputs(result: CalibrationResult, out_dir: Path, *, plots: bool = Tru
         figures = []
         if plots:
             from .plots import residual_figures
-            from ..diagnosis.plots import unexplained_figures
-            figures = residual_figures(result, staging) + unexplained_figures(result.diagnosis, staging)
+            from ..diagnosis.plots import contrast_figures, unexplained_figures
+            figures = (residual_figures(result, staging) + unexplained_figures(result.diagnosis, staging)
+                       + contrast_figures(result.diagnosis, staging))
         result.report.setdefault('plots', [f.name for f in figures])
         (staging / 'report.json').write_text(json.dumps(result.report, indent=2, allow_nan=False) + '\n')
         (staging / 'report.md').write_text(report_markdown(result.report, result))

@@ -1,0 +1,67 @@
+"""Hysteresis loops and sign asymmetries written from their physics (test/diagnosis_physics.py,
+not from the families' terms), one noise floor in size (the RMS they add to that component's
+cubic-fit residual = Table 17's cubic σ): the right family named first and alone, nothing
+unexplained, σ after (in-sample and cross-validated) within 15 % / 20 % of the clean campaign of
+the same seed (issue 24). The fast path runs one seed per cell; the slow test the ten seeds of
+the issue's ≥ 9/10.
+
+Only the cells that meet the target are here; the measured misses (docs in the final report of
+issue 24): load-path friction 0/10 (unexplained: on this schedule every loaded point is reached
+rising, so it is mostly a sign step plus a sensitivity, which no family holds with the stick
+band), negative curvature on every bridge 4/10 (LMC6522) and 0/10 (B660H) with cross_terms
+beside bidirectional, Preisach on every bridge 8/10 (LMC6522) and 7/10 (B660H), and B660H's loops
+on F_Z at σ ratios 1.18-1.56.
+"""
+from functools import lru_cache
+
+import pytest
+
+import diagnosis_physics as physics
+from balance_calib.config import load_balance_config
+from balance_calib.diagnosis import diagnose
+from balance_calib.diagnosis.rates import simulate_reduction
+
+CELLS = [('lmc6522', 'preisach', 'MY'), ('lmc6522', 'masing', 'MY'), ('lmc6522', 'bouc_wen', 'MY'),
+         ('lmc6522', 'reseating', 'MY'), ('lmc6522', 'sign_step', 'MY'),
+         ('lmc6522', 'negative_curvature', 'MY'), ('lmc6522', 'bouc_wen', 'all'),
+         ('lmc6522', 'sign_step', 'all'), ('b660h', 'sign_step', 'FZ')]
+SEEDS = tuple(range(3000, 3010))
+
+
+@lru_cache(maxsize=None)
+def _clean(balance, seed):
+    config = load_balance_config(balance)
+    reduction, scatter = simulate_reduction(config, seed=seed, samples_per_point=8, with_scatter=True)
+    return diagnose(reduction, config, **scatter)
+
+
+def _outcome(balance, shape, bridges, seed):
+    """(right, worst σ after / clean σ, worst cross-validated ratio) over the affected components."""
+    config = load_balance_config(balance)
+    effect = physics.scaled(balance, shape, bridges)
+    reduction, scatter = simulate_reduction(config, [effect], seed=seed, samples_per_point=8,
+                                            with_scatter=True)
+    result = diagnose(reduction, config, **scatter)
+    clean = _clean(balance, seed)
+    assert clean.effects == () and clean.unexplained == () and not clean.warnings
+    components = config.components if bridges == 'all' else (bridges,)
+    sigma = max(result.sigma_pct_fs['after'][c] / clean.sigma_pct_fs['before'][c] for c in components)
+    crossval = max(result.sigma_pct_fs_crossval['after'][c] / clean.sigma_pct_fs_crossval['before'][c]
+                   for c in components)
+    right = result.effect_names == (physics.FAMILY[shape],) and not result.unexplained
+    return right, sigma, crossval, (result.effect_names, [u.components for u in result.unexplained])
+
+
+@pytest.mark.parametrize('balance, shape, bridges', CELLS)
+def test_a_physical_loop_or_sign_asymmetry_is_named_alone_one_seed(balance, shape, bridges):
+    right, sigma, crossval, found = _outcome(balance, shape, bridges, SEEDS[0])
+    assert right, found
+    assert sigma <= 1.15 and crossval <= 1.2, (sigma, crossval)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('balance, shape, bridges', CELLS)
+def test_a_physical_loop_or_sign_asymmetry_is_named_alone_in_nine_of_ten(balance, shape, bridges):
+    outcomes = [_outcome(balance, shape, bridges, seed) for seed in SEEDS]
+    assert sum(o[0] for o in outcomes) >= 9, [o[3] for o in outcomes]
+    assert all(o[1] <= 1.15 and o[2] <= 1.2 for o in outcomes), [(o[1], o[2]) for o in outcomes]
