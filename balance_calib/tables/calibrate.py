@@ -14,18 +14,16 @@ import scipy.stats
 
 from ..calibration_file import Calibration, now_iso
 from ..fit.iterative import IterationDidNotConverge, fit_iterative, iterative_point_uncertainty
-from ..fit.least_squares import UnexcitedTermsError
+from ..fit.least_squares import TooFewPointsError, UnexcitedTermsError
 from ..fit.series_tares import SeriesTareFit, direct_point_uncertainty, fit_direct
 from ..model.inverse import InverseDidNotConverge
 from ..model.r091 import term_set
 from .balfit_reader import CalibrationTable
+from .errors import TableCalibrationError
+from .term_screen import screen_for_table
 
 METHODS = ('direct', 'iterative')
 _NAME_RE = re.compile(r'^[A-Za-z_][A-Za-z0-9_]*$')
-
-
-class TableCalibrationError(ValueError):
-    """The table cannot be calibrated as asked; one line saying why."""
 
 
 @dataclass(frozen=True)
@@ -162,6 +160,8 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
             'iterative': term_set('r091-96' if terms == 'auto' else terms, loads, inputs)}
     except ValueError as err:
         raise TableCalibrationError(str(err)) from None
+    screens = {m: screen_for_table(m, term_sets[m], table, outputs) for m in methods}
+    term_sets = {m: screens[m].kept for m in methods}
     fits: dict[str, SeriesTareFit] = {}
     selections = {}
     try:
@@ -181,7 +181,7 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
                                fit_iterative(term_sets[m], loads_si, outputs, table.series, components=loads,
                                              inputs=inputs, capacity=capacity, name='iterative',
                                              statistics=statistics))
-    except (UnexcitedTermsError, IterationDidNotConverge, InverseDidNotConverge) as err:
+    except (UnexcitedTermsError, TooFewPointsError, IterationDidNotConverge, InverseDidNotConverge) as err:
         raise TableCalibrationError(f'{table.source}: {err}') from None
 
     if method == 'auto' and len(fits) == 2:
@@ -210,6 +210,7 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
 
     t95 = float(scipy.stats.t.ppf(0.975, fit.dof))
     report = _report(table, validation, fits, chosen, why, term_sets, validation_sigma, validation_u, t95, terms)
+    report['terms_dropped'] = {m: [{'term': t, 'why': w} for t, w in screens[m].dropped] for m in fits}
     if select:
         report['term_selection'] = {m: {'kept': len(sel.kept), 'removed': list(sel.removed), 'why': list(sel.reasons)}
                                     for m, sel in selections.items()}

@@ -1,0 +1,66 @@
+"""The terms of a table's candidate set that its load schedule determines, per model form.
+
+The iterative form's terms are polynomials of the loads: judged at the applied loads the schedule
+sets (tares, unknown, are the nuisance columns). The direct form's are polynomials of the outputs:
+a term is dropped when the loads its bridges follow (each output's dominant load in a least-squares
+fit of the outputs on the applied loads and the series) are never applied together, or when the
+measured output columns leave nothing of it the other terms and tares do not explain. Cross-talk
+and noise make such a product's measured column non-zero; it would be fitted to noise.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from ..fit.determinable import TermScreen, screen_terms
+from ..fit.series_tares import series_indicator
+from ..model.r091 import TermEvaluator
+from ..model.terms import Factor, Term
+from .errors import TableCalibrationError
+
+
+def dominant_loads(relative_loads: np.ndarray, onehot: np.ndarray, outputs: np.ndarray) -> np.ndarray:
+    """(n_outputs,) index of the load each output follows most (sensitivity x capacity)."""
+    n_loads = relative_loads.shape[1]
+    sensitivity = np.linalg.lstsq(np.hstack([relative_loads, onehot]), outputs, rcond=None)[0][:n_loads]
+    scale = np.maximum(np.max(np.abs(sensitivity), axis=0), 1e-300)
+    return np.argmax(np.abs(sensitivity) / scale, axis=0)
+
+
+def schedule_columns(method: str, terms: Sequence[Term], applied_si: np.ndarray, capacity: np.ndarray,
+                     outputs: np.ndarray, series: np.ndarray, inputs: Sequence[str],
+                     loads: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    """((N, p) term columns, (N, n_series) one-hot of the series): the iterative form's at the
+    applied loads; the direct form's from the measured outputs, zero where the schedule never
+    applies the loads its bridges follow together."""
+    _, _, onehot = series_indicator(series)
+    relative = applied_si / capacity
+    if method == 'iterative':
+        return TermEvaluator(terms, loads).design(relative), onehot
+    follows = dominant_loads(relative, onehot, outputs)
+    as_loads = tuple(Term(tuple(Factor(loads[follows[list(inputs).index(f.variable)]], f.power, f.absolute)
+                                for f in t.factors)) for t in terms)
+    applied_together = np.array([np.any(Term.evaluate(t, dict(zip(loads, relative.T)), len(relative)))
+                                 for t in as_loads])
+    measured = TermEvaluator(terms, inputs).design(outputs)
+    return measured * applied_together[None, :], onehot
+
+
+def screen_for_table(method: str, terms: Sequence[Term], table, outputs: np.ndarray,
+                     min_dof: int = 2) -> TermScreen:
+    """The determinable terms of one form; TableCalibrationError when none is left."""
+    columns, onehot = schedule_columns(method, terms, table.applied_loads_si, table.load_capacity_si,
+                                       outputs, table.series, table.bridge_symbols, table.load_symbols)
+    screen = screen_terms(terms, columns, onehot, min_dof=min_dof)
+    linear = [t for t in screen.kept if t.degree == 1 and not t.factors[0].absolute]
+    # the loads cannot be told apart without a linear term per load (iterative: the Newton inverse
+    # starts from the linear part); fewer is "nothing left"
+    if len(linear) < table.n_loads:
+        lost = [f'{name} ({why})' for name, why in screen.dropped
+                if name in {t.name for t in terms if t.degree == 1}][:3]
+        raise TableCalibrationError(
+            f'{table.source}: the load schedule determines none of the {method} models: '
+            f'{len(linear)} of the {table.n_loads} linear terms are left ({table.points} points, '
+            f'{onehot.shape[1]} series){"; " + "; ".join(lost) if lost else ""}')
+    return screen

@@ -1,0 +1,61 @@
+"""Calibration tables generated from physical-ish responses the package does not model exactly
+(tanh knees, a bending beam read by eight gauges, loads from an |x| polynomial of the outputs), for
+the `fit` tests. Each returns a CalibrationTable in file units plus what the test needs to derive
+its expected numbers (the injected noise)."""
+from __future__ import annotations
+
+import numpy as np
+
+from balance_calib.tables.balfit_reader import FILE_TYPE, CalibrationTable
+
+
+def table(name, loads, outputs, load_units, output_units, capacity, applied, raw, series, *,
+          output_capacity=None, zero=None, point_ids=None) -> CalibrationTable:
+    """A CalibrationTable (file units) with one natural-zero set read at four roll angles."""
+    n_out = len(outputs)
+    zero = np.zeros(n_out) if zero is None else np.asarray(zero, float)
+    roll = np.array([0.0, 90.0, 180.0, 270.0])
+    pattern = np.outer(np.cos(np.radians(roll)).round(12), np.full(n_out, 1e-3))
+    n = len(applied)
+    output_capacity = np.full(n_out, np.nan) if output_capacity is None else np.asarray(output_capacity, float)
+    ids = tuple(point_ids) if point_ids is not None else tuple(f'P{i + 1:03d}' for i in range(n))
+    return CalibrationTable(
+        name, FILE_TYPE, name, 'generated for the fit tests', tuple(loads), tuple(outputs),
+        tuple(load_units), tuple(output_units), np.asarray(capacity, float), output_capacity,
+        tuple(f'NZ-{i + 1}' for i in range(4)), ('Z1',) * 4, roll, zero[None, :] + pattern,
+        ids, np.asarray(series, int), ('Z1',) * n, np.asarray(applied, float),
+        np.asarray(raw, float) + zero[None, :])
+
+
+def three_component_cell(rng, *, series_per_axis: int = 1, steps: int = 5, noise_mvv: float = 2e-4,
+                         knee: float = 0.02):
+    """A 3-component strain-gauge cell (FX, FY, FZ in N, outputs mV/V) calibrated one axis at a time
+    with deadweights: per axis `series_per_axis` fixture orientations (a series each, with the
+    fixture's weight as an unknown tare), `steps` loads from 20 % to 100 % of capacity. FZ's bridge
+    has a low-load knee (tanh, `knee` of rated output), a shape none of the term sets holds; the
+    others a small quadratic and 1.5 % cross-talk. Returns (table, noise mV/V)."""
+    capacity = np.array([50.0, 50.0, 200.0])
+    rated = np.array([1.0, 1.0, 1.5])                       # mV/V at capacity
+    crosstalk = np.array([[1.0, 0.015, -0.01], [-0.012, 1.0, 0.008], [0.01, -0.015, 1.0]])
+    applied, series = [], []
+    label = 1
+    for axis in range(3):
+        for orientation in range(series_per_axis):
+            block = np.zeros((steps, 3))
+            sign = 1.0 if orientation % 2 == 0 else -1.0
+            block[:, axis] = sign * np.linspace(0.2, 1.0, steps) * capacity[axis]
+            applied.append(block)
+            series += [label] * steps
+            label += 1
+    applied = np.vstack(applied)
+    series = np.array(series)
+    tares = {s: rng.uniform(-0.03, 0.03, 3) * capacity for s in np.unique(series)}
+    total = applied + np.array([tares[s] for s in series])
+    x = total / capacity
+    response = x.copy()
+    response[:, 0] += 0.004 * x[:, 0] ** 2
+    response[:, 1] -= 0.003 * x[:, 1] ** 2
+    response[:, 2] += knee * np.tanh(x[:, 2] / 0.08)           # low-load knee of the FZ bridge
+    raw = (response @ crosstalk.T) * rated + rng.normal(0, noise_mvv, response.shape)
+    return table('cell3', ('FX', 'FY', 'FZ'), ('rFX', 'rFY', 'rFZ'), ('N',) * 3, ('mV/V',) * 3,
+                 capacity, applied, raw, series, zero=rng.uniform(-0.05, 0.05, 3)), noise_mvv
