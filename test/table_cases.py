@@ -59,3 +59,62 @@ def three_component_cell(rng, *, series_per_axis: int = 1, steps: int = 5, noise
     raw = (response @ crosstalk.T) * rated + rng.normal(0, noise_mvv, response.shape)
     return table('cell3', ('FX', 'FY', 'FZ'), ('rFX', 'rFY', 'rFZ'), ('N',) * 3, ('mV/V',) * 3,
                  capacity, applied, raw, series, zero=rng.uniform(-0.05, 0.05, 3)), noise_mvv
+
+
+def eight_channel_sensor(rng, *, poses: int = 60, noise: float = 3e-4):
+    """A six-component sensor read by eight strain-gauge bridges (a Stewart-like cell: every
+    bridge sees a mix of all six loads), calibrated on `poses` random poses, all six loads at once
+    up to 80 % of capacity, two series (two mounting adapters, a tare each). The bridges respond
+    with a saturating strain (x - 0.05 x^3 + 0.02 x |x| of the mixed strain x), which no term set
+    holds exactly. Returns (table, noise as a fraction of the rated output)."""
+    loads = ('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ')
+    capacity = np.array([500.0, 500.0, 1000.0, 40.0, 40.0, 30.0])
+    mixing = rng.normal(0, 1, (8, 6))
+    mixing /= np.linalg.norm(mixing, axis=1, keepdims=True)
+    applied = rng.uniform(-0.8, 0.8, (poses, 6)) * capacity
+    series = np.where(np.arange(poses) < poses // 2, 1, 2)
+    tares = {1: rng.uniform(-0.02, 0.02, 6) * capacity, 2: rng.uniform(-0.02, 0.02, 6) * capacity}
+    total = applied + np.array([tares[s] for s in series])
+    strain = (total / capacity) @ mixing.T
+    raw = 2.0 * (strain - 0.05 * strain ** 3 + 0.02 * strain * np.abs(strain))
+    raw = raw + rng.normal(0, noise * 2.0, raw.shape)
+    units = ('N', 'N', 'N', 'N-m', 'N-m', 'N-m')
+    return table('sensor8', loads, tuple(f'g{i + 1}' for i in range(8)), units, ('mV/V',) * 8,
+                 capacity, applied, raw, series), noise
+
+
+def six_component_balance(rng, *, repeats: int = 1, noise: float = 1e-4, rated=None):
+    """A six-component balance (FX..MZ in N / N-m, outputs mV/V) on a TM-663-like schedule: each
+    load alone from -100 % to +100 % (11 steps, a series each) and every pair of loads at random
+    in all four quadrants (12 points, a series each). Bridges: 2 % cross-talk, a small square and
+    a tanh knee (0.05 % of rated), shapes the term sets hold only approximately; noise as a
+    fraction of the rated output. `rated` (mV/V) is written as the output capacities."""
+    from itertools import combinations
+    capacity = np.array([400.0, 300.0, 1200.0, 60.0, 90.0, 50.0])
+    rated = np.array([2.0, 1.5, 2.5, 1.8, 2.2, 1.6]) if rated is None else np.asarray(rated, float)
+    rows, series, label = [], [], 1
+    for _ in range(repeats):
+        for v in range(6):
+            block = np.zeros((11, 6))
+            block[:, v] = np.linspace(-1, 1, 11)
+            rows.append(block)
+            series += [label] * 11
+            label += 1
+        for v, w in combinations(range(6), 2):
+            block = np.zeros((12, 6))
+            block[:, v] = rng.uniform(-1, 1, 12)
+            block[:, w] = rng.uniform(-1, 1, 12)
+            rows.append(block)
+            series += [label] * 12
+            label += 1
+    applied = np.vstack(rows) * capacity
+    series = np.array(series)
+    tares = {s: rng.uniform(-0.02, 0.02, 6) * capacity for s in np.unique(series)}
+    x = (applied + np.array([tares[s] for s in series])) / capacity
+    crosstalk = np.eye(6) + rng.uniform(-0.02, 0.02, (6, 6))
+    response = x + 0.002 * x ** 2 + 0.0005 * np.tanh(x / 0.1)
+    raw = (response @ crosstalk.T) * rated + rng.normal(0, noise, x.shape) * rated
+    units = ('N', 'N', 'N', 'N-m', 'N-m', 'N-m')
+    return table('balance6', ('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'),
+                 ('rFX', 'rFY', 'rFZ', 'rMX', 'rMY', 'rMZ'), units, ('mV/V',) * 6, capacity,
+                 applied, raw, series, output_capacity=rated), noise

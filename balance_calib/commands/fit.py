@@ -32,6 +32,9 @@ def register(subparsers) -> None:
                              '(e.g. a table whose loads are FX..MZ under other symbols)')
     parser.add_argument('--select', action='store_true',
                         help='drop terms by backward elimination (insignificant everywhere and lowering PRESS)')
+    parser.add_argument('--force', action='store_true',
+                        help='write the calibration even when an acceptance gate fails (report.json '
+                             'gates says which, forced: true)')
     parser.add_argument('--no-plots', action='store_true', help='skip the residual figures')
     parser.set_defaults(func=run)
 
@@ -59,7 +62,7 @@ def run(args) -> int:
             table = rename_axes(table, args.axes)
             validation = rename_axes(validation, args.axes) if validation is not None else None
         result = calibrate_table(table, method=args.method, terms=args.terms, validation=validation,
-                                 excitation_v=args.excitation_v, select=args.select)
+                                 excitation_v=args.excitation_v, select=args.select, force=args.force)
     except (TableError, TableCalibrationError) as err:
         raise CommandError(str(err)) from None
     out = write_fit_outputs(result, Path(args.out), plots=not args.no_plots)
@@ -70,6 +73,11 @@ def run(args) -> int:
           f'({report["method_choice"]}); σ % capacity {line}')
     if 'validation' in sigma:
         print('validation σ % capacity ' + ' '.join(f'{k} {v:.4f}' for k, v in sigma['validation'].items()))
+    if report.get('forced'):
+        import sys
+        failed = [g['name'] for g in report['gates'] if not g['passed']]
+        print(f'balance-calib fit: written with --force although gate(s) failed: {", ".join(failed)}',
+              file=sys.stderr)
     print(f'report: {out / "report.md"}')
     return 0
 

@@ -28,6 +28,7 @@ SEPARATION = 1e-3
 class TermScreen:
     kept: tuple[Term, ...]                    # in the set's own order
     dropped: tuple[tuple[str, str], ...]      # (term name, one-line reason), in screening order
+    no_room: tuple[str, ...] = ()             # the dropped ones the number of points left no room for
 
 
 def _factor_terms(term: Term) -> tuple[Term, ...]:
@@ -99,10 +100,12 @@ def screen_terms(terms: Sequence[Term], columns: np.ndarray, nuisance: np.ndarra
         accept(columns[:, j])
         kept.append(j)
     limit = n - q - min_dof
+    no_room: list[str] = []
     if len(kept) > limit:
         by_priority = [j for j in order if j in kept]
         for j in by_priority[max(limit, 0):]:
+            no_room.append(names[j])
             dropped.append((names[j], f'{n} points leave room for {max(limit, 0)} terms beside '
                                       f'{q} series tares and {min_dof} residual degrees of freedom'))
         kept = by_priority[:max(limit, 0)]
-    return TermScreen(tuple(terms[j] for j in sorted(kept)), tuple(dropped))
+    return TermScreen(tuple(terms[j] for j in sorted(kept)), tuple(dropped), tuple(no_room))

@@ -18,8 +18,11 @@ from ..fit.least_squares import TooFewPointsError, UnexcitedTermsError
 from ..fit.series_tares import SeriesTareFit, direct_point_uncertainty, fit_direct
 from ..model.inverse import InverseDidNotConverge
 from ..model.r091 import term_set
+from ..refit.gates import gates_report
 from .balfit_reader import CalibrationTable
 from .errors import TableCalibrationError
+from .gates import (channel_gate, condition_gate, first_failure, outlier_gate, overfit_gate,
+                    sensitivity_gate)
 from .term_screen import screen_for_table
 
 METHODS = ('direct', 'iterative')
@@ -135,7 +138,8 @@ def _select(method: str, terms, fit: SeriesTareFit, table: CalibrationTable, out
 
 def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str = 'auto',
                     validation: CalibrationTable | None = None, excitation_v: float | None = None,
-                    statistics: bool = True, select: bool = False) -> TableCalibration:
+                    statistics: bool = True, select: bool = False,
+                    force: bool = False) -> TableCalibration:
     if method not in ('auto',) + METHODS:
         raise TableCalibrationError(f'--method {method!r}: expected auto, direct or iterative')
     _check_names(table)
@@ -148,6 +152,9 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
                 validation.load_units != table.load_units or validation.output_units != table.output_units:
             raise TableCalibrationError(f'{validation.source}: symbols or units differ from the calibration '
                                         f'table {table.source}')
+    channels = channel_gate(table, outputs)
+    if not channels.passed and not force:
+        raise TableCalibrationError(_refusal(table, channels))
     methods = METHODS if (method == 'auto' or validation is not None) else (method,)
     if len(inputs) != len(loads) and 'iterative' in methods:
         if method == 'iterative':
@@ -221,6 +228,17 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
     rated = table.output_capacity[list(table.bridge_columns)] * table.output_factor[list(table.bridge_columns)]
     if excitation_v is not None and table.output_internal_unit == 'mV/V':
         rated = rated * excitation_v
+    gates = [channels, sensitivity_gate(table, outputs, rated),
+             outlier_gate(table.point_id, loads, fit.load_residuals, fit.press_load_residuals, capacity,
+                          f'{chosen} model'),
+             overfit_gate(report['sigma_pct_capacity']['calibration'], report['sigma_pct_fs_crossval']['after'],
+                          table.points, len(term_sets[chosen]) + len(fit.series_labels), f'{chosen} model'),
+             condition_gate(fit.condition_number, f'{chosen} model')]
+    acceptance = gates_report(gates, forced=force)
+    report['gates'], report['forced'] = acceptance['gates'], acceptance['forced']
+    refused = first_failure(gates)
+    if refused is not None and not force:
+        raise TableCalibrationError(_refusal(table, refused))
     rated = np.where(np.isfinite(rated) & (rated > 0), rated, np.max(np.abs(outputs), axis=0))
     models = {m: f.model for m, f in fits.items()}
     output_unit = 'mV' if excitation_v is not None or table.output_internal_unit == 'mV' else table.output_internal_unit
@@ -233,6 +251,11 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
          'series_tares_sigma_si': {str(s): [float(x) for x in row] for s, row in zip(fit.series_labels, fit.tare_sigma)},
          'points': table.points})
     return TableCalibration(table, validation, fits, chosen, calibration, report, point_rows)
+
+
+def _refusal(table: CalibrationTable, gate) -> str:
+    return (f'{table.source}: refused by acceptance gate {gate.name}: {gate.reason}; nothing written '
+            f'(--force writes it anyway)')
 
 
 def _point_rows(table, fit, t95, kind, residuals, uncertainty) -> list[dict]:

@@ -53,14 +53,14 @@ def screen_for_table(method: str, terms: Sequence[Term], table, outputs: np.ndar
     columns, onehot = schedule_columns(method, terms, table.applied_loads_si, table.load_capacity_si,
                                        outputs, table.series, table.bridge_symbols, table.load_symbols)
     screen = screen_terms(terms, columns, onehot, min_dof=min_dof)
-    linear = [t for t in screen.kept if t.degree == 1 and not t.factors[0].absolute]
-    # the loads cannot be told apart without a linear term per load (iterative: the Newton inverse
-    # starts from the linear part); fewer is "nothing left"
-    if len(linear) < table.n_loads:
-        lost = [f'{name} ({why})' for name, why in screen.dropped
-                if name in {t.name for t in terms if t.degree == 1}][:3]
+    linear = [t.name for t in terms if t.degree == 1 and not t.factors[0].absolute]
+    kept_linear = [t for t in screen.kept if t.name in linear]
+    # the loads cannot be told apart without a linear term per load: a schedule too short for them
+    # is "nothing left" (a dead channel's term is dropped too, but the channels gate judges that)
+    lost = [name for name in screen.no_room if name in linear]
+    if not kept_linear or (lost and len(kept_linear) < table.n_loads):
         raise TableCalibrationError(
             f'{table.source}: the load schedule determines none of the {method} models: '
-            f'{len(linear)} of the {table.n_loads} linear terms are left ({table.points} points, '
-            f'{onehot.shape[1]} series){"; " + "; ".join(lost) if lost else ""}')
+            f'{len(kept_linear)} of the {table.n_loads} linear terms are left ({table.points} points, '
+            f'{onehot.shape[1]} series: no room for {", ".join(lost) or "any"})')
     return screen
