@@ -118,3 +118,38 @@ def six_component_balance(rng, *, repeats: int = 1, noise: float = 1e-4, rated=N
     return table('balance6', ('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'),
                  ('rFX', 'rFY', 'rFZ', 'rMX', 'rMY', 'rMZ'), units, ('mV/V',) * 6, capacity,
                  applied, raw, series, output_capacity=rated), noise
+
+
+def r091_features(u: np.ndarray) -> np.ndarray:
+    """(N, 6n + 4 n(n-1)/2) R-091's term shapes of the columns of u, written out here (not the
+    package's term machinery): per column u, |u|, u², u|u|, u³, |u|³; per pair a·b, |a·b|, a·|b|, |a|·b."""
+    columns = []
+    n = u.shape[1]
+    for k in range(n):
+        a = u[:, k]
+        columns += [a, np.abs(a), a * a, a * np.abs(a), a ** 3, np.abs(a) ** 3]
+    for i in range(n):
+        for j in range(i + 1, n):
+            a, b = u[:, i], u[:, j]
+            columns += [a * b, np.abs(a * b), a * np.abs(b), np.abs(a) * b]
+    return np.column_stack(columns)
+
+
+def support_fractions(rng, single: int, pair: int, first_series: int = 1):
+    """(fractions of capacity (N, 6), series (N,)): single-load sweeps -1..1 (a series each) and
+    random pairs in all quadrants (a series each)."""
+    from itertools import combinations
+    rows, series, label = [], [], first_series
+    for v in range(6):
+        block = np.zeros((single, 6))
+        block[:, v] = np.linspace(-1, 1, single)
+        rows.append(block)
+        series += [label] * single
+        label += 1
+    for v, w in combinations(range(6), 2):
+        block = np.zeros((pair, 6))
+        block[:, [v, w]] = rng.uniform(-1, 1, (pair, 2))
+        rows.append(block)
+        series += [label] * pair
+        label += 1
+    return np.vstack(rows), np.array(series)

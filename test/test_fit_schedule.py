@@ -36,8 +36,7 @@ def test_screening_by_hand_hierarchy_zero_columns_and_points():
 def test_three_component_cell_fits_with_defaults_and_lists_the_interactions(tmp_path, capsys):
     table, _ = tc.three_component_cell(np.random.default_rng(11))
     path = write_table(tmp_path / 'cell.csv', table)
-    # the cubic left on 15 points is refused by the overfit gate until auto selects (next commit)
-    assert main(['fit', str(path), '--out', str(tmp_path / 'out'), '--no-plots', '--force']) == 0
+    assert main(['fit', str(path), '--out', str(tmp_path / 'out'), '--no-plots']) == 0
     report = json.loads((tmp_path / 'out' / 'report.json').read_text())
     assert (tmp_path / 'out' / 'calibration.yaml').is_file()
     assert not any('*' in t for t in report['terms'])
