@@ -28,22 +28,24 @@ def table(name, loads, outputs, load_units, output_units, capacity, applied, raw
 
 
 def three_component_cell(rng, *, series_per_axis: int = 1, steps: int = 5, noise_mvv: float = 2e-4,
-                         knee: float = 0.02):
+                         knee: float = 0.02, first_series: int = 1, span=(0.2, 1.0), sign: float = 1.0,
+                         return_tares: bool = False):
     """A 3-component strain-gauge cell (FX, FY, FZ in N, outputs mV/V) calibrated one axis at a time
     with deadweights: per axis `series_per_axis` fixture orientations (a series each, with the
     fixture's weight as an unknown tare), `steps` loads from 20 % to 100 % of capacity. FZ's bridge
     has a low-load knee (tanh, `knee` of rated output), a shape none of the term sets holds; the
-    others a small quadratic and 1.5 % cross-talk. Returns (table, noise mV/V)."""
+    others a small quadratic and 1.5 % cross-talk. `span` (fractions of capacity) and `sign` set
+    the loads; series numbered from `first_series`. Returns (table, noise mV/V[, tares N])."""
     capacity = np.array([50.0, 50.0, 200.0])
     rated = np.array([1.0, 1.0, 1.5])                       # mV/V at capacity
     crosstalk = np.array([[1.0, 0.015, -0.01], [-0.012, 1.0, 0.008], [0.01, -0.015, 1.0]])
     applied, series = [], []
-    label = 1
+    label = first_series
     for axis in range(3):
         for orientation in range(series_per_axis):
             block = np.zeros((steps, 3))
-            sign = 1.0 if orientation % 2 == 0 else -1.0
-            block[:, axis] = sign * np.linspace(0.2, 1.0, steps) * capacity[axis]
+            direction = sign if orientation % 2 == 0 else -sign
+            block[:, axis] = direction * np.linspace(*span, steps) * capacity[axis]
             applied.append(block)
             series += [label] * steps
             label += 1
@@ -57,8 +59,10 @@ def three_component_cell(rng, *, series_per_axis: int = 1, steps: int = 5, noise
     response[:, 1] -= 0.003 * x[:, 1] ** 2
     response[:, 2] += knee * np.tanh(x[:, 2] / 0.08)           # low-load knee of the FZ bridge
     raw = (response @ crosstalk.T) * rated + rng.normal(0, noise_mvv, response.shape)
-    return table('cell3', ('FX', 'FY', 'FZ'), ('rFX', 'rFY', 'rFZ'), ('N',) * 3, ('mV/V',) * 3,
-                 capacity, applied, raw, series, zero=rng.uniform(-0.05, 0.05, 3)), noise_mvv
+    made = table('cell3', ('FX', 'FY', 'FZ'), ('rFX', 'rFY', 'rFZ'), ('N',) * 3, ('mV/V',) * 3,
+                 capacity, applied, raw, series, zero=np.array([0.01, -0.02, 0.03]),
+                 point_ids=[f'S{s}-{i % steps + 1}' for i, s in enumerate(series)])
+    return (made, noise_mvv, tares) if return_tares else (made, noise_mvv)
 
 
 def eight_channel_sensor(rng, *, poses: int = 60, noise: float = 3e-4):

@@ -67,12 +67,9 @@ def run(args) -> int:
         raise CommandError(str(err)) from None
     out = write_fit_outputs(result, Path(args.out), plots=not args.no_plots)
     report = result.report
-    sigma = report['sigma_pct_capacity']
-    line = ' '.join(f'{k} {v:.4f}' for k, v in sigma['calibration'].items())
     print(f'{report["balance"]}: {report["points"]["calibration"]} points, method {report["method"]} '
-          f'({report["method_choice"]}); σ % capacity {line}')
-    if 'validation' in sigma:
-        print('validation σ % capacity ' + ' '.join(f'{k} {v:.4f}' for k, v in sigma['validation'].items()))
+          f'({report["method_choice"]})')
+    print(sigma_headline(report))
     if report.get('forced'):
         import sys
         failed = [g['name'] for g in report['gates'] if not g['passed']]
@@ -121,6 +118,34 @@ def _plots(result, directory: Path):
             for method, fit in result.fits.items()]
 
 
+def sigma_headline(report) -> str:
+    """One line: σ % capacity in-sample, cross-validated and (when validated) validation, per load."""
+    sigma = report['sigma_pct_capacity']
+    parts = [(name, sigma[key]) for name, key in (('in-sample', 'calibration'),
+                                                  ('cross-validated', 'crossval'),
+                                                  ('validation', 'validation')) if key in sigma]
+    return 'σ % capacity ' + '; '.join(
+        f'{name} ' + ' '.join(f'{k} {v:.4f}' for k, v in values.items()) for name, values in parts)
+
+
+def _gates_and_selection(report) -> list[str]:
+    """report.md: the acceptance gates, the models compared and the terms dropped."""
+    lines = ['## Acceptance gates' + (' (written with --force although one failed)'
+                                      if report.get('forced') else ''), '']
+    lines += [f'- {g["name"]}: {"passed" if g["passed"] else "FAILED"}: {g["reason"]}'
+              for g in report.get('gates', [])]
+    lines += ['', '## Models compared (cross-validated σ, mean over loads, % capacity)', '']
+    for c in report.get('model_selection', {}).get('candidates', []):
+        figure = f'{c["crossval_mean"]:.4f}' if 'crossval_mean' in c else f'not fitted: {c["error"]}'
+        lines.append(f'- {c["method"]}, {c["term_set"]} ({c["terms"]} terms): {figure}')
+    for method, dropped in report.get('terms_dropped', {}).items():
+        if dropped:
+            shown = '; '.join(f'{d["term"]} ({d["why"]})' for d in dropped[:12])
+            more = f' … and {len(dropped) - 12} more in report.json' if len(dropped) > 12 else ''
+            lines.append(f'- {method}, terms dropped: {shown}{more}')
+    return lines + ['']
+
+
 def report_markdown(report) -> str:
     from ..accuracy.sigma import format_sigma_table
     loads = report['load_symbols']
@@ -130,6 +155,7 @@ def report_markdown(report) -> str:
              f'switched off). Loads {", ".join(f"{s} [{u}]" for s, u in zip(loads, report["load_units"]))}.', '',
              f'**Method adopted: {report["method"]}** ({len(report["terms"])} terms, set '
              f'{report["term_set"]}). Why: {report["method_choice"]}.', '',
+             f'**{sigma_headline(report)}**', ''] + _gates_and_selection(report) + [
              '## σ in % of capacity (sample standard deviation of applied − predicted)', '', '```']
     rows = {}
     for method, entry in report['methods_compared'].items():

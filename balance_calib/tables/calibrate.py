@@ -13,9 +13,7 @@ import numpy as np
 import scipy.stats
 
 from ..calibration_file import Calibration, now_iso
-from ..fit.iterative import iterative_point_uncertainty
-from ..fit.series_tares import SeriesTareFit, direct_point_uncertainty
-from ..model.inverse import InverseDidNotConverge
+from ..fit.series_tares import SeriesTareFit
 from ..refit.gates import gates_report
 from .balfit_reader import CalibrationTable
 from .errors import TableCalibrationError
@@ -25,6 +23,7 @@ from .model_selection import (AUTO_TERM_SETS, FIT_ERRORS, choose_form, choose_wi
                               compared_entry, fit_form, select_terms, terms_dropped,
                               with_statistics)
 from .table_report import build_report, in_file_units, point_rows, sigma_pct
+from .validation import FormValidation, coverage_warning, range_warnings, validate_form
 
 _choose = choose_form        # the rule between the forms (tests reach it under its old name)
 
@@ -127,26 +126,35 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
     why += f'; terms: {choices[chosen].why}'
     fit = fits[chosen]
 
-    # validation with the calibration's tares (never re-estimated)
-    validation_sigma, validation_u, val_outputs = {}, {}, None
+    # validation: the calibration's tares for its series, own tares (model fixed) for the others
+    validations: dict[str, FormValidation] = {}
+    validation_sigma, validation_u = {}, {}
     if validation is not None:
         val_outputs = _outputs(validation, excitation_v)
         for m, f in fits.items():
-            try:
-                predicted = f.predict_applied(val_outputs, validation.series)
-            except KeyError as err:
-                raise TableCalibrationError(f'{validation.source}: {err.args[0]}') from None
-            except InverseDidNotConverge as err:
-                raise TableCalibrationError(f'{validation.source}: {err}') from None
-            residual = validation.applied_loads_si - predicted
+            validations[m] = validate_form(m, f, validation, val_outputs)
+            residual = validations[m].residuals
             validation_sigma[m] = (sigma_pct(residual, capacity, loads), residual)
-            validation_u[m] = (direct_point_uncertainty if m == 'direct' else iterative_point_uncertainty)(
-                f, val_outputs, validation.series)
+            validation_u[m] = validations[m].uncertainty
 
     t95 = float(scipy.stats.t.ppf(0.975, fit.dof))
     report = build_report(table, validation, fits, chosen, why, term_sets, validation_sigma, validation_u,
                           t95, {m: c.candidate.term_set for m, c in choices.items()})
     report['terms_dropped'] = {m: terms_dropped(c) for m, c in choices.items()}
+    if validation is not None:
+        own = validations[chosen]
+        report['validation_series_tares'] = {
+            str(k): {sym: float(f'{v:.6g}') for sym, v in zip(loads, in_file_units(t, table))}
+            for k, t in own.own_tares.items()}
+        report['validation_series_tares_sigma'] = {
+            str(k): {sym: float(f'{v:.4g}') for sym, v in zip(loads, in_file_units(t, table))}
+            for k, t in own.own_tare_sigma.items()}
+        if own.own_tares:
+            report['warnings'].append(
+                f'validation series {", ".join(map(str, own.own_tares))} are not in the calibration '
+                f'(other setups): their tares were estimated from their own points with the model '
+                f'held fixed (validation_series_tares); their σ cannot show a wrong tare')
+        report['warnings'] += range_warnings(table, validation) + coverage_warning(own.coverage, chosen)
     report['model_selection'] = {
         'candidates': [compared_entry(k, loads) for c in choices.values() for k in c.compared],
         'adopted': {m: {'term_set': c.candidate.term_set, 'terms': len(c.candidate.terms), 'why': c.why}

@@ -5,7 +5,8 @@ from loads, R-091) times the term sets (linear, TM-663 quadratic and cubic, R-09
 `--terms FILE`), each restricted to the terms the schedule determines (term_screen.py). Every
 candidate is fitted with its series tares and judged by its cross-validated σ (PRESS, leave one
 point out) per load, in % of capacity. Per form the candidate of lowest mean cross-validated σ is
-kept among those no worse than the form's linear model on any load; its terms are then pruned by
+kept among those no worse than the form's linear model on any load (beyond the chance scatter
+of a cross-validated σ, two standard errors); its terms are then pruned by
 PRESS (a term goes when leaving it out lowers the mean log PRESS over the targets, hierarchy kept:
 never a factor of a product that stays, never a linear term), and the pruned model replaces it only
 when it is again no worse than the linear model on any load and better on average. Between the
@@ -110,8 +111,10 @@ def candidate(method: str, spec: str, table, outputs: np.ndarray, *, strict: boo
                      crossval_pct(fit, table.load_capacity_si))
 
 
-def _no_worse(crossval: np.ndarray, reference: np.ndarray) -> bool:
-    return bool(np.all(crossval <= reference))
+def _no_worse(crossval: np.ndarray, reference: np.ndarray, points: int) -> bool:
+    """No load's cross-validated σ worse than the reference's beyond chance: two standard errors
+    of a σ estimated from N points (relative standard error 1/sqrt(2N))."""
+    return bool(np.all(crossval <= reference * (1.0 + 2.0 / np.sqrt(2.0 * points))))
 
 
 def _linear_problem(method: str, fit: SeriesTareFit, terms, table, outputs):
@@ -200,7 +203,7 @@ def choose_within_form(method: str, specs: Sequence[str], table, outputs: np.nda
                                     f'{compared[0].error}')
     linear = next((c for c in fitted if c.term_set == 'linear'), None)
     reference = linear.crossval if linear is not None else None
-    eligible = [c for c in fitted if reference is None or _no_worse(c.crossval, reference)]
+    eligible = [c for c in fitted if reference is None or _no_worse(c.crossval, reference, table.points)]
     best = min(eligible or fitted, key=lambda c: c.score)
     default = next((c for c in eligible if c.term_set == DEFAULT_SETS[method]), None)
     if default is not None and not best.score < (1 - SELECTION_MARGIN) * default.score:
@@ -217,7 +220,7 @@ def choose_within_form(method: str, specs: Sequence[str], table, outputs: np.nda
             pruned_fit = None
         if pruned_fit is not None:
             cv = crossval_pct(pruned_fit, table.load_capacity_si)
-            if (reference is None or _no_worse(cv, reference)) and \
+            if (reference is None or _no_worse(cv, reference, table.points)) and \
                     np.mean(cv) < (1 - SELECTION_MARGIN) * best.score:
                 pruned = Candidate(method, best.term_set, terms, best.dropped, pruned_fit, cv)
                 why += (f'; {len(removed)} term(s) removed by PRESS: mean cross-validated σ '
