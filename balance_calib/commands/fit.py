@@ -143,6 +143,34 @@ def _gates_and_selection(report) -> list[str]:
             shown = '; '.join(f'{d["term"]} ({d["why"]})' for d in dropped[:12])
             more = f' … and {len(dropped) - 12} more in report.json' if len(dropped) > 12 else ''
             lines.append(f'- {method}, terms dropped: {shown}{more}')
+    return lines + [''] + _signing(report)
+
+
+def _signing(report) -> list[str]:
+    """report.md: identification, largest residuals, effects offered, the adopted coefficients."""
+    ident = report.get('identification', {})
+    lines = ['## Identification', '',
+             f'Balance {ident.get("balance_name") or "-"}: {ident.get("description") or "-"}; '
+             f'fitted by {ident.get("package", "balance_calib")} {ident.get("package_version", "")}. '
+             f'Rated loads: ' + ', '.join(f'{s} {r["capacity"]:g} {r["unit"]}'
+                                          for s, r in report.get('rated_loads', {}).items()) + '.', '',
+             '## Largest residual of each load (% capacity, point id)', '']
+    for name, per_load in report.get('largest_residual', {}).items():
+        lines.append(f'- {name}: ' + ', '.join(f'{s} {v["residual_pct_capacity"]:+.4f} ({v["point_id"]})'
+                                               for s, v in per_load.items()))
+    for effect in report.get('effects', []):
+        lines.append(f'- offered, not adopted: {effect["name"]} on {", ".join(effect["components"])}: '
+                     f'{effect["evidence"]}')
+    coefficients = report.get('coefficients')
+    if coefficients:
+        targets = coefficients['targets']
+        lines += ['', f'## Coefficients of the adopted {coefficients["form"]} model ± standard error '
+                      f'({coefficients["units"]})', '',
+                  '| term | ' + ' | '.join(targets) + ' |', '|---|' + '---|' * len(targets)]
+        for j, term in enumerate(coefficients['terms']):
+            lines.append(f'| {term} | ' + ' | '.join(
+                f'{coefficients["values"][t][j]:.6g} ± {coefficients["standard_errors"][t][j]:.2g}'
+                for t in targets) + ' |')
     return lines + ['']
 
 

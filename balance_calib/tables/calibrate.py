@@ -22,7 +22,8 @@ from .gates import (channel_gate, condition_gate, first_failure, outlier_gate, o
 from .model_selection import (AUTO_TERM_SETS, FIT_ERRORS, choose_form, choose_within_form,
                               compared_entry, fit_form, select_terms, terms_dropped,
                               with_statistics)
-from .table_report import build_report, in_file_units, point_rows, sigma_pct
+from .odd_components import odd_components
+from .table_report import build_report, in_file_units, point_rows, sigma_pct, signing_sections
 from .validation import FormValidation, coverage_warning, range_warnings, validate_form
 
 _choose = choose_form        # the rule between the forms (tests reach it under its old name)
@@ -155,6 +156,13 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
                 f'(other setups): their tares were estimated from their own points with the model '
                 f'held fixed (validation_series_tares); their σ cannot show a wrong tare')
         report['warnings'] += range_warnings(table, validation) + coverage_warning(own.coverage, chosen)
+    sets = {'calibration': (table, fit.load_residuals)}
+    if validation is not None:
+        sets['validation'] = (validation, validations[chosen].residuals)
+    report.update(signing_sections(table, fit, chosen, outputs, sets))
+    effects, odd = odd_components(chosen, fit, term_sets[chosen], table, outputs)
+    report['effects'] = effects
+    report['unexplained'] = report['unexplained'] + odd
     report['model_selection'] = {
         'candidates': [compared_entry(k, loads) for c in choices.values() for k in c.compared],
         'adopted': {m: {'term_set': c.candidate.term_set, 'terms': len(c.candidate.terms), 'why': c.why}

@@ -49,13 +49,11 @@ def channel_gate(table, outputs: np.ndarray) -> Gate:
 def sensitivity_gate(table, outputs: np.ndarray, rated: np.ndarray | None) -> Gate:
     """Each load's fitted response at capacity (linear fit of the outputs on the applied loads and
     the series) on the output it drives most, against that output's rated output (NaN: unknown)."""
-    from ..fit.series_tares import series_indicator
+    from .term_screen import linear_response
     if rated is None or not np.any(np.isfinite(rated) & (np.asarray(rated) > 0)):
         return Gate('sensitivity', True, 'the table gives no rated outputs (output capacities): '
                                          'not checked', {})
-    _, _, onehot = series_indicator(table.series)
-    relative = table.applied_loads_si / table.load_capacity_si
-    response = np.linalg.lstsq(np.hstack([relative, onehot]), outputs, rcond=None)[0][:table.n_loads]
+    _, _, response = linear_response(table, outputs)
     ratios, bad = {}, []
     for v, load in enumerate(table.load_symbols):
         k = int(np.argmax(np.abs(response[v]) / np.maximum(np.abs(rated), 1e-300)))

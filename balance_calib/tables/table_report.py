@@ -127,3 +127,50 @@ def build_report(table, validation, fits, chosen, why, term_sets, validation_sig
                               'directions a table lacks: residuals examined against point order, load '
                               'direction and extra channels only (report.json diagnosis.skipped)')
     return report
+
+
+def signing_sections(table, fit, method: str, outputs: np.ndarray, residuals_sets: dict) -> dict:
+    """What a laboratory signs beside the σ (issue 20, Deliver 7): identification, rated loads,
+    the largest residual of each load with its point id (per set), the adopted model's coefficients
+    with standard errors, and the sensitivities (output change from zero to capacity of each load).
+
+    residuals_sets: {'calibration': (table, (N, n_loads) SI), 'validation': ...}.
+    """
+    from .. import __version__
+    from .term_screen import linear_response
+    capacity = table.load_capacity_si
+    largest = {}
+    for name, (source, residuals) in residuals_sets.items():
+        pct = residuals / capacity * 100.0
+        largest[name] = {}
+        for k, symbol in enumerate(table.load_symbols):
+            i = int(np.argmax(np.abs(pct[:, k])))
+            largest[name][symbol] = {'point_id': source.point_id[i], 'series': int(source.series[i]),
+                                     'residual_pct_capacity': round(float(pct[i, k]), 5)}
+    model = fit.model
+    p = len(model.terms)
+    variance = np.diag(fit.full_covariance_unscaled)[:p]
+    coefficients = np.atleast_2d(np.asarray(model.coefficients, float))     # (targets, p)
+    standard_errors = np.sqrt(np.outer(fit.residual_sigma ** 2, variance))
+    targets = list(table.load_symbols if method == 'direct' else table.bridge_symbols)
+    _, _, response = linear_response(table, outputs)
+    return {
+        'identification': {'balance_name': table.balance_name, 'description': table.description,
+                           'source': table.source, 'package': 'balance_calib',
+                           'package_version': __version__},
+        'rated_loads': {s: {'capacity': float(c), 'unit': u}
+                        for s, c, u in zip(table.load_symbols, table.load_capacity, table.load_units)},
+        'largest_residual': largest,
+        'coefficients': {
+            'form': method, 'terms': [t.name for t in model.terms], 'targets': targets,
+            'units': 'SI: N and N·m, outputs in the calibration\'s output unit',
+            'values': {t: [float(f'{v:.8g}') for v in row] for t, row in zip(targets, coefficients)},
+            'standard_errors': {t: [float(f'{v:.4g}') for v in row]
+                                for t, row in zip(targets, standard_errors)}},
+        'sensitivities': {
+            'what': 'output change from zero to capacity of each load (linear least squares with '
+                    'the series), in the calibration\'s output unit',
+            'outputs': list(table.bridge_symbols),
+            'per_load': {s: [float(f'{v:.6g}') for v in row]
+                         for s, row in zip(table.load_symbols, response)}},
+    }

@@ -20,12 +20,26 @@ from ..model.terms import Factor, Term
 from .errors import TableCalibrationError
 
 
-def dominant_loads(relative_loads: np.ndarray, onehot: np.ndarray, outputs: np.ndarray) -> np.ndarray:
-    """(n_outputs,) index of the load each output follows most (sensitivity x capacity)."""
+def linear_response(table, outputs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(applied / capacity (N, n_loads), series one-hot (N, n_series), response (n_loads, n_out)):
+    least squares of the outputs on the applied loads (fractions of capacity) and the series, so
+    response[v, k] is output k's change from zero to capacity of load v."""
+    _, _, onehot = series_indicator(table.series)
+    relative = table.applied_loads_si / table.load_capacity_si
+    n_loads = relative.shape[1]
+    response = np.linalg.lstsq(np.hstack([relative, onehot]), outputs, rcond=None)[0][:n_loads]
+    return relative, onehot, response
+
+
+def dominant_loads(relative_loads: np.ndarray, onehot: np.ndarray, outputs: np.ndarray,
+                   response: np.ndarray | None = None) -> np.ndarray:
+    """(n_outputs,) index of the load each output follows most (response at capacity)."""
     n_loads = relative_loads.shape[1]
-    sensitivity = np.linalg.lstsq(np.hstack([relative_loads, onehot]), outputs, rcond=None)[0][:n_loads]
-    scale = np.maximum(np.max(np.abs(sensitivity), axis=0), 1e-300)
-    return np.argmax(np.abs(sensitivity) / scale, axis=0)
+    if response is None:
+        response = np.linalg.lstsq(np.hstack([relative_loads, onehot]), outputs,
+                                   rcond=None)[0][:n_loads]
+    scale = np.maximum(np.max(np.abs(response), axis=0), 1e-300)
+    return np.argmax(np.abs(response) / scale, axis=0)
 
 
 def schedule_columns(method: str, terms: Sequence[Term], applied_si: np.ndarray, capacity: np.ndarray,

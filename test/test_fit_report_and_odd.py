@@ -1,0 +1,67 @@
+"""What a laboratory signs (issue 20, Deliver 7) and the odd component named with its points,
+with a term of its own channel offered when it removes the structure (Deliver 6)."""
+import json
+
+import numpy as np
+
+import table_cases as tc
+from balance_calib import __version__
+from balance_calib.cli import main
+from balance_calib.tables.balfit_writer import write_table
+
+
+def test_report_carries_identification_residual_ids_coefficients_and_sensitivities(tmp_path, capsys):
+    table, _ = tc.six_component_balance(np.random.default_rng(5))
+    path = write_table(tmp_path / 'b6.csv', table)
+    assert main(['fit', str(path), '--out', str(tmp_path / 'out'), '--no-plots']) == 0
+    report = json.loads((tmp_path / 'out' / 'report.json').read_text())
+    ident = report['identification']
+    assert (ident['balance_name'], ident['description'], ident['package_version']) == \
+        ('balance6', 'generated for the fit tests', __version__)
+    assert report['rated_loads']['FZ'] == {'capacity': 1200.0, 'unit': 'N'}
+    for symbol, entry in report['largest_residual']['calibration'].items():
+        i = table.point_id.index(entry['point_id'])
+        assert abs(entry['residual_pct_capacity']) >= report['sigma_pct_capacity']['calibration'][symbol]
+        assert int(table.series[i]) == entry['series']
+    coefficients = report['coefficients']
+    assert coefficients['terms'] == report['terms']
+    assert all(se > 0 for row in coefficients['standard_errors'].values() for se in row)
+    # the response at capacity of each load on its own bridge: rated x (1 + 0.002 + 0.0005 tanh(10)),
+    # the generator's square and knee at x = 1, within its 2 % cross-talk of the diagonal
+    per_load = coefficients and report['sensitivities']['per_load']
+    rated = table.output_capacity
+    for k, symbol in enumerate(table.load_symbols):
+        assert abs(per_load[symbol][k] / rated[k] - 1.0025) < 0.025
+    text = (tmp_path / 'out' / 'report.md').read_text()
+    assert '## Identification' in text and '## Coefficients of the adopted' in text
+    assert '## Acceptance gates' in text and '## Models compared' in text
+
+
+def test_a_knee_at_low_load_names_the_component_and_its_first_steps(tmp_path, capsys):
+    # FZ's bridge has a tanh knee of 2 % of rated output near zero; the schedule starts at 0 %
+    table, _ = tc.three_component_cell(np.random.default_rng(11), series_per_axis=3, steps=5,
+                                       span=(0.0, 1.0))
+    path = write_table(tmp_path / 'cell.csv', table)
+    assert main(['fit', str(path), '--out', str(tmp_path / 'refused'), '--no-plots']) == 2
+    err = capsys.readouterr().err
+    assert 'acceptance gate outliers' in err and 'its FZ load' in err
+    assert main(['fit', str(path), '--out', str(tmp_path / 'out'), '--no-plots', '--force']) == 0
+    report = json.loads((tmp_path / 'out' / 'report.json').read_text())
+    named = report['effects'] + report['unexplained']
+    assert [e['components'] for e in named] == [['FZ']]
+    entry = named[0]
+    fz_series = {int(s) for s, row in zip(table.series, table.applied_loads) if row[2] != 0}
+    # the points named are FZ's: its low-load steps (step 1 or 2 of a FZ series)
+    assert all(int(p.split('-')[0][1:]) in fz_series for p in entry['points'][:3])
+    assert any(p.endswith('-1') for p in entry['points'][:3])
+    if report['effects']:
+        effect = report['effects'][0]
+        assert effect['sigma_after_pct_fs']['FZ'] <= 0.9 * effect['sigma_before_pct_fs']['FZ']
+        assert effect['terms'][0] not in report['terms'] and effect['adopted'] is False
+
+
+def test_clean_tables_name_no_component():
+    from balance_calib.tables.calibrate import calibrate_table
+    for seed in (3, 7):
+        report = calibrate_table(tc.six_component_balance(np.random.default_rng(seed))[0]).report
+        assert report['effects'] == [] and report['unexplained'] == []
