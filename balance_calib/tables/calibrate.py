@@ -54,8 +54,8 @@ def rename_axes(table: CalibrationTable, axes: str) -> CalibrationTable:
                                     f'{", ".join(COMPONENTS)}, one per load of {table.source} '
                                     f'({", ".join(table.load_symbols)})')
     if len(table.bridge_columns) != len(names):
-        raise TableCalibrationError(f'--axes: {table.source} has {len(table.bridge_columns)} bridge outputs '
-                                    f'for {len(names)} loads')
+        raise TableCalibrationError(f'--axes: {table.source} has {len(table.bridge_columns)} '
+                                    f'bridge outputs for {len(names)} loads')
     outputs = list(table.output_symbols)
     for column, name in zip(table.bridge_columns, names):
         outputs[column] = BRIDGE_OUTPUTS[COMPONENTS.index(name)]
@@ -65,8 +65,9 @@ def rename_axes(table: CalibrationTable, axes: str) -> CalibrationTable:
 def _check_names(table: CalibrationTable) -> None:
     for symbol in table.load_symbols + table.bridge_symbols:
         if not _NAME_RE.match(symbol):
-            raise TableCalibrationError(f'{table.source}: symbol {symbol!r} cannot name a model variable '
-                                        f'(letters, digits and _ only, not starting with a digit)')
+            raise TableCalibrationError(f'{table.source}: symbol {symbol!r} cannot name a model '
+                                        f'variable (letters, digits and _ only, not starting with '
+                                        f'a digit)')
 
 
 def _outputs(table: CalibrationTable, excitation_v: float | None) -> np.ndarray:
@@ -90,16 +91,17 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
     if validation is not None:
         if validation.load_symbols != loads or validation.bridge_symbols != inputs or \
                 validation.load_units != table.load_units or validation.output_units != table.output_units:
-            raise TableCalibrationError(f'{validation.source}: symbols or units differ from the calibration '
-                                        f'table {table.source}')
+            raise TableCalibrationError(f'{validation.source}: symbols or units differ from the '
+                                        f'calibration table {table.source}')
     channels = channel_gate(table, outputs)
     if not channels.passed and not force:
         raise TableCalibrationError(_refusal(table, channels))
     methods = METHODS if (method == 'auto' or validation is not None) else (method,)
     if len(inputs) != len(loads) and 'iterative' in methods:
         if method == 'iterative':
-            raise TableCalibrationError(f'{table.source}: the iterative method needs as many bridge outputs as '
-                                        f'loads ({len(inputs)} outputs, {len(loads)} loads)')
+            raise TableCalibrationError(f'{table.source}: the iterative method needs as many '
+                                        f'bridge outputs as loads ({len(inputs)} outputs, '
+                                        f'{len(loads)} loads)')
         methods = ('direct',)
     specs = AUTO_TERM_SETS if terms == 'auto' else (terms,)
     choices = {m: choose_within_form(m, specs, table, outputs, prune=not select) for m in methods}
@@ -205,5 +207,5 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
 
 
 def _refusal(table: CalibrationTable, gate) -> str:
-    return (f'{table.source}: refused by acceptance gate {gate.name}: {gate.reason}; nothing written '
-            f'(--force writes it anyway)')
+    return (f'{table.source}: refused by acceptance gate {gate.name}: {gate.reason}; nothing '
+            f'written (--force writes it anyway)')

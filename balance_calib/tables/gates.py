@@ -32,18 +32,21 @@ def channel_gate(table, outputs: np.ndarray) -> Gate:
     """Bridge outputs (N, n_out) in the calibration's unit: enough of them, none constant."""
     symbols = table.bridge_symbols
     spread = np.ptp(outputs, axis=0) if len(outputs) else np.zeros(len(symbols))
-    size = np.maximum(np.max(np.abs(outputs), axis=0), 1e-300) if len(outputs) else np.ones(len(symbols))
+    size = (np.maximum(np.max(np.abs(outputs), axis=0), 1e-300) if len(outputs)
+            else np.ones(len(symbols)))
     constant = [s for s, d, m in zip(symbols, spread, size) if not d > CONSTANT_FRACTION * m]
     details = {'outputs': list(symbols), 'constant': constant}
     if len(symbols) < table.n_loads:
         return Gate('channels', False,
-                    f'{len(symbols)} bridge outputs ({", ".join(symbols)}) for {table.n_loads} loads '
-                    f'({", ".join(table.load_symbols)}): a bridge column is missing', details)
+                    f'{len(symbols)} bridge outputs ({", ".join(symbols)}) for '
+                    f'{table.n_loads} loads ({", ".join(table.load_symbols)}): a bridge column '
+                    f'is missing', details)
     if constant:
-        return Gate('channels', False, f'bridge output(s) {", ".join(constant)} constant over all '
-                                       f'{table.points} points: a dead or disconnected bridge', details)
-    return Gate('channels', True, f'{len(symbols)} bridge outputs for {table.n_loads} loads, '
-                                  f'all varying', details)
+        return Gate('channels', False,
+                    f'bridge output(s) {", ".join(constant)} constant over all {table.points} '
+                    f'points: a dead or disconnected bridge', details)
+    return Gate('channels', True, f'{len(symbols)} bridge outputs for {table.n_loads} loads, all '
+                                  f'varying', details)
 
 
 def sensitivity_gate(table, outputs: np.ndarray, rated: np.ndarray | None) -> Gate:
@@ -68,12 +71,14 @@ def sensitivity_gate(table, outputs: np.ndarray, rated: np.ndarray | None) -> Ga
         return Gate('sensitivity', False, f'response at capacity against the rated outputs: '
                                           f'{"; ".join(bad)} (a unit or capacity error?)', details)
     worst = max(ratios, key=lambda s: abs(np.log(ratios[s]['ratio'])), default=None)
-    text = f'closest to its limit: {worst} {ratios[worst]["ratio"]:.3g}' if worst else 'none comparable'
-    return Gate('sensitivity', True, f'responses at capacity within {RATED_OUTPUT_FACTOR:g}x of the '
-                                     f'rated outputs ({text})', details)
+    text = (f'closest to its limit: {worst} {ratios[worst]["ratio"]:.3g}' if worst
+            else 'none comparable')
+    return Gate('sensitivity', True, f'responses at capacity within {RATED_OUTPUT_FACTOR:g}x of '
+                                     f'the rated outputs ({text})', details)
 
 
-def overfit_gate(sigma_cal: dict, sigma_cv: dict, points: int, coefficients: int, what: str) -> Gate:
+def overfit_gate(sigma_cal: dict, sigma_cv: dict, points: int, coefficients: int,
+                 what: str) -> Gate:
     """Cross-validated against in-sample σ (% capacity) per load, with q coefficients per load."""
     expected = points / max(points - coefficients, 1)
     limit = OVERFIT_FACTOR * expected
@@ -87,8 +92,8 @@ def overfit_gate(sigma_cal: dict, sigma_cv: dict, points: int, coefficients: int
                     f'cross-validated σ {text} in-sample (ratio > {limit:.3g}; {coefficients} '
                     f'coefficients per load on {points} points): fit fewer terms', details)
     worst = max(ratio, key=ratio.get)
-    return Gate('overfit', True, f'cross-validated σ within {limit:.3g}x the in-sample σ (largest: '
-                                 f'{worst} {ratio[worst]:.3g}x)', details)
+    return Gate('overfit', True, f'cross-validated σ within {limit:.3g}x the in-sample σ '
+                                 f'(largest: {worst} {ratio[worst]:.3g}x)', details)
 
 
 def outlier_gate(point_ids: Sequence[str], symbols: Sequence[str], residuals: np.ndarray,
@@ -102,7 +107,8 @@ def outlier_gate(point_ids: Sequence[str], symbols: Sequence[str], residuals: np
     threshold = np.maximum(DEFAULT_OUTLIER_ROBUST_SIGMAS * robust, DEFAULT_OUTLIER_FLOOR_PCT_FS)
     flagged = (np.abs(standardized) > threshold) | ~np.isfinite(standardized)
     rows = np.flatnonzero(np.any(flagged, axis=1))
-    severity = np.max(np.where(flagged, np.nan_to_num(np.abs(standardized) / threshold, nan=np.inf),
+    excess = np.nan_to_num(np.abs(standardized) / threshold, nan=np.inf)
+    severity = np.max(np.where(flagged, excess,
                                0.0), axis=1)
     rows = rows[np.argsort(-severity[rows], kind='stable')]
     entries = []
@@ -114,15 +120,16 @@ def outlier_gate(point_ids: Sequence[str], symbols: Sequence[str], residuals: np
     details = {'points': entries, 'count': int(len(rows)),
                'threshold_pct_capacity': dict(zip(symbols, threshold.tolist()))}
     if not len(rows):
-        return Gate('outliers', True, f'no point beyond {DEFAULT_OUTLIER_ROBUST_SIGMAS:g} robust σ '
-                                      f'(leave-one-out residuals of the {what})', details)
+        return Gate('outliers', True, f'no point beyond {DEFAULT_OUTLIER_ROBUST_SIGMAS:g} robust '
+                                      f'σ (leave-one-out residuals of the {what})', details)
     first = entries[0]
     more = (f' and {len(rows) - 1} more ({", ".join(e["point_id"] for e in entries[1:6])}'
             f'{"…" if len(rows) > 6 else ""})') if len(rows) > 1 else ''
     return Gate('outliers', False,
-                f'point {first["point_id"]}: its {first["component"]} load disagrees with its outputs '
-                f'by {first["residual_pct_capacity"]:+.3g} % capacity ({first["robust_sigmas"]:.0f} '
-                f'robust σ; a weight, unit or typing error?){more}', details)
+                f'point {first["point_id"]}: its {first["component"]} load disagrees with its '
+                f'outputs by {first["residual_pct_capacity"]:+.3g} % capacity '
+                f'({first["robust_sigmas"]:.0f} robust σ; a weight, unit or typing error?){more}',
+                details)
 
 
 def condition_gate(condition_number: float, what: str) -> Gate:
@@ -130,9 +137,10 @@ def condition_gate(condition_number: float, what: str) -> Gate:
     if not condition_number <= CONDITION_LIMIT:
         return Gate('condition', False, f'condition number of the {what}\'s scaled design '
                                         f'{condition_number:.3g} > {CONDITION_LIMIT:.0e}: its '
-                                        f'coefficients are not determined; fit fewer terms', details)
-    return Gate('condition', True, f'condition number {condition_number:.3g} '
-                                   f'(limit {CONDITION_LIMIT:.0e})', details)
+                                        f'coefficients are not determined; fit fewer '
+                                        f'terms', details)
+    return Gate('condition', True, f'condition number {condition_number:.3g} (limit '
+                                   f'{CONDITION_LIMIT:.0e})', details)
 
 
 def first_failure(gates: Sequence[Gate]) -> Gate | None:

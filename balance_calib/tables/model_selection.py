@@ -32,7 +32,8 @@ from .table_report import normality
 from .term_screen import screen_for_table
 
 AUTO_TERM_SETS = ('linear', 'tm663-quadratic', 'tm663-cubic', 'r091-96')
-FIT_ERRORS = (UnexcitedTermsError, TooFewPointsError, IterationDidNotConverge, InverseDidNotConverge)
+FIT_ERRORS = (UnexcitedTermsError, TooFewPointsError, IterationDidNotConverge,
+              InverseDidNotConverge)
 MAX_REMOVALS = 60
 # each form's default set (TM-663's cubic; R-091's 96 terms) stays unless another candidate, or the
 # pruned model, lowers the mean cross-validated σ by more than this fraction: the scatter of a
@@ -87,8 +88,8 @@ def fit_form(method: str, terms: Sequence[Term], table, outputs: np.ndarray, *,
     """One form fitted with the table's series tares (SI loads)."""
     if method == 'direct':
         return fit_direct(terms, outputs, table.applied_loads_si, table.series,
-                          components=table.load_symbols, inputs=table.bridge_symbols, name='direct',
-                          statistics=statistics)
+                          components=table.load_symbols, inputs=table.bridge_symbols,
+                          name='direct', statistics=statistics)
     return fit_iterative(terms, table.applied_loads_si, outputs, table.series,
                          components=table.load_symbols, inputs=table.bridge_symbols,
                          capacity=table.load_capacity_si, name='iterative', statistics=statistics)
@@ -136,7 +137,8 @@ def with_statistics(method: str, fit: SeriesTareFit, terms: Sequence[Term], tabl
     from ..fit.series_tares import solve_scaled
     design, targets = _linear_problem(method, fit, terms, table, outputs)
     names = [t.name for t in terms]
-    solution = solve_scaled(design, targets, names + [f'series {s}' for s in fit.series_labels], method)
+    columns = names + [f'series {s}' for s in fit.series_labels]
+    solution = solve_scaled(design, targets, columns, method)
     targets_names = list(table.load_symbols if method == 'direct' else table.bridge_symbols)
     stats = term_statistics(design, targets, solution.coefficients, solution.covariance_unscaled,
                             len(terms), names, targets_names)
@@ -203,13 +205,15 @@ def choose_within_form(method: str, specs: Sequence[str], table, outputs: np.nda
                                     f'{compared[0].error}')
     linear = next((c for c in fitted if c.term_set == 'linear'), None)
     reference = linear.crossval if linear is not None else None
-    eligible = [c for c in fitted if reference is None or _no_worse(c.crossval, reference, table.points)]
+    eligible = [c for c in fitted
+                if reference is None or _no_worse(c.crossval, reference, table.points)]
     best = min(eligible or fitted, key=lambda c: c.score)
     default = next((c for c in eligible if c.term_set == DEFAULT_SETS[method]), None)
     if default is not None and not best.score < (1 - SELECTION_MARGIN) * default.score:
         best = default
-    why = (f'{best.term_set} ({len(best.terms)} terms, {table.points / (len(best.terms) + len(best.fit.series_labels)):.1f} '
-           f'points per coefficient): mean cross-validated σ {best.score:.4g} % capacity')
+    why = (f'{best.term_set} ({len(best.terms)} terms, '
+           f'{table.points / (len(best.terms) + len(best.fit.series_labels)):.1f} points per '
+           f'coefficient): mean cross-validated σ {best.score:.4g} % capacity')
     if len(specs) == 1 or not prune:
         return FormChoice(best, (), tuple(compared), why)
     terms, removed = prune_by_press(method, best.fit, best.terms, table, outputs)
@@ -253,8 +257,9 @@ def compared_entry(c: Candidate, symbols: Sequence[str]) -> dict:
 
 
 def choose_form(fits: Mapping[str, SeriesTareFit], capacity, symbols) -> tuple[str, str]:
-    """Adopt the form with the lower mean cross-validated σ (% capacity); say why, with the residual structure."""
-    cv = {m: np.sqrt(np.mean(f.press_load_residuals ** 2, axis=0)) / capacity * 100 for m, f in fits.items()}
+    """Adopt the form with the lower mean cross-validated σ (% capacity); say why, with the
+    residual structure."""
+    cv = {m: crossval_pct(f, capacity) for m, f in fits.items()}
     score = {m: float(np.mean(v)) for m, v in cv.items()}
     structure, odd_count = [], {}
     for method, fit in fits.items():

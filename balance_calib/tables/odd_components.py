@@ -1,5 +1,5 @@
 """A component whose residuals stand out, named with its points, and a term of its own channel
-offered when it removes the structure (issue 20, Deliver 6; refit's closing of the loop, for tables).
+offered when it removes the structure (issue 20, Deliver 6; refit's closing of the loop).
 
 A load is odd when its cross-validated σ (% capacity) is more than ODD_RATIO times the median of
 the other loads', or when some of its leave-one-out residuals lie beyond ODD_ROBUST_SIGMAS robust
@@ -57,7 +57,8 @@ def odd_components(method: str, fit, terms: Sequence[Term], table,
         worst = np.argsort(-np.abs(column))[:NAMED_POINTS]
         points = [table.point_id[i] for i in worst]
         listed = ', '.join(f'{table.point_id[i]} {column[i]:+.3g} %' for i in worst[:3])
-        evidence = (f'{symbol} cross-validated σ {cv[k]:.3g} % capacity, {ratio:.1f}x the other loads\' '
+        evidence = (f'{symbol} cross-validated σ {cv[k]:.3g} % capacity, {ratio:.1f}x the other '
+                    f'loads\' '
                     f'median; {int(far.sum())} point(s) beyond {ODD_ROBUST_SIGMAS:g} robust σ; '
                     f'furthest off: {listed}')
         best = None
@@ -84,6 +85,7 @@ def odd_components(method: str, fit, terms: Sequence[Term], table,
         else:
             unexplained.append({
                 'components': [symbol], 'points': points,
-                'evidence': evidence + '; no square, x|x| or |x| term of its own channel removes it',
+                'evidence': evidence
+                + '; no square, x|x| or |x| term of its own channel removes it',
                 'tracks': 'nothing found', 'sigma_pct_fs': {symbol: round(float(cv[k]), 5)}})
     return effects, unexplained

@@ -96,8 +96,8 @@ def build_report(table, validation, fits, chosen, why, term_sets, validation_sig
         'prediction_interval_95_pct_capacity': {s: round(float(v), 5) for s, v in zip(loads, pi)},
         'uncertainty': {'k': 1, 't_95': round(t95, 4),
                         'how': 'u² = σ²(1 + z (ZᵀZ)⁻¹ zᵀ), z the point\'s design row with its series; '
-                               'iterative: in output space, mapped by the inverse Jacobian; per point in '
-                               'point_uncertainty.csv'},
+                               'iterative: in output space, mapped by the inverse Jacobian; per '
+                               'point in point_uncertainty.csv'},
         'methods_compared': compared,
         'term_statistics': stats,
         'weak_terms': weak,
@@ -117,15 +117,18 @@ def build_report(table, validation, fits, chosen, why, term_sets, validation_sig
     from ..units import BRIDGE_OUTPUTS, COMPONENTS
     if not (set(loads) <= set(COMPONENTS) and set(table.bridge_symbols) <= set(BRIDGE_OUTPUTS)):
         report['warnings'].append(f'loads {", ".join(loads)} / outputs {", ".join(table.bridge_symbols)} are not '
-                                  f'TM-663 names: balance_calibrator cannot run this calibration; refit with '
-                                  f'--axes FX,FY,FZ,MX,MY,MZ (in the table\'s column order) if that is what they are')
+                                  f'TM-663 names: balance_calibrator cannot run this calibration; '
+                                  f'refit with --axes FX,FY,FZ,MX,MY,MZ (in the '
+                                  f'table\'s column order) if that is what they are')
     from .diagnose_table import residual_structure
     structure = residual_structure(table, fit)
     report['unexplained'] = structure['unexplained']
     report['diagnosis'] = {'examined': structure['examined'], 'skipped': structure['skipped']}
-    report['warnings'].append('the refit\'s diagnosis of effects needs sample times, temperatures and gravity '
-                              'directions a table lacks: residuals examined against point order, load '
-                              'direction and extra channels only (report.json diagnosis.skipped)')
+    report['warnings'].append('the refit\'s diagnosis of effects needs sample times, temperatures '
+                                         'and gravity '
+                              'directions a table lacks: residuals examined against point order, '
+                              'load direction and extra channels only (report.json '
+                              'diagnosis.skipped)')
     return report
 
 

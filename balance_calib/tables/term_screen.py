@@ -42,7 +42,8 @@ def dominant_loads(relative_loads: np.ndarray, onehot: np.ndarray, outputs: np.n
     return np.argmax(np.abs(response) / scale, axis=0)
 
 
-def schedule_columns(method: str, terms: Sequence[Term], applied_si: np.ndarray, capacity: np.ndarray,
+def schedule_columns(method: str, terms: Sequence[Term], applied_si: np.ndarray,
+                     capacity: np.ndarray,
                      outputs: np.ndarray, series: np.ndarray, inputs: Sequence[str],
                      loads: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
     """((N, p) term columns, (N, n_series) one-hot of the series): the iterative form's at the
@@ -53,9 +54,11 @@ def schedule_columns(method: str, terms: Sequence[Term], applied_si: np.ndarray,
     if method == 'iterative':
         return TermEvaluator(terms, loads).design(relative), onehot
     follows = dominant_loads(relative, onehot, outputs)
-    as_loads = tuple(Term(tuple(Factor(loads[follows[list(inputs).index(f.variable)]], f.power, f.absolute)
+    load_of = {name: loads[follows[j]] for j, name in enumerate(inputs)}
+    as_loads = tuple(Term(tuple(Factor(load_of[f.variable], f.power, f.absolute)
                                 for f in t.factors)) for t in terms)
-    applied_together = np.array([np.any(Term.evaluate(t, dict(zip(loads, relative.T)), len(relative)))
+    by_name = dict(zip(loads, relative.T))
+    applied_together = np.array([np.any(t.evaluate(by_name, len(relative)))
                                  for t in as_loads])
     measured = TermEvaluator(terms, inputs).design(outputs)
     return measured * applied_together[None, :], onehot
@@ -64,8 +67,9 @@ def schedule_columns(method: str, terms: Sequence[Term], applied_si: np.ndarray,
 def screen_for_table(method: str, terms: Sequence[Term], table, outputs: np.ndarray,
                      min_dof: int = 2) -> TermScreen:
     """The determinable terms of one form; TableCalibrationError when none is left."""
-    columns, onehot = schedule_columns(method, terms, table.applied_loads_si, table.load_capacity_si,
-                                       outputs, table.series, table.bridge_symbols, table.load_symbols)
+    columns, onehot = schedule_columns(method, terms, table.applied_loads_si,
+                                       table.load_capacity_si, outputs, table.series,
+                                       table.bridge_symbols, table.load_symbols)
     screen = screen_terms(terms, columns, onehot, min_dof=min_dof)
     linear = [t.name for t in terms if t.degree == 1 and not t.factors[0].absolute]
     kept_linear = [t for t in screen.kept if t.name in linear]
@@ -75,6 +79,7 @@ def screen_for_table(method: str, terms: Sequence[Term], table, outputs: np.ndar
     if not kept_linear or (lost and len(kept_linear) < table.n_loads):
         raise TableCalibrationError(
             f'{table.source}: the load schedule determines none of the {method} models: '
-            f'{len(kept_linear)} of the {table.n_loads} linear terms are left ({table.points} points, '
+            f'{len(kept_linear)} of the {table.n_loads} linear terms are left ({table.points} '
+            f'points, '
             f'{onehot.shape[1]} series: no room for {", ".join(lost) or "any"})')
     return screen

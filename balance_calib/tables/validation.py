@@ -1,4 +1,4 @@
-"""Validation of a table calibration on points it was not fitted to, honestly (issue 20, Deliver 5).
+"""Validation of a table calibration on points it was not fitted to (issue 20, Deliver 5).
 
 A validation series the calibration has is the same setup: the calibration's tare is applied,
 never re-estimated. A series it lacks is another setup (another fixture orientation): its tare is
@@ -40,7 +40,8 @@ class FormValidation:
         return float(np.mean(np.abs(self.residuals) <= 1.96 * self.uncertainty))
 
 
-def validate_form(method: str, fit: SeriesTareFit, validation, outputs: np.ndarray) -> FormValidation:
+def validate_form(method: str, fit: SeriesTareFit, validation,
+                  outputs: np.ndarray) -> FormValidation:
     """Predict the validation points with one fitted form: its tares where it has the series, the
     series' own tares (model fixed) where not."""
     try:
@@ -105,20 +106,20 @@ def range_warnings(table, validation) -> list[str]:
             if val_max <= SIGN_FRACTION * capacity[k]:
                 continue
             if cal_max <= SIGN_FRACTION * capacity[k]:
-                warnings.append(f'validation applies {symbol} {word} (up to {100 * val_max / capacity[k]:.0f} % '
-                                f'of capacity), a sign the calibration never applied: its σ there is an '
-                                f'extrapolation')
+                warnings.append(f'validation applies {symbol} {word} (up to '
+                                f'{100 * val_max / capacity[k]:.0f} % of capacity), a sign the '
+                                f'calibration never applied: its σ there is an extrapolation')
             elif val_max > RANGE_TOLERANCE * cal_max:
-                warnings.append(f'validation loads {symbol} {word} to {val_max / cal_max:.2f}x the calibrated '
-                                f'{100 * cal_max / capacity[k]:.0f} % of capacity: its σ there is an '
-                                f'extrapolation')
+                warnings.append(f'validation loads {symbol} {word} to {val_max / cal_max:.2f}x '
+                                f'the calibrated {100 * cal_max / capacity[k]:.0f} % of capacity: '
+                                f'its σ there is an extrapolation')
     return warnings
 
 
 def coverage_warning(coverage: float, method: str) -> list[str]:
     if coverage < COVERAGE_WARNING:
-        return [f'only {100 * coverage:.1f} % of the validation loads lie within ±1.96 u of the {method} '
-                f'model (95 % expected, < {100 * COVERAGE_WARNING:.0f} % warned): the stated uncertainty '
-                f'is too small for these points (extrapolation, another setup, or an effect the model '
-                f'lacks)']
+        return [f'only {100 * coverage:.1f} % of the validation loads lie within ±1.96 u of the '
+                f'{method} model (95 % expected, < {100 * COVERAGE_WARNING:.0f} % warned): the '
+                f'stated uncertainty is too small for these points (extrapolation, another setup, '
+                f'or an effect the model lacks)']
     return []
