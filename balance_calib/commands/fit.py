@@ -18,12 +18,17 @@ def register(subparsers) -> None:
     parser.add_argument('tables', nargs='+', help='calibration table(s) of one campaign (CSV)')
     parser.add_argument('--out', required=True, help='output directory')
     parser.add_argument('--validate', nargs='+', default=[], metavar='VAL.csv',
-                        help='validation table(s): same series, the calibration\'s tares applied')
+                        help='validation table(s): series the calibration has get its tares; other '
+                             'series (other setups) their own, estimated with the model held fixed')
     parser.add_argument('--method', default='auto', choices=['auto', 'direct', 'iterative'],
                         help='direct: loads as a polynomial of the outputs (TM-663); iterative: outputs as a '
                              'polynomial of the loads, inverted per point (AIAA R-091); auto: the one with the lower '
-                             'cross-validated σ, within 2 %% the one with fewer non-normal residuals (default auto)')
-    parser.add_argument('--terms', default='auto', help='auto, tm663-cubic, r091-96 or a file of term names')
+                             'cross-validated σ, within 2 %% the one with fewer non-normal residuals, else '
+                             'TM-663\'s direct form unless the iterative one is lower on every load (default auto)')
+    parser.add_argument('--terms', default='auto',
+                        help='auto (compare linear, tm663-quadratic, tm663-cubic and r091-96, each restricted '
+                             'to the terms the schedule determines, by cross-validated σ, then prune by PRESS), '
+                             'tm663-cubic, r091-96 or a file of term names')
     parser.add_argument('--excitation-v', type=float, default=None,
                         help='bridge excitation (V): turns mV/V tables into mV calibrations')
     parser.add_argument('--axes', default=None, metavar='FX,FY,FZ,MX,MY,MZ',
