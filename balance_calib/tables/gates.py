@@ -108,8 +108,7 @@ def outlier_gate(point_ids: Sequence[str], symbols: Sequence[str], residuals: np
     flagged = (np.abs(standardized) > threshold) | ~np.isfinite(standardized)
     rows = np.flatnonzero(np.any(flagged, axis=1))
     excess = np.nan_to_num(np.abs(standardized) / threshold, nan=np.inf)
-    severity = np.max(np.where(flagged, excess,
-                               0.0), axis=1)
+    severity = np.max(np.where(flagged, excess, 0.0), axis=1)
     rows = rows[np.argsort(-severity[rows], kind='stable')]
     entries = []
     for i in rows[:20]:

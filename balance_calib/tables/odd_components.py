@@ -58,8 +58,7 @@ def odd_components(method: str, fit, terms: Sequence[Term], table,
         points = [table.point_id[i] for i in worst]
         listed = ', '.join(f'{table.point_id[i]} {column[i]:+.3g} %' for i in worst[:3])
         evidence = (f'{symbol} cross-validated σ {cv[k]:.3g} % capacity, {ratio:.1f}x the other '
-                    f'loads\' '
-                    f'median; {int(far.sum())} point(s) beyond {ODD_ROBUST_SIGMAS:g} robust σ; '
+                    f'loads\' median; {int(far.sum())} point(s) beyond {ODD_ROBUST_SIGMAS:g} robust σ; '
                     f'furthest off: {listed}')
         best = None
         for term in _own_channel_terms(method, k, table, outputs):

@@ -125,9 +125,8 @@ def build_report(table, validation, fits, chosen, why, term_sets, validation_sig
     report['unexplained'] = structure['unexplained']
     report['diagnosis'] = {'examined': structure['examined'], 'skipped': structure['skipped']}
     report['warnings'].append('the refit\'s diagnosis of effects needs sample times, temperatures '
-                                         'and gravity '
-                              'directions a table lacks: residuals examined against point order, '
-                              'load direction and extra channels only (report.json '
+                              'and gravity directions a table lacks: residuals examined against '
+                              'point order, load direction and extra channels only (report.json '
                               'diagnosis.skipped)')
     return report
 
