@@ -13,6 +13,8 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.csv')),
+        ('share/' + package_name + '/config/models', glob('config/models/*.yaml')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.yaml')),
     ],
     # the live calibrator's lone sample in C (live/lone_sample.py); optional: without a C compiler the
     # package installs and every sample takes the pure core's path (the node says so at start-up)

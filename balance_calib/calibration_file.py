@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import os
+import re
 import stat
 import tempfile
 from dataclasses import dataclass, field
@@ -64,6 +65,12 @@ class Calibration:
         return tuple(needed)
 
     @property
+    def output_unit(self) -> str:
+        """The unit of the bridge outputs the models take: mV, or what a table gave that has no
+        conversion to mV (counts, -, mV/V without the excitation), as `fit` records it."""
+        return str((self.extra or {}).get('output_unit', 'mV'))
+
+    @property
     def fitted_datetime(self) -> _dt.datetime | None:
         try:
             return _dt.datetime.fromisoformat(self.fitted_at)
@@ -104,9 +111,18 @@ def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -
     try:
         components = tuple(data.get('components', COMPONENTS))
         outputs = tuple(data.get('bridge_outputs', BRIDGE_OUTPUTS))
-        models = {name: _model_from_dict({'name': name, 'components': components, 'inputs': outputs, **m},
-                                         where=f'{where}: models.{name}')
-                  for name, m in (data['models'] or {}).items()}
+        given = data['models'] or {}
+        if not isinstance(given, Mapping):
+            raise ConfigError(f'{where}: models: expected a mapping of model names, '
+                              f'not {type(given).__name__}')
+        models = {}
+        for name, m in given.items():
+            if not isinstance(m, Mapping):
+                raise ConfigError(f'{where}: models.{name}: expected a mapping (form, terms, '
+                                  f'coefficients), not {type(m).__name__} {m!r:.40}')
+            models[name] = _model_from_dict(
+                {'name': name, 'components': components, 'inputs': outputs, **m},
+                where=f'{where}: models.{name}')
         if not models:
             raise ConfigError(f'{where}: no models')
         capacity = np.array([float(data['capacity'][c]) for c in components])
@@ -125,7 +141,8 @@ def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -
     except KeyError as err:
         raise ConfigError(f'{where}: missing key {err.args[0]!r}') from None
     except (TypeError, ValueError, AttributeError) as err:
-        raise ConfigError(f'{where}: {err}') from None
+        text = ' '.join(str(err).split())      # the model's errors name the file already
+        raise ConfigError(text if text.startswith(f'{where}: ') else f'{where}: {text}') from None
 
 
 def _model_from_dict(data: Mapping[str, Any], where: str):
@@ -161,16 +178,69 @@ def load_calibration(path: str | Path) -> Calibration:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as err:
-        raise ConfigError(f'{path}: not valid YAML: {str(err).splitlines()[0]}') from None
-    return calibration_from_dict(data, str(path))
+        raise ConfigError(_yaml_error_line(path, err)) from None
+    try:
+        return calibration_from_dict(data, str(path))
+    except ConfigError as err:
+        raise ConfigError(_with_line_number(str(err), str(path), text)) from None
 
 
-def write_text_atomically(path: str | Path, text: str) -> None:
-    """Write a file so that readers see the old or the new content, never a mix."""
+def _yaml_error_line(path: Path, err: yaml.YAMLError) -> str:
+    """'FILE, line N: not valid YAML: what' from PyYAML's several-line message."""
+    mark = getattr(err, 'problem_mark', None)
+    problem = getattr(err, 'problem', None) or str(err).splitlines()[0]
+    context = getattr(err, 'context', None)
+    where = f'{path}, line {mark.line + 1}' if mark is not None else str(path)
+    return f'{where}: not valid YAML: {problem}{f" ({context})" if context else ""}'
+
+
+_KEY_PATH = re.compile(r'([A-Za-z_][\w+\-]*(?:\.[A-Za-z_0-9][\w+\-]*)*): ')
+_QUOTED = re.compile(r"'([^']{1,80})'")
+
+
+def _with_line_number(message: str, where: str, text: str) -> str:
+    """'FILE, line N: key: what' for 'FILE: key: what': N is the line of the offending value when
+    the message quotes it, else of the key."""
+    rest = message[len(where) + 2:] if message.startswith(f'{where}: ') else message
+    key = _KEY_PATH.match(rest)
+    line = _line_of_key(text, key.group(1).split('.')) if key else None
+    if line is None:
+        return f'{where}: {rest}'
+    quoted = _QUOTED.search(rest[key.end():])
+    if quoted:
+        lines = text.splitlines()
+        line = next((i + 1 for i in range(line - 1, len(lines)) if quoted.group(1) in lines[i]),
+                    line)
+    return f'{where}, line {line}: {rest}'
+
+
+def _line_of_key(text: str, keys: list[str]) -> int | None:
+    """1-based line of the nested mapping key `keys` in a YAML text, None if not found."""
+    try:
+        node = yaml.compose(text, Loader=getattr(yaml, 'CSafeLoader', yaml.SafeLoader))
+    except yaml.YAMLError:
+        return None
+    line = None
+    for key in keys:
+        if not isinstance(node, yaml.MappingNode):
+            return line
+        # the last of repeated keys: the one the loader keeps
+        match = next(((k, v) for k, v in reversed(node.value) if getattr(k, 'value', None) == key),
+                     None)
+        if match is None:
+            return line
+        line, node = match[0].start_mark.line + 1, match[1]
+    return line
+
+
+def write_text_atomically(path: str | Path, text: str, mode: int = 0o644) -> None:
+    """Write a file so that readers see the old or the new content, never a mix; `mode` 0644
+    (as refit's outputs, whichever command writes the file)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
     try:
+        os.fchmod(fd, mode)       # mkstemp makes 0600; a calibration is read by other users' nodes
         with os.fdopen(fd, 'w') as f:
             f.write(text)
             f.flush()
@@ -185,7 +255,8 @@ def write_text_atomically(path: str | Path, text: str) -> None:
 
 
 def save_calibration(path: str | Path, calibration: Calibration) -> None:
-    header = f'# {calibration.balance} calibration written by balance_calib; loads in N, N·m from outputs in mV.\n'
+    header = (f'# {calibration.balance} calibration written by balance_calib; loads in N, N·m from '
+              f'outputs in {calibration.output_unit}.\n')
     write_text_atomically(path, header + yaml.safe_dump(calibration.to_dict(), sort_keys=False, width=160))
 
 

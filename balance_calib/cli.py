@@ -15,6 +15,8 @@ COMMAND_MODULES = (
     'balance_calib.commands.thrust',
     'balance_calib.commands.fit',
     'balance_calib.commands.reduce',
+    'balance_calib.commands.coverage',
+    'balance_calib.commands.design',
 )
 
 

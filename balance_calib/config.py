@@ -70,22 +70,30 @@ class BalanceConfig:
             raise ConfigError(f'{self.path or self.name}: no gravity direction for I_g = {orientation}') from None
 
 
+def shipped_config_dirs() -> list[Path]:
+    """Where the shipped configs are: the source tree's config/ and, installed with colcon (the
+    package in site-packages, no config/ beside it), share/balance_calib/config."""
+    dirs = [CONFIG_DIR]
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        dirs.append(Path(get_package_share_directory('balance_calib')) / 'config')
+    except Exception:       # not installed as a ROS package (or ament_index not importable)
+        pass
+    return dirs
+
+
 def resolve_config_path(name_or_path: str | Path) -> Path:
     """A path, or the name of a shipped config ('lmc6522', 'b660h', 'thrust_stand')."""
     path = Path(name_or_path)
     if path.exists():
         return path
-    for candidate in (CONFIG_DIR / f'{name_or_path}.yaml', CONFIG_DIR / f'{str(name_or_path).lower()}.yaml'):
-        if candidate.exists():
-            return candidate
-    try:  # installed with colcon: share/balance_calib/config
-        from ament_index_python.packages import get_package_share_directory
-        candidate = Path(get_package_share_directory('balance_calib')) / 'config' / f'{name_or_path}.yaml'
-        if candidate.exists():
-            return candidate
-    except Exception:
-        pass
-    raise ConfigError(f'balance config {name_or_path!r} not found (looked for the file and in {CONFIG_DIR})')
+    dirs = shipped_config_dirs()
+    for directory in dirs:
+        for name in dict.fromkeys((f'{name_or_path}.yaml', f'{str(name_or_path).lower()}.yaml')):
+            if (directory / name).exists():
+                return directory / name
+    raise ConfigError(f'balance config {name_or_path!r} not found (looked for the file and in '
+                      f'{", ".join(map(str, dirs))})')
 
 
 def load_balance_config(name_or_path: str | Path) -> BalanceConfig:

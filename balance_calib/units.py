@@ -15,8 +15,9 @@ COMPONENTS = ('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ')
 BRIDGE_OUTPUTS = ('FXV', 'FYV', 'FZV', 'MXV', 'MYV', 'MZV')
 
 # Exact by definition: 1 lb = 0.45359237 kg, 1 in = 0.0254 m.
+METRE_PER_INCH = 0.0254
 NEWTON_PER_LBF = 0.45359237 * STANDARD_GRAVITY_M_S2          # 4.4482216152605 N
-NEWTON_METRE_PER_INCH_LBF = NEWTON_PER_LBF * 0.0254         # 0.1129848290276167 N·m
+NEWTON_METRE_PER_INCH_LBF = NEWTON_PER_LBF * METRE_PER_INCH  # 0.1129848290276167 N·m
 
 # Display systems for loads: (force unit, moment unit, N per force unit, N·m per moment unit).
 LOAD_UNIT_SYSTEMS = {

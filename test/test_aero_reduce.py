@@ -155,3 +155,86 @@ def test_an_electrical_zero_is_taken_in_output_space_before_the_calibration(tmp_
     assert errors[''] > 1e-4 and errors['0.04,0.04,0.04,0.04,0.04,0.04'] < 1e-9
     assert main(['reduce', str(tmp_path / 'run'), '--calibration', 'lmc6522', '--model', 'euler_replica_lmc6522',
                  '--out', str(tmp_path / 'bad'), '--electrical-zero-mv', '0.04,0.04']) == 2
+
+
+def _zeroed_run_bag(path, electrical_zero_mv, **truth):
+    from balance_calib.live.wind_on import wind_on_outputs
+    from test_aero_core import CONFIG
+    profile, _ = simulated_run()
+    raw = wind_on_outputs(CONFIG.matrices['cubic'], profile.loads_balance,
+                          electrical_zero_mv=electrical_zero_mv)
+    stamps = START_NS + np.round(profile.times_s * 1e9).astype(np.int64)
+    write_run_bag(path, stamps, raw, profile.support_attitude, profile.q_pa, **truth)
+    return profile
+
+
+def _reduce(bag, out, *extra):
+    return main(['reduce', str(bag), '--calibration', 'lmc6522', '--model',
+                 'euler_replica_lmc6522', '--out', str(out), *extra])
+
+
+@pytest.mark.filterwarnings('error::RuntimeWarning')
+def test_offsets_beyond_one_percent_of_capacity_are_a_console_and_report_warning(tmp_path, capsys):
+    from balance_calib.model.inverse import linear_part
+    from test_aero_core import CONFIG
+    _zeroed_run_bag(tmp_path / 'run', 0.04)
+    assert _reduce(tmp_path / 'run', tmp_path / 'out') == 0
+    console = capsys.readouterr().out
+    # 0.04 mV on every bridge through the calibration's linear part (N per mV) is ~ +313 N of the
+    # balance's F_Z, -F_Z of the tunnel upright (§10.2.1); the wind-off sweep's offset takes it
+    expected_fz = -(linear_part(CONFIG.matrices['cubic']) @ np.full(6, 0.04))[2]
+    assert abs(expected_fz) / 9800 > 0.01
+    warning = next(line for line in console.splitlines()
+                   if line.startswith('warning: cubic: wind-off offsets'))
+    value = float(warning.split('F_Z ')[1].split(' N')[0])
+    assert value == pytest.approx(expected_fz, rel=0.02)
+    assert f'{100 * abs(value) / 9800:.1f} % of its rated load 9800 N' in warning
+    assert '--electrical-zero-mv' in warning
+    report = (tmp_path / 'out' / 'report.md').read_text()
+    assert warning[len('warning: '):] in report.split('## Warnings')[1]
+    # the zero given: no offset beyond 1 %, no warning
+    zero = ','.join(['0.04'] * 6)
+    assert _reduce(tmp_path / 'run', tmp_path / 'zeroed', '--electrical-zero-mv', zero) == 0
+    assert 'warning' not in capsys.readouterr().out
+    assert '## Warnings\n\n- none' in (tmp_path / 'zeroed' / 'report.md').read_text()
+
+
+@pytest.mark.filterwarnings('error::RuntimeWarning')
+def test_an_electrical_zero_below_one_percent_of_capacity_is_no_warning(tmp_path, capsys):
+    _zeroed_run_bag(tmp_path / 'run', 0.004)          # ~31 N on F_Z: 0.3 % of 9800 N
+    assert _reduce(tmp_path / 'run', tmp_path / 'out') == 0
+    assert 'warning' not in capsys.readouterr().out
+
+
+@pytest.mark.filterwarnings('error::RuntimeWarning')
+def test_a_truth_without_its_wind_axis_part_says_so_instead_of_nan(tmp_path, capsys):
+    profile, _ = simulated_run()              # deterministic: the profile the bag is written from
+    _zeroed_run_bag(tmp_path / 'run', 0.0, truth_body=profile.body_coefficients)  # no truth_wind
+    assert _reduce(tmp_path / 'run', tmp_path / 'out') == 0
+    capsys.readouterr()
+    report = (tmp_path / 'out' / 'report.md').read_text()
+    section = report.split('## Against the simulation')[1].split('\n## ')[0]
+    row = next(line for line in section.splitlines() if line.startswith('| cubic |'))
+    cells = [c.strip() for c in row.strip('|').split('|')][1:]
+    assert cells[6:] == ['no truth', 'no truth'] and all(' u)' in c for c in cells[:6]), row
+    assert 'nan' not in section.lower()
+    assert 'C_D, C_L (the bag has no /aero/truth_wind)' in section
+
+
+@pytest.mark.filterwarnings('error::RuntimeWarning')
+def test_a_raw_sample_of_minus_1e300_is_left_out_and_said_not_spread_as_nan(tmp_path, capsys):
+    profile, raw = simulated_run()                    # noise-free: a hold's samples are equal
+    stamps = START_NS + np.round(profile.times_s * 1e9).astype(np.int64)
+    write_run_bag(tmp_path / 'clean', stamps, raw, profile.support_attitude, profile.q_pa)
+    flipped = raw.copy()
+    flipped[500, 2] = -1e300                          # a flipped exponent bit in one F_Z sample
+    write_run_bag(tmp_path / 'run', stamps, flipped, profile.support_attitude, profile.q_pa)
+    assert _reduce(tmp_path / 'clean', tmp_path / 'clean_out') == 0
+    capsys.readouterr()
+    assert _reduce(tmp_path / 'run', tmp_path / 'out') == 0
+    console = capsys.readouterr().out
+    assert ('warning: 1 raw sample(s) with a bridge output beyond 1000x its rated output left out '
+            '(first: FZV -1e+300 mV)') in console
+    _, values = read_csv(tmp_path / 'out' / 'coefficients.csv')
+    _, clean = read_csv(tmp_path / 'clean_out' / 'coefficients.csv')
+    assert np.all(np.isfinite(values)) and np.allclose(values, clean, rtol=0, atol=1e-9)

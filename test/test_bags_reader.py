@@ -179,6 +179,47 @@ def test_a_directory_without_metadata_or_a_foreign_file_is_not_a_bag(tmp_path):
         read_bags(tmp_path / 'notes.txt')
 
 
+def _recording_in_progress(tmp_path, name, content):
+    """A bag directory as a recorder leaves it while it writes: the file so far, no metadata.yaml."""
+    bag = tmp_path / name
+    bag.mkdir()
+    (bag / f'{name}_0.mcap').write_bytes(content)
+    return bag
+
+
+def test_a_bag_still_being_recorded_is_read_up_to_what_is_on_disk(tmp_path):
+    records = [('/balance/raw', i, wrench(i, [i, -i, 2 * i, 0.5, i * i, 3.0])) for i in range(3000)]
+    with BagWriter(tmp_path / 'done', chunk_size_bytes=8192) as writer:
+        writer.add_topic('/balance/raw', WRENCH)
+        for topic, time_ns, message in records:
+            writer.write(topic, time_ns, cdr(message))
+    finished = (tmp_path / 'done' / 'done_0.mcap').read_bytes()
+    chunks, counts = _chunks_and_counts(tmp_path / 'done' / 'done_0.mcap')
+    assert len(chunks) > 6 and counts == {'/balance/raw': 3000}
+    # a writer only appends: the file being recorded is a prefix of the finished one
+    for k, into in [(1, 20), (3, 0), (5, chunks[5].chunk_length // 2), (len(chunks) - 1, 9)]:
+        cut = chunks[k].chunk_start_offset + into
+        bag = _recording_in_progress(tmp_path, f'live{k}_{into}', finished[:cut])
+        data = read_bags(bag)
+        on_disk = chunks[k - 1].message_end_time + 1        # log times are 0, 1, 2, ...: whole chunks
+        np.testing.assert_array_equal(data.raw.values, expected_raw(records[:on_disk])[1])
+        assert len(data.losses) == 1 and 'still being recorded' in data.losses[0]
+        assert f'read the {on_disk} messages on disk so far' in data.losses[0]
+    # nothing flushed yet: the required topic is missing, and the reason is said
+    early = _recording_in_progress(tmp_path, 'early', finished[:chunks[0].chunk_start_offset + 30])
+    with pytest.raises(BagError, match=r'early: no messages on /balance/raw.*still being recorded'):
+        read_bags(early)
+    # the recording closed its file but not (yet) metadata.yaml: the whole file, nothing said
+    whole = read_bags(_recording_in_progress(tmp_path, 'whole', finished))
+    assert len(whole.raw) == 3000 and whole.losses == ()
+    # damage inside a complete chunk of a file being recorded is still damage
+    damaged = bytearray(finished[:chunks[4].chunk_start_offset])
+    middle = chunks[2].chunk_start_offset + chunks[2].chunk_length // 2
+    damaged[middle:middle + 8] = bytes(b ^ 0xA5 for b in damaged[middle:middle + 8])
+    with pytest.raises(BagError, match=f'damaged data at byte offset {chunks[2].chunk_start_offset}'):
+        read_bags(_recording_in_progress(tmp_path, 'damaged', bytes(damaged)))
+
+
 @pytest.mark.parametrize('bare', [True, False])
 def test_truncated_mcap_names_the_file(tmp_path, bare):
     records = [('/balance/raw', i, wrench(i, [i] * 6)) for i in range(2000)]

@@ -158,6 +158,39 @@ def assert_identical_through_rosbags_and_mcap(bag):
 
 
 @pytest.mark.ros
+def test_a_bag_being_recorded_is_read_up_to_the_last_flush(tmp_path, domain_id, test_node):
+    """Issue 21: ~/refit of the recorder's bag while it still records (no metadata.yaml yet)."""
+    from balance_calib.nodes.balance_recorder import FLUSH_PERIOD_S
+    node, executor = test_node
+    reliable = QoSProfile(depth=SAMPLES, reliability=ReliabilityPolicy.RELIABLE)
+    raw_publisher = node.create_publisher(WrenchStamped, '/balance/raw', reliable)
+    bag = tmp_path / 'live'
+    recorder = start_recorder(bag, domain_id)
+    try:
+        wait_until(lambda: raw_publisher.get_subscription_count() > 0, executor, recorder)
+        sent = []
+        for index in range(SAMPLES):
+            message = WrenchStamped()
+            message.header.stamp.sec, message.header.stamp.nanosec = 1_700_000_000, index
+            message.wrench.force.x, message.wrench.torque.z = float(index), -0.5 * index
+            sent.append(index)
+            raw_publisher.publish(message)
+        assert raw_publisher.wait_for_all_acked(Duration(seconds=20))
+        time.sleep(2.5 * FLUSH_PERIOD_S)
+        assert recorder.poll() is None and not (bag / 'metadata.yaml').exists()
+        data = read_bags(bag)                  # the directory as it is, the recorder still at work
+    finally:
+        recorder.send_signal(signal.SIGINT)
+        output, _ = recorder.communicate(timeout=30)
+    assert recorder.returncode == 0, output
+    np.testing.assert_array_equal(data.raw.values[:, 0], sent)
+    np.testing.assert_array_equal(data.raw.values[:, 5], -0.5 * np.array(sent))
+    assert len(data.losses) == 1 and f'read the {SAMPLES} messages on disk so far' in data.losses[0]
+    closed = read_bags(bag)                    # and once stopped: the complete bag, nothing to say
+    assert len(closed.raw) == SAMPLES and closed.losses == ()
+
+
+@pytest.mark.ros
 def test_recorder_refuses_an_existing_output(tmp_path, domain_id):
     (tmp_path / 'campaign').mkdir()
     result = subprocess.run(

@@ -72,8 +72,9 @@ def test_a_refit_killed_with_sigkill_leaves_nothing_half_written(tmp_path, kill_
     # nothing half-written: DIR appears whole with one rename, or not at all
     if out.exists():
         assert {p.name for p in out.iterdir()} >= {'calibration.yaml', 'report.json', 'report.md'}
-    # a second refit removes the killed one's staging directory and writes everything
-    again = _start_refit(bag, out, '--no-diagnosis')
+    # a second refit removes the killed one's staging directory and writes everything (over the
+    # first one's calibration record, if the kill came after its rename: --overwrite)
+    again = _start_refit(bag, out, '--no-diagnosis', '--overwrite')
     _, stderr = again.communicate(timeout=300)
     assert again.returncode == 0, stderr
     assert {'calibration.yaml', 'report.json', 'report.md'} <= {p.name for p in out.iterdir()}

@@ -31,6 +31,7 @@ def _load_events(events):
 
 
 def _refit(tmp_path, events, *, balance='lmc6522', force=False, **kwargs):
+    tmp_path.mkdir(parents=True, exist_ok=True)
     bag = write_mcap(events, tmp_path / 'campaign.mcap')
     return run_refit([bag], balance, tmp_path / 'out', diagnose=False, plots=False, force=force, **kwargs)
 
@@ -44,7 +45,7 @@ def test_a_clean_campaign_passes_every_gate_and_the_report_shows_them(clean, tmp
     result = _refit(tmp_path, events)
     gates = _gates(result)
     assert set(gates) == {'output_range', 'sigma', 'outliers', 'sensitivity', 'zero_points', 'body_weight',
-                          'capacity', 'clipping', 'marker_order'}
+                          'capacity', 'clipping', 'marker_order', 'schedule'}
     assert all(g['passed'] for g in gates.values()), [g['reason'] for g in gates.values() if not g['passed']]
     assert result.report['acceptance'] == {**result.report['acceptance'], 'passed': True, 'forced': False}
     # the fitted linear sensitivities are the truth's (Table 10): noise moves them by far less than 1 %
@@ -269,3 +270,101 @@ def test_out_is_checked_before_any_work(tmp_path):
         run_refit([tmp_path / 'missing.mcap'], 'lmc6522', afile)
     with pytest.raises(RefitError, match='/proc/refit-out: output directory not writable'):
         run_refit([tmp_path / 'missing.mcap'], 'lmc6522', '/proc/refit-out')
+
+
+def _without_markers(events, share, seed, *, component=None):
+    """The events less `share` of the load markers (chosen at random; of points loading `component`
+    only, when given): their samples then belong to no point, as when the recorder lost them."""
+    loads = _load_events(events)
+    if component is not None:
+        loads = [i for i in loads if abs(events[i].values[component]) > 0]
+    rng = np.random.default_rng(seed)
+    drop = set(rng.choice(loads, size=int(round(share * len(loads))), replace=False).tolist())
+    return [e for i, e in enumerate(events) if i not in drop], len(drop)
+
+
+def test_a_campaign_that_lost_30_percent_of_its_points_is_refused_with_counts(clean, tmp_path,
+                                                                               capsys):
+    from balance_calib.cli import main
+    events, dropped = _without_markers(clean[1], 0.30, seed=1)
+    expected = len(load_balance_config('lmc6522').schedule)
+    bag = write_mcap(events, tmp_path / 'damaged.mcap')
+    out = tmp_path / 'out'
+    status = main(['refit', str(bag), '--balance', 'lmc6522', '--out', str(out), '--no-diagnosis'])
+    error = capsys.readouterr().err.strip()
+    assert status == 2 and '\n' not in error, error
+    assert 'damaged.mcap' in error and 'acceptance gate schedule' in error
+    found = expected - dropped
+    assert f'{found} of the {expected} scheduled points found ({dropped} missing, 30 %' in error
+    assert 'lost coverage: FX' in error and '--force' in error
+    assert not out.exists()
+    # --force writes it, and the report keeps the counts
+    result = _refit(tmp_path, events, force=True)
+    gate = _gates(result)['schedule']
+    assert not gate['passed'] and gate['missing'] == dropped and gate['expected'] == expected
+    loads_fx = load_balance_config('lmc6522').schedule.loads[:, 0]
+    assert gate['coverage']['FX']['expected'] == np.count_nonzero(loads_fx)
+
+
+def test_two_percent_lost_passes_with_a_warning_and_a_complete_campaign_without(clean, tmp_path):
+    events, dropped = _without_markers(clean[1], 0.02, seed=2)
+    assert dropped >= 5
+    result = _refit(tmp_path, events)
+    gate = _gates(result)['schedule']
+    assert gate['passed'] and gate['missing'] == dropped
+    warning = f'{dropped} of the schedule\'s 328 points are missing'
+    assert any(warning in w for w in result.report['warnings'])
+    complete = _refit(tmp_path / 'complete', clean[1])
+    assert _gates(complete)['schedule']['missing'] == 0
+    assert not any('missing' in w for w in complete.report['warnings'])
+
+
+def test_a_component_that_lost_its_loads_is_named_though_few_points_are_missing(clean, tmp_path):
+    config = load_balance_config('lmc6522')
+    mz = config.components.index('MZ')
+    # 40 % of the points loading MZ lost: under 10 % of the campaign, beyond 20 % of MZ's coverage
+    events, dropped = _without_markers(clean[1], 0.4, seed=3, component=mz)
+    full = _gates(_refit(tmp_path / 'full', clean[1]))['schedule']
+    expected_mz = full['coverage']['MZ']['expected']
+    assert dropped / 328 < 0.10 and dropped == round(0.4 * expected_mz)
+    result = _refit(tmp_path, events, force=True)
+    gate = _gates(result)['schedule']
+    assert not gate['passed'] and 'lost coverage: ' in gate['reason']
+    assert f'MZ {expected_mz - dropped} of {expected_mz}' in gate['reason']
+    assert gate['coverage']['MZ']['found'] == expected_mz - dropped
+
+
+def test_the_gate_judges_against_the_schedule_it_is_given(clean, tmp_path):
+    # a campaign that ran only points 1-200 of the schedule: refused against the full schedule,
+    # passed against the schedule it ran (what `refit --schedule FILE` will pass)
+    from balance_calib.live.timeline import select_points
+    from balance_calib.refit.gates import schedule_gate
+    from balance_calib.refit.pipeline import campaign_points
+    config = load_balance_config('lmc6522')
+    points = campaign_points(clean[0])
+    ran = select_points(config.schedule, '1-200')
+    part = points.subset(np.isin(points.label, ran.point))
+    assert not schedule_gate(config, part, config.schedule).passed
+    gate = schedule_gate(config, part, ran)
+    assert gate.passed and gate.details['expected'] == len(ran) and gate.details['missing'] == 0
+    assert schedule_gate(config, part, None).passed     # no schedule: nothing to compare
+
+
+def test_no_runtime_warning_reaches_the_user_of_a_refit(clean, tmp_path):
+    events = _copy_events(clean[1])
+    loads = _load_events(events)
+    events[loads[40]].values[2] = -1e300                 # a flipped exponent bit in one weight
+    bag = write_mcap(events, tmp_path / 'absurd.mcap')
+    strict = [sys.executable, '-W', 'error', '-m', 'balance_calib.cli', 'refit', '--balance',
+              'lmc6522']
+    done = subprocess.run(strict + [str(bag), '--out', str(tmp_path / 'out'), '--no-diagnosis'],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2 and done.stderr.count('\n') == 1, done.stderr
+    assert 'FZ -1e+300 is beyond 1000x its rated load 9800' in done.stderr
+    # and a clean campaign, damaged by 2 %, refits under -W error (a warning would be an error)
+    damaged, _ = _without_markers(clean[1], 0.02, seed=4)
+    bag = write_mcap(damaged, tmp_path / 'two_percent.mcap')
+    done = subprocess.run(strict + [str(bag), '--out', str(tmp_path / 'out2')],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0 and done.stderr == '', done.stderr
+    assert 'points are missing from the campaign' in done.stdout

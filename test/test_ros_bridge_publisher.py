@@ -141,3 +141,45 @@ def test_thrust_stand_mode_without_its_simulator_fails_clearly(monkeypatch):
             BridgePublisher(context=context, parameter_overrides=[Parameter('mode', value='thrust_stand')])
     finally:
         rclpy.try_shutdown(context=context)
+
+
+def test_calibration_mode_plays_the_schedule_of_schedule_file(probe, tmp_path):
+    """A designed schedule (balance-calib design) played with parameter schedule_file: the points
+    of the file, not the config's, on /calibration/applied_load."""
+    from balance_calib.schedule_file import read_schedule_csv, schedule_csv_text
+    from balance_calib.config import LoadSchedule
+    extra = LoadSchedule(np.array([400, 401, 402]), np.array([3, 3, 3]),
+                         np.array([[0.0] * 6, [-200.0, -1500.0, 3000.0, -40.0, 150.0, -180.0],
+                                   [0.0] * 6]),
+                         ('', '', ''))
+    path = tmp_path / 'schedule.csv'
+    path.write_text(schedule_csv_text(extra))
+    raw = probe.subscribe(WrenchStamped, '/balance/raw')        # the node waits for a raw reader
+    applied = probe.subscribe(WrenchStamped, '/calibration/applied_load')
+    gravity = probe.subscribe(Vector3Stamped, '/calibration/gravity')
+    node = NodeProcess('bridge_publisher', probe.domain_id, tmp_path, {
+        'mode': 'calibration', 'schedule_file': str(path), 'rate_hz': 200.0,
+        'point_duration_s': 0.1, 'transition_s': 0.03, 'exit_when_done': True,
+        'wait_for_subscribers': 1})
+    try:
+        assert node.wait(60.0) == 0, node.output()
+    finally:
+        node.stop()
+    wait_for(lambda: len(applied) == 6, 5.0,
+             f'the 3 points of the file (have {len(applied)} messages)')
+    values = np.array([six(m) for m in applied])
+    np.testing.assert_allclose(values[1::2], read_schedule_csv(path).loads, rtol=1e-9, atol=1e-9)
+    assert [[m.vector.x, m.vector.y, m.vector.z] for m in gravity] == [CONFIG.gravity(3).tolist()]
+    wait_for(lambda: len(raw) == 3 * 26, 5.0, f'the raw samples of 3 points (have {len(raw)})')
+
+
+def test_a_schedule_file_that_is_not_a_schedule_stops_the_node_with_its_name(tmp_path):
+    path = tmp_path / 'schedule.csv'
+    path.write_text('point,Ig,FX\n1,2,0\n')
+    node = NodeProcess('bridge_publisher', new_domain_id(), tmp_path,
+                       {'mode': 'calibration', 'schedule_file': str(path)})
+    try:
+        assert node.wait(30.0) == 1
+    finally:
+        node.stop()
+    assert f'{path}: not a load schedule: missing column(s) FX_kgf, FY_kgf' in node.output()

@@ -79,12 +79,14 @@ def stop_graph(graph):
 
 
 def test_graph_runs_the_nodes_and_ends_with_the_publisher_closing_the_bag(tmp_path):
-    graph = start_graph(tmp_path, graph_params(tmp_path))
+    # issue 21: by default the calibrator outlives the campaign; --stop-with-campaign ends them all
+    graph = start_graph(tmp_path, graph_params(tmp_path), '--stop-with-campaign')
     try:
         assert graph.wait(90) == 0
     finally:
         output = stop_graph(graph)
     assert 'campaign complete' in output and 'bridge_publisher exited with status 0' in output, output
+    assert f'bag {tmp_path / "bag"} closed (status 0)' in output, output
     metadata = yaml.safe_load((tmp_path / 'bag' / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     counts = {t['topic_metadata']['name']: t['message_count'] for t in metadata['topics_with_message_count']}
     assert counts['/balance/raw'] == 50 + 3 * 20 and counts['/balance/wrench'] > 0, counts
@@ -119,3 +121,42 @@ def test_graph_stops_everything_when_a_node_dies(tmp_path):
     finally:
         output = stop_graph(graph)
     assert 'balance_calibrator exited with status 1' in output and 'broken.yaml' in output, output
+
+
+def run_ros(domain, *args, timeout=300):
+    return subprocess.run([str(SCRIPTS / 'ros'), *map(str, args)], capture_output=True, text=True,
+                          timeout=timeout, env=dict(os.environ, ROS_DOMAIN_ID=str(domain)))
+
+
+@pytest.mark.slow
+def test_graph_as_its_help_says_the_calibrator_outlives_the_campaign_and_refits_its_bag(tmp_path):
+    """The help's recipe: campaign through the graph, then param set calibration_bags to the recorded
+    bag directory and trigger ~/refit, while the graph still runs."""
+    params = yaml.safe_load((SCRIPTS.parent / 'config' / 'graph_params.yaml').read_text())
+    params['bridge_publisher']['ros__parameters'].update(speed=4.0)        # the shipped campaign, 4x
+    params['balance_calibrator']['ros__parameters'].update(report_dir=str(tmp_path / 'reports'))
+    path = tmp_path / 'params.yaml'
+    path.write_text(yaml.safe_dump(params))
+    domain = new_domain_id()
+    graph = subprocess.Popen([str(SCRIPTS / 'graph'), str(path), '--bag', str(tmp_path / 'bag')],
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                             start_new_session=True, env=dict(os.environ, ROS_DOMAIN_ID=str(domain)))
+    graph.lines = []
+    graph.reader = threading.Thread(target=lambda: graph.lines.extend(graph.stdout), daemon=True)
+    graph.reader.start()
+    try:
+        wait_for(lambda: any('keeps running' in line for line in graph.lines) or graph.poll() is not None,
+                 150.0, 'the end of the campaign')
+        assert graph.poll() is None, ''.join(graph.lines)           # the calibrator still runs
+        assert (tmp_path / 'bag' / 'metadata.yaml').exists()          # the recorder closed the bag
+        done = run_ros(domain, 'param', 'set', '/balance_calibrator', 'calibration_bags',
+                       f'[{tmp_path / "bag"}]', '--timeout', 60)
+        assert done.returncode == 0, done.stderr
+        refit = run_ros(domain, 'service', 'call', '/balance_calibrator/refit')
+        assert refit.returncode == 0, refit.stdout + refit.stderr + ''.join(graph.lines)
+        assert refit.stdout.startswith('success: true'), refit.stdout
+        graph.send_signal(signal.SIGINT)
+        assert graph.wait(30) == 0
+    finally:
+        output = stop_graph(graph)
+    assert 'balance_calibrator keeps running' in output and 'Traceback' not in output, output

@@ -44,6 +44,8 @@ def test_line_fit_prints_a_b_and_sigma(tmp_path):
     assert result['sigma_a'] == pytest.approx(0.0155 ** 0.5)
     assert result['n'] == 4 and result['sigma_source'] == 'eq27'
     assert result['formatted'] == 'a = 1.90 ± 0.12'
+    # printed as a person reads it, not JSON-escaped (and still JSON)
+    assert '"a = 1.90 ± 0.12"' in done.stdout and '\\u00b1' not in done.stdout
 
 
 @pytest.mark.parametrize('content, problem', [

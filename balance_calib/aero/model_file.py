@@ -12,7 +12,7 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
-from ..config import CONFIG_DIR, ConfigError
+from ..config import CONFIG_DIR, ConfigError, shipped_config_dirs
 from .deflection import Deflection
 
 MODELS_DIR = CONFIG_DIR / 'models'
@@ -49,10 +49,11 @@ def resolve_model_path(name_or_path: str | Path) -> Path:
     path = Path(name_or_path)
     if path.exists():
         return path
-    candidate = MODELS_DIR / f'{name_or_path}.yaml'
-    if candidate.exists():
-        return candidate
-    shipped = ', '.join(sorted(p.stem for p in MODELS_DIR.glob('*.yaml'))) or 'none'
+    dirs = [directory / 'models' for directory in shipped_config_dirs()]   # MODELS_DIR first
+    for directory in dirs:
+        if (directory / f'{name_or_path}.yaml').exists():
+            return directory / f'{name_or_path}.yaml'
+    shipped = ', '.join(sorted({p.stem for d in dirs for p in d.glob('*.yaml')})) or 'none'
     raise ConfigError(f'{name_or_path}: no such model file (shipped models: {shipped})')
 
 

@@ -5,19 +5,21 @@ and turned into the installation's tunnel axes as `balance_calibrator` does, the
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from ..calibration_file import Calibration, load_calibration
+from ..coverage.run import RunCoverage, run_coverage
+from ..model.uncertainty import has_uncertainty
 from ..live.calibrator_core import activate, six_axis_loads
 from ..tunnel_axes import Installation, parse_installation
 from .bag_io import DEFAULT_MAX_INPUT_AGE_S, RunSamples, read_run
 from .held_points import HoldSettings
 from .model_file import ModelDescription, load_model
-from .run import FALLBACK_SIGMA_PCT_FS, RunResult, reduce_run, sigma_loads_tunnel
+from .run import FALLBACK_SIGMA_PCT_FS, RunResult, offset_warnings, reduce_run, sigma_loads_tunnel
 
 
 class ReduceError(ValueError):
@@ -42,6 +44,8 @@ class Reduction:
     sigma_source: str
     main: ModelRun
     compared: tuple[ModelRun, ...]
+    coverage: RunCoverage | None = None   # predicted u of the main model at every sample; None:
+                                          # the calibration carries no coefficient covariance
 
     @property
     def runs(self) -> tuple[ModelRun, ...]:
@@ -63,6 +67,34 @@ def readings_for(calibration: Calibration, model_name: str, installation: Instal
         raise ReduceError(f'calibration model {active.model_name!r} needs {", ".join(active.requires)} as well as '
                           f'the bridge outputs; choose another with --calibration-model or --compare')
     return installation.to_tunnel(six_axis_loads(active.model, raw_mv))
+
+
+# no bridge gives 1000x its rated output (the refit's cut uses the same bound, load_points.py)
+IMPLAUSIBLE_OUTPUT_RATED = 1000.0
+
+
+def _without_implausible_outputs(samples: RunSamples, calibration: Calibration):
+    """The samples less those whose bridge outputs are beyond IMPLAUSIBLE_OUTPUT_RATED x rated (a
+    flipped exponent bit: through a cubic it overflows and spoils the hold's mean), and the
+    warning saying how many went (an empty list when none)."""
+    raw = np.asarray(samples.raw_mv, float)
+    limit = IMPLAUSIBLE_OUTPUT_RATED * np.abs(np.asarray(calibration.rated_output_mv, float))
+    bad = np.any(np.abs(raw) > limit, axis=1)
+    if not bad.any():
+        return samples, []
+    first = int(np.flatnonzero(bad)[0])
+    k = int(np.argmax(np.abs(raw[first]) / limit))
+    keep = ~bad
+
+    def kept(values):
+        return None if values is None else values[keep]
+
+    warning = (f'{int(bad.sum())} raw sample(s) with a bridge output beyond '
+               f'{IMPLAUSIBLE_OUTPUT_RATED:g}x its rated output left out (first: '
+               f'{calibration.bridge_outputs[k]} {raw[first, k]:.4g} mV)')
+    return replace(samples, stamps_ns=samples.stamps_ns[keep], raw_mv=raw[keep],
+                   support_attitude=samples.support_attitude[keep], q_pa=samples.q_pa[keep],
+                   truth_body=kept(samples.truth_body), truth_wind=kept(samples.truth_wind)), [warning]
 
 
 def reduce_bags(bags: Sequence[str | Path], calibration_path: str, model_path: str, *, compare: Sequence[str] = (),
@@ -94,14 +126,25 @@ def reduce_bags(bags: Sequence[str | Path], calibration_path: str, model_path: s
     if len(samples.q_pa) == 0:
         raise ReduceError(f'{", ".join(map(str, bags))}: no raw sample has an attitude and a dynamic pressure '
                           f'within {max_input_age_s} s before it')
+    samples, implausible = _without_implausible_outputs(samples, calibration)
+    if len(samples.q_pa) == 0:
+        raise ReduceError(f'{", ".join(map(str, bags))}: {implausible[0]}; no sample left')
     sigma, sigma_source = calibration_sigma(calibration, parsed)
     runs = []
+    raw = samples.raw_mv if electrical_zero_mv is None \
+        else samples.raw_mv - np.asarray(electrical_zero_mv, float)
+    coverage = run_coverage(calibration, outputs_mv=raw, model=main_name) \
+        if has_uncertainty(calibration, main_name) else None
     for name in names:
-        raw = samples.raw_mv if electrical_zero_mv is None else samples.raw_mv - np.asarray(electrical_zero_mv, float)
         readings = readings_for(calibration, name, parsed, raw)
-        runs.append(ModelRun(name, reduce_run(readings, samples.support_attitude, samples.q_pa, model, settings, sigma)))
+        result = reduce_run(readings, samples.support_attitude, samples.q_pa, model, settings,
+                            sigma)
+        capacity = parsed.to_tunnel(np.asarray(calibration.capacity, float))
+        extra = offset_warnings(result.tares, capacity, name, electrical_zero_mv is not None)
+        extra = (implausible if not runs else []) + extra
+        runs.append(ModelRun(name, replace(result, warnings=result.warnings + tuple(extra))))
     if not runs[0].result.wind_on:
         raise ReduceError(f'{", ".join(map(str, bags))}: no held wind-on attitude found '
                           f'(q∞ ≥ {settings.wind_off_q_pa} Pa held for {settings.min_samples} samples or more)')
     return Reduction(samples, calibration, str(calibration_path), model, parsed, settings, sigma, sigma_source,
-                     runs[0], tuple(runs[1:]))
+                     runs[0], tuple(runs[1:]), coverage)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..calibration_file import write_text_atomically
+from .bag_io import TRUTH_WIND_TOPIC
 from .pipeline import Reduction
 
 COEFFICIENTS = ('CAF', 'CY', 'CN', 'Cl', 'Cm', 'Cn', 'CD', 'CL')
@@ -80,6 +81,20 @@ def truth_by_point(reduction: Reduction) -> np.ndarray | None:
     return np.array(rows)
 
 
+NO_TRUTH = 'no truth'
+
+
+def _largest_error(error: np.ndarray, ratio: np.ndarray) -> str:
+    """'largest error (largest ratio u)' over the finite entries of (R,) arrays; NO_TRUTH if
+    there are none."""
+    error, ratio = error[np.isfinite(error)], ratio[np.isfinite(ratio)]
+    if not error.size:
+        return NO_TRUTH
+    if not ratio.size:
+        return f'{error.max():.2e} (u unknown)'
+    return f'{error.max():.2e} ({ratio.max():.1f} u)'
+
+
 def _fmt(value: float, digits: int = 5) -> str:
     return 'NaN' if not np.isfinite(value) else f'{value:.{digits}f}'
 
@@ -144,15 +159,40 @@ def report_markdown(reduction: Reduction, figures: list[str]) -> str:
                   'Largest |reduced − true| over the α sweep, and in units of the point\'s uncertainty u:', '',
                   '| model | ' + ' | '.join(NICE[c] for c in COEFFICIENTS) + ' |',
                   '|---|' + '---:|' * len(COEFFICIENTS)]
+        absent = []
         for run in reduction.runs:
             error = np.abs(values[run.name] - truth)
-            ratio = error / uncertainty
-            lines.append(f'| {run.name} | ' + ' | '.join(
-                f'{np.nanmax(error[:, k]):.2e} ({np.nanmax(ratio[:, k]):.1f} u)' for k in range(len(COEFFICIENTS))) + ' |')
+            with np.errstate(divide='ignore', invalid='ignore'):
+                ratio = error / uncertainty
+            cells = [_largest_error(error[:, k], ratio[:, k]) for k in range(len(COEFFICIENTS))]
+            absent += [NICE[c] for c, cell in zip(COEFFICIENTS, cells)
+                       if cell == NO_TRUTH and NICE[c] not in absent]
+            lines.append(f'| {run.name} | ' + ' | '.join(cells) + ' |')
+        if absent:
+            wind_only = samples.truth_wind is None and set(absent) <= {NICE['CD'], NICE['CL']}
+            why = (f'the bag has no {TRUTH_WIND_TOPIC}' if wind_only
+                   else 'the truth or the reduced value is missing at every point')
+            lines += ['', f'{NO_TRUTH}: no point with both a reduced value and the truth for '
+                          f'{", ".join(absent)} ({why})']
+    lines += ['', '## Coverage of this run by the calibration', ''] + coverage_section(reduction)
     lines += ['', '## Figures', ''] + [f'- [{f}]({f})' for f in figures] + ['']
     lines += ['Axes and signs: interfaces.md "Wind-tunnel data reduction"; body coefficients about the moment '
               'reference centre, C_D and C_L in wind axes; α and β are the deflection-corrected angles.', '']
     return '\n'.join(lines)
+
+
+def coverage_section(reduction: Reduction) -> list[str]:
+    """The `coverage` command's summary for every sample of the run (coverage/run.py)."""
+    from ..coverage.run import summary_table
+    coverage = reduction.coverage
+    if coverage is None:
+        return [f'Not available: the calibration\'s {reduction.main.name} model carries no '
+                f'coefficient covariance (the memo\'s published matrices); refit it to have one.']
+    return ['Predicted standard uncertainty (k = 1) of the calibrated load at every sample, from '
+            'the coefficient covariance (as `/balance/wrench_uncertainty`), balance axes, and the '
+            'share of the samples outside the support of the calibration\'s schedule (`coverage` '
+            'command, interfaces.md); figure [coverage.png](coverage.png).', '',
+            '```', summary_table(coverage.summary(), coverage.components), '```']
 
 
 def coefficient_figure(reduction: Reduction, coefficient: str, path: Path) -> Path:
@@ -204,6 +244,11 @@ def write_outputs(reduction: Reduction, out_dir: Path) -> list[Path]:
     with tempfile.TemporaryDirectory(dir=out_dir, prefix='.reduce-') as tmp:
         for coefficient, name in zip(COEFFICIENTS, names):
             coefficient_figure(reduction, coefficient, Path(tmp) / name)
+        if reduction.coverage is not None:
+            from ..coverage.plots import coverage_figure
+            names.append('coverage.png')
+            coverage_figure(reduction.coverage, Path(tmp) / names[-1],
+                            (reduction.samples.stamps_ns - reduction.samples.stamps_ns[0]) / 1e9)
         csv_text = coefficients_csv(reduction)
         report = report_markdown(reduction, names)
         for name in names:

@@ -15,6 +15,7 @@ of the weight-tare parameters through the whole reduction, by central difference
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 
@@ -174,3 +175,43 @@ def reduce_run(readings, support_attitude, q_pa, model: ModelDescription, settin
         warnings.append(f'{missing} wind-on held point(s) before any usable wind-off sweep were not reduced '
                         f'(no weight tare and offsets)')
     return RunResult(tuple(points), len(holds), tuple(warnings), tuple(tares))
+
+
+OFFSET_WARNING_SHARE = 0.01      # of the rated load: beyond, not the balance at rest
+TUNNEL_COMPONENTS = ('F_X', 'F_Y', 'F_Z', 'M_X', 'M_Y', 'M_Z')
+
+
+def offset_warnings(tares: Sequence[WeightTare], capacity_tunnel, model_name: str,
+                    electrical_zero_given: bool) -> list[str]:
+    """One line when a wind-off sweep's fitted constant offsets exceed OFFSET_WARNING_SHARE of
+    the rated load of a component.
+
+    The offsets (weight_tare.py) take what the calibration leaves constant with nothing but the
+    model's weight on the balance; beyond 1 % of the rated load that is the bridges' electrical
+    zero carried through a calibration that has none (TM-663 §5(4): the zero belongs in output
+    space), and with a non-linear calibration a load-space offset absorbs it only approximately.
+
+    tares: the run's fitted tares; capacity_tunnel (6,): rated loads in tunnel axes, N and N·m.
+    """
+    if not tares:
+        return []
+    capacity = np.abs(np.asarray(capacity_tunnel, float))
+    share = np.max(np.abs([t.offsets for t in tares]), axis=0) / capacity
+    over = np.flatnonzero(share > OFFSET_WARNING_SHARE)
+    if not len(over):
+        return []
+    worst = int(over[np.argmax(share[over])])
+    largest = max((t.offsets[worst] for t in tares), key=abs)
+    unit = 'N' if worst < 3 else 'N·m'
+    others = ', '.join(f'{TUNNEL_COMPONENTS[k]} {100 * share[k]:.1f} %'
+                       for k in over if k != worst)
+    also = f' (also {others})' if others else ''
+    if electrical_zero_given:
+        cause = 'the electrical zero given is not the bridges\' output at rest?'
+    else:
+        cause = ('the bridges\' electrical zero is not removed: give --electrical-zero-mv '
+                 '(the calibrator\'s ~/zero)')
+    return [f'{model_name}: wind-off offsets of {TUNNEL_COMPONENTS[worst]} {largest:+.4g} {unit} '
+            f'are {100 * share[worst]:.1f} % of its rated load {capacity[worst]:g} {unit}{also}, '
+            f'beyond {100 * OFFSET_WARNING_SHARE:g} %: {cause}']
+

@@ -29,6 +29,7 @@ _RECORD_HEAD = struct.Struct('<BQ')
 _MESSAGE_HEAD = struct.Struct('<HIQQ')
 _FOOTER = struct.Struct('<BQQQI')          # opcode, length, summary_start, summary_offset_start, crc
 _MAX_RECORD = 1 << 34                      # a longer record length is damage, not data
+STILL_RECORDING = 'still being recorded'   # the loss line of a file read while it is written
 
 
 class McapDamage(ValueError):
@@ -97,8 +98,9 @@ def _bytes(buffer, at: int, width: str = '<I') -> tuple[bytes, int]:
 
 
 class _Reader:
-    def __init__(self, path: Path, wanted: Collection[str] | None, salvage: bool):
-        self.path, self.wanted, self.salvage = path, wanted, salvage
+    def __init__(self, path: Path, wanted: Collection[str] | None, salvage: bool,
+                 unfinished: bool = False):
+        self.path, self.wanted, self.salvage, self.unfinished = path, wanted, salvage, unfinished
         self.scan = Scan(path)
         self.schemas: dict[int, tuple[str, str, bytes]] = {}
         self.pending_channels: dict[int, tuple[int, str, str]] = {}
@@ -210,7 +212,10 @@ class _Reader:
         summary = self._summary(data)
         indexes = summary['chunks'] if summary else {}
         data_end = summary['summary_start'] if summary and summary['summary_start'] else size
-        if summary is None:
+        # a file still being written (its bag has no metadata.yaml yet) ends at the last record
+        # flushed so far, maybe half-way through one: that end is where its writer is, not damage
+        open_end = summary is None and self.unfinished
+        if summary is None and not open_end:
             problem = (f'{path}: truncated or damaged: no valid footer and summary at the end '
                        f'(file is {size} bytes); the messages it should hold cannot be counted')
             if not self.salvage:
@@ -221,6 +226,9 @@ class _Reader:
         seen_chunks = set()
         while at < data_end:
             try:
+                if open_end and (at + 9 > size
+                                 or at + 9 + _RECORD_HEAD.unpack_from(data, at)[1] > size):
+                    break
                 if at + 9 > size:
                     raise ValueError('record header cut by the end of the file')
                 opcode, length = _RECORD_HEAD.unpack_from(data, at)
@@ -260,6 +268,12 @@ class _Reader:
                 at = following[0]
         if summary is not None:
             self._compare(summary, seen_chunks)
+        if open_end:
+            read = sum(self.scan.counts.values())
+            self.scan.losses.append(
+                f'{path}: {STILL_RECORDING}, or its recorder was stopped without closing it '
+                f'(no MCAP summary, no metadata.yaml yet): read the {read} messages on disk so far '
+                f'({at} of {size} bytes); what its writer still buffers is not in the file yet')
         return self.scan
 
     def _summary(self, data: bytes) -> dict | None:
@@ -333,6 +347,12 @@ class _Reader:
         self.scan.losses.append(problem)
 
 
-def scan_mcap(path: str | Path, wanted: Collection[str] | None = None, *, salvage: bool = False) -> Scan:
-    """Read one MCAP file, checked; wanted topics keep their payloads (None: all)."""
-    return _Reader(Path(path), wanted, salvage).read()
+def scan_mcap(path: str | Path, wanted: Collection[str] | None = None, *, salvage: bool = False,
+              unfinished: bool = False) -> Scan:
+    """Read one MCAP file, checked; wanted topics keep their payloads (None: all).
+
+    unfinished: the file may still be being written (a bag directory without metadata.yaml yet):
+    without a footer and summary it is read up to its last complete record, and Scan.losses says
+    so in one line; with a footer it is checked as any other file.
+    """
+    return _Reader(Path(path), wanted, salvage, unfinished).read()

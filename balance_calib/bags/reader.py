@@ -30,7 +30,8 @@ import yaml
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
 from balance_calib.bags.errors import BagError
-from balance_calib.bags.mcap_scan import check_regular_file, McapDamage, Scan, scan_mcap
+from balance_calib.bags.mcap_scan import (check_regular_file, McapDamage, Scan, scan_mcap,
+                                         STILL_RECORDING)
 
 ProgressCallback = Callable[[int, int], None]
 BagPath = str | os.PathLike
@@ -159,9 +160,11 @@ def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicN
     scans: list[tuple[Path, Scan]] = []
     losses: list[str] = []
     for source, mcap_files in files:
+        # a bag directory without metadata.yaml yet: its recorder is still at work (or was killed)
+        unfinished = source.is_dir() and not (source / 'metadata.yaml').exists()
         for mcap_file in mcap_files:
             try:
-                scan = scan_mcap(mcap_file, wanted, salvage=salvage)
+                scan = scan_mcap(mcap_file, wanted, salvage=salvage, unfinished=unfinished)
             except McapDamage as error:
                 raise BagError(str(error)) from None
             _check_types(mcap_file, scan, topics)
@@ -169,9 +172,13 @@ def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicN
             scans.append((mcap_file, scan))
     recorded_topics = sorted({c.topic for _, scan in scans for c in scan.channels.values()})
     counts = {t: sum(scan.counts.get(t, 0) for _, scan in scans) for t in wanted}
+    still_recording = [line for line in losses if f': {STILL_RECORDING}' in line]
     for name in required:
         if counts[getattr(topics, name)] == 0:
-            raise BagError(_no_messages(sources, getattr(topics, name), recorded_topics))
+            raise BagError(_no_messages(sources, getattr(topics, name), recorded_topics)
+                           + ('; the bag is still being recorded and holds none on disk yet (its '
+                              'recorder writes them in chunks and metadata.yaml when it stops)'
+                              if still_recording else ''))
     total = sum(counts.values())
     # topic -> one (receive times, CDR payloads, source) per file
     collected: dict[str, list[tuple[list[int], list[bytes], Path]]] = {t: [] for t in wanted}
@@ -226,7 +233,8 @@ _METADATA_MAX_BYTES = 16 * 1024 * 1024
 
 
 def _mcap_files(source: Path) -> list[Path]:
-    """The MCAP files of a bag: a bare .mcap, or those metadata.yaml lists in a rosbag2 directory."""
+    """The MCAP files of a bag: a bare .mcap, those metadata.yaml lists in a rosbag2 directory, or
+    (a bag still being recorded: no metadata.yaml yet) the directory's .mcap files."""
     if not source.exists() and not source.is_symlink():
         raise BagError(f'{source}: no such file or directory')
     try:
@@ -236,9 +244,12 @@ def _mcap_files(source: Path) -> list[Path]:
     if stat.S_ISDIR(mode):
         metadata = source / 'metadata.yaml'
         if not metadata.exists():
-            inside = sorted(p.name for p in source.glob('*.mcap'))
-            hint = (f'; pass its .mcap files ({", ".join(inside)}) instead' if inside else '')
-            raise BagError(f'{source}: not a rosbag2 bag (no metadata.yaml){hint}')
+            # rosbag2 (and balance_recorder) write metadata.yaml when the recording stops: until
+            # then the directory's .mcap files are the bag, read up to what is on disk
+            inside = sorted(source.glob('*.mcap'))
+            if not inside:
+                raise BagError(f'{source}: not a rosbag2 bag (no metadata.yaml and no .mcap file)')
+            return inside
         try:
             check_regular_file(metadata)
         except McapDamage as error:

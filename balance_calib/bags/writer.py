@@ -178,6 +178,16 @@ class BagWriter:
                                                                          timestamp_ns)
         self._last_ns = max(self._last_ns, timestamp_ns)
 
+    def flush(self) -> None:
+        """Put everything written so far into the file, the chunk in progress included.
+
+        A reader of the bag while it is being recorded (no footer, no metadata.yaml yet) then sees
+        every message up to now; each flush ends a chunk, so flushing often costs compression.
+        """
+        self._require_open()
+        self._mcap.flush()
+        self._stream.flush()
+
     @property
     def message_counts(self) -> dict[str, int]:
         """Messages written so far, per topic."""

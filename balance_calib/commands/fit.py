@@ -6,7 +6,6 @@ import csv
 import io
 import json
 import shutil
-import tempfile
 from pathlib import Path
 
 
@@ -17,6 +16,9 @@ def register(subparsers) -> None:
                     'report.json, report.md, point_uncertainty.csv and residual plots into DIR.')
     parser.add_argument('tables', nargs='+', help='calibration table(s) of one campaign (CSV)')
     parser.add_argument('--out', required=True, help='output directory')
+    parser.add_argument('--overwrite', action='store_true',
+                        help='replace the calibration record of an earlier run in --out '
+                             '(its files are removed)')
     parser.add_argument('--validate', nargs='+', default=[], metavar='VAL.csv',
                         help='validation table(s): series the calibration has get its tares; other '
                              'series (other setups) their own, estimated with the model held fixed')
@@ -50,16 +52,19 @@ def register(subparsers) -> None:
     export.add_argument('bags', nargs='+', help='rosbag2 directories or bare .mcap files of one campaign')
     export.add_argument('--balance', required=True, help='balance config: lmc6522, b660h or a path')
     export.add_argument('--out', required=True, help='CSV file to write')
+    export.add_argument('--overwrite', action='store_true', help='replace --out if it exists')
     export.set_defaults(func=run_export)
 
 
 def run(args) -> int:
     from ..cli import CommandError
+    from ..output_dir import OutputError, check_out_dir
     from ..tables.balfit_reader import TableError, read_tables
     from ..tables.calibrate import TableCalibrationError, calibrate_table
     if args.excitation_v is not None and not args.excitation_v > 0:
         raise CommandError(f'--excitation-v must be positive, not {args.excitation_v}')
     try:
+        check_out_dir(args.out, overwrite=args.overwrite)
         table = read_tables(args.tables)
         validation = read_tables(args.validate, natural_zeros_from=table) if args.validate else None
         if args.axes:
@@ -68,9 +73,15 @@ def run(args) -> int:
             validation = rename_axes(validation, args.axes) if validation is not None else None
         result = calibrate_table(table, method=args.method, terms=args.terms, validation=validation,
                                  excitation_v=args.excitation_v, select=args.select, force=args.force)
-    except (TableError, TableCalibrationError) as err:
+    except (TableError, TableCalibrationError, OutputError) as err:
         raise CommandError(str(err)) from None
-    out = write_fit_outputs(result, Path(args.out), plots=not args.no_plots)
+    try:
+        out = write_fit_outputs(result, Path(args.out), plots=not args.no_plots,
+                                overwrite=args.overwrite)
+    except OutputError as err:
+        raise CommandError(str(err)) from None
+    except OSError as err:      # the disk filled, a file vanished: one line naming it
+        raise CommandError(f'{err.filename or args.out}: {err.strerror or err}') from None
     report = result.report
     print(f'{report["balance"]}: {report["points"]["calibration"]} points, method {report["method"]} '
           f'({report["method_choice"]})')
@@ -84,11 +95,15 @@ def run(args) -> int:
     return 0
 
 
-def write_fit_outputs(result, out_dir: Path, *, plots: bool = True) -> Path:
-    """Everything into a staging directory first, then moved in (nothing half-written)."""
+def write_fit_outputs(result, out_dir: Path, *, plots: bool = True,
+                      overwrite: bool = True) -> Path:
+    """Everything into a staging directory first, then moved in (nothing half-written;
+    output_dir.py: an earlier calibration record is replaced only with overwrite, and then no
+    file of it stays)."""
     from ..calibration_file import save_calibration
-    out_dir.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix='.fit-', dir=out_dir))
+    from ..output_dir import check_out_dir, install_outputs, make_staging
+    out_dir = Path(out_dir)
+    staging = make_staging(out_dir, check_out_dir(out_dir, overwrite=overwrite), 'fit')
     try:
         save_calibration(staging / 'calibration.yaml', result.calibration)
         (staging / 'point_uncertainty.csv').write_text(_rows_csv(result.point_rows))
@@ -96,11 +111,10 @@ def write_fit_outputs(result, out_dir: Path, *, plots: bool = True) -> Path:
         result.report['plots'] = [f.name for f in figures]
         (staging / 'report.json').write_text(json.dumps(result.report, indent=2, allow_nan=False) + '\n')
         (staging / 'report.md').write_text(report_markdown(result.report))
-        for item in sorted(staging.iterdir()):
-            item.replace(out_dir / item.name)
-    finally:
+    except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
-    return out_dir
+        raise
+    return install_outputs(staging, out_dir, overwrite=overwrite)
 
 
 def _rows_csv(rows) -> str:
@@ -240,10 +254,14 @@ def report_markdown(report) -> str:
 
 def run_export(args) -> int:
     from ..cli import CommandError
+    from ..output_dir import OutputError, check_out_file
     from ..tables.export import ExportError, export_bags_table
     try:
+        check_out_file(args.out, overwrite=args.overwrite)
         path, points = export_bags_table(args.bags, args.balance, Path(args.out))
-    except ExportError as err:
+    except (ExportError, OutputError) as err:
         raise CommandError(str(err)) from None
+    except OSError as err:
+        raise CommandError(f'{err.filename or args.out}: {err.strerror or err}') from None
     print(f'wrote {points} points to {path}')
     return 0

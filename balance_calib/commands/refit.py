@@ -13,6 +13,10 @@ def register(subparsers) -> None:
     parser.add_argument('bags', nargs='+', help='rosbag2 directories or bare .mcap files of one campaign')
     parser.add_argument('--balance', required=True, help='balance config: lmc6522, b660h or a path')
     parser.add_argument('--out', required=True, help='output directory')
+    parser.add_argument('--overwrite', action='store_true',
+                        help='replace the calibration record of an earlier run in --out (its '
+                             'files are removed; without this an --out holding calibration.yaml '
+                             'or report.json is refused)')
     parser.add_argument('--model', default='cubic', choices=['linear', 'quadratic', 'cubic'],
                         help='base model of TM-663 §2 (default cubic)')
     parser.add_argument('--no-diagnosis', action='store_true', help='do not look for effects the model lacks')
@@ -27,6 +31,10 @@ def register(subparsers) -> None:
                         help='read what is intact of damaged bags; the report says exactly what was lost')
     parser.add_argument('--active', metavar='CAL.yaml', default=None,
                         help='the calibration in use: the new sensitivities must stay near its ones')
+    parser.add_argument('--schedule', metavar='FILE', default=None,
+                        help='the load schedule the campaign ran (layout of the Appendix A/B '
+                             'sheets, e.g. from balance-calib design) when it is not the balance '
+                             'config\'s own; the gates judge the campaign against it')
     parser.add_argument('--progress', action=argparse.BooleanOptionalAction, default=None,
                         help='progress lines on stderr (default: when stderr is a terminal)')
     parser.set_defaults(func=run)
@@ -44,7 +52,8 @@ def run(args) -> int:
         result = run_refit(args.bags, args.balance, Path(args.out), model=args.model,
                            diagnose=not args.no_diagnosis, estimate_body=not args.declared_body,
                            progress=progress, force=args.force, salvage=args.salvage,
-                           active_calibration=args.active)
+                           active_calibration=args.active, schedule=args.schedule,
+                           overwrite=args.overwrite)
     except RefitError as err:
         raise CommandError(_one_line(str(err))) from None
     except OSError as err:  # the disk filled, a file vanished: still one line naming it
@@ -58,6 +67,8 @@ def run(args) -> int:
         from ..refit.report_sections import add_lab_units_to_report
         add_lab_units_to_report(result.out_dir / 'report.md', result.report, args.report_units)
     print(result.summary)
+    for warning in result.report.get('warnings', []):
+        print(f'warning: {warning}')
     print(f'report: {result.out_dir / "report.md"}')
     return 0
 

@@ -2,10 +2,15 @@
 Table 17 (the memo's numbers beside ours) and the cubic matrix in the memo's layout."""
 from __future__ import annotations
 
+import os
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+
+
+TRANSITION_SAMPLES = 2       # per load change, as a recorded campaign has them
 
 
 def register(subparsers) -> None:
@@ -26,6 +31,10 @@ def register(subparsers) -> None:
     parser.add_argument('--no-diagnosis', action='store_true',
                         help='do not examine the residuals for effects the base model lacks')
     parser.add_argument('--matrix', action='store_true', help='print the fitted cubic matrix (memo layout)')
+    parser.add_argument('--schedule', metavar='FILE',
+                        help='run the campaign on this load schedule (layout of the Appendix A/B '
+                             'sheets, e.g. from balance-calib design) instead of the balance '
+                             'config\'s; needs one --balance')
     parser.set_defaults(func=run)
 
 
@@ -35,23 +44,52 @@ def run(args) -> int:
     from ..cli import CommandError
     from ..config import ConfigError, load_balance_config
     from ..refit.pipeline import RefitError, calibrate_points, campaign_points, summary_line
+    from ..refit.gates import acceptance_limits
+    from ..schedule_file import schedule_for
     from ..simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
     from ..simulation.effects import parse_effects
 
+    if args.seed < 0:
+        raise CommandError(f'--seed {args.seed}: the seed of the noise generator must be 0 '
+                           f'or more')
+    if args.samples_per_point < 1:
+        raise CommandError(f'--samples-per-point {args.samples_per_point}: at least 1 sample '
+                           f'per load point')
     try:
         effects = parse_effects(args.effects)
     except ValueError as err:
         raise CommandError(str(err)) from None
-    for name in args.balance or ['lmc6522', 'b660h']:
+    if args.schedule and len(args.balance or []) != 1:
+        raise CommandError('--schedule runs on one balance: give exactly one --balance')
+    names = args.balance or ['lmc6522', 'b660h']
+    configs = []
+    for name in names:
         try:
             config = load_balance_config(name)
+            if args.schedule:     # the campaign's schedule is the one the gates judge it against
+                margin = acceptance_limits(config).capacity_margin   # the capacity gate's
+                config = replace(config, schedule=schedule_for(config, args.schedule, margin))
+            configs.append(config)
         except ConfigError as err:
             raise CommandError(str(err)) from None
+    bags = ({config.name: _bag_path(args.bag, config, len(names)) for config in configs}
+            if args.bag else {})
+    for path in bags.values():           # before the work: a campaign is not simulated for nothing
+        _check_new_bag(path)
+    for config in configs:
+        # the samples taken while weights change are simulated whether or not a bag is written:
+        # the noise is drawn in time order, so leaving them out for the fit alone would give the
+        # points other noise, and the bag another campaign than the one fitted (the fit uses the
+        # points only)
         settings = SimulationSettings(samples_per_point=args.samples_per_point, seed=args.seed,
                                       noise_sigma_pct_fs=table17_noise(config),
-                                      transition_samples=2 if args.bag else 0)
-        campaign = simulate_campaign(config, settings=settings, effects=effects)
+                                      transition_samples=TRANSITION_SAMPLES)
+        try:
+            campaign = simulate_campaign(config, settings=settings, effects=effects)
+        except ArithmeticError as err:       # Newton's inverse: a load the truth model cannot give
+            raise CommandError(f'{args.schedule or config.name}: {err}') from None
         print(f'\n=== {config.name}: simulated campaign of {len(campaign.point)} points '
+              f'{"on " + str(args.schedule) + " " if args.schedule else ""}'
               f'(truth: memo cubic matrix; noise: Table 17 cubic row; effects: {", ".join(campaign.effects) or "none"})')
         try:
             result = calibrate_points(campaign_points(campaign), config, diagnose=not args.no_diagnosis)
@@ -68,8 +106,31 @@ def run(args) -> int:
             print(f'\nFitted cubic matrix (cf. TM-663 Table {12 if config.name == "LMC6522" else 16}):')
             print(format_coefficient_tables(result.fits['cubic'].fit.model))
         if args.bag:
+            from ..bags.errors import BagError
             from ..simulation.campaign_bag import write_campaign_bag
-            path = Path(args.bag) if len(args.balance or ['', '']) == 1 else Path(args.bag) / config.name.lower()
-            write_campaign_bag(campaign, path)
-            print(f'campaign bag: {path}', file=sys.stderr)
+            try:
+                write_campaign_bag(campaign, bags[config.name])
+            except (BagError, OSError) as err:
+                raise CommandError(_one_line(str(err))) from None
+            print(f'campaign bag: {bags[config.name]}', file=sys.stderr)
     return 0
+
+
+def _bag_path(bag: str, config, balances: int) -> Path:
+    """--bag itself for one balance, else one bag per balance inside it."""
+    return Path(bag) if balances == 1 else Path(bag) / config.name.lower()
+
+
+def _check_new_bag(path: Path) -> None:
+    from ..cli import CommandError
+    if path.exists() or path.is_symlink():
+        raise CommandError(f'--bag {path}: exists already; give a new directory (a bag is never '
+                           f'overwritten)')
+    parent = next((p for p in path.absolute().parents if p.exists()), Path('/'))
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        raise CommandError(f'--bag {path}: cannot create it ({parent} is not a writable '
+                           f'directory)')
+
+
+def _one_line(text: str) -> str:
+    return ' '.join(text.split())

@@ -72,7 +72,7 @@ def run_nozzle(args) -> int:
         'gamma': args.gamma,
         'gas_constant_j_kg_k': args.gas_constant,
     }
-    json.dump(result, sys.stdout, indent=2)
+    json.dump(result, sys.stdout, indent=2, ensure_ascii=False)    # ± and σ as they are
     sys.stdout.write('\n')
     return 0
 
@@ -144,6 +144,6 @@ def run_line_fit(args) -> int:
         # the residual examined (interfaces.md, "One-axis calibration with its residual examined")
         **examined.to_report(),
     }
-    json.dump(result, sys.stdout, indent=2)
+    json.dump(result, sys.stdout, indent=2, ensure_ascii=False)    # ± and σ as they are
     sys.stdout.write('\n')
     return 0

@@ -43,6 +43,11 @@ EFFECT_NAMES = ('temperature', 'zero_drift', 'hysteresis', 'bidirectional', 'cro
 # Families whose terms are fitted at calibration but not applied live (they follow the campaign's
 # time line or load history, which the live calibrator does not have).
 NUISANCE_EFFECTS = ('zero_drift', 'creep', 'excitation')
+# Families of generic shape, adopted only where no specific family explains the structure.
+GENERIC_FAMILIES = ('cross_terms', 'zero_drift')
+# Families whose coefficients a physical effect keeps over the campaign (the time-keyed ones,
+# temperature, zero drift, excitation, follow time themselves and are not tested so).
+STATIC_FAMILIES = ('hysteresis', 'bidirectional', 'cross_terms', 'creep')
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,8 @@ from ..model.tm663 import tm663_terms
 from ..reduction import Reduction
 from ..tare.calibration_body import CorrectedData
 from ..tare.calibration_body import tare_loads
-from .candidates import (EFFECT_NAMES, NUISANCE_EFFECTS, CandidateFamily, absolute_load_variables,
+from .candidates import (EFFECT_NAMES, GENERIC_FAMILIES, NUISANCE_EFFECTS, STATIC_FAMILIES,
+                         CandidateFamily, absolute_load_variables,
                          bidirectional_family, creep_family, creep_time_constants, creep_variables,
                          cross_terms_family, direction_variables, drift_family, drift_frequencies,
                          drift_variables, excitation_basis, excitation_family, excitation_variables,
@@ -501,10 +502,6 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
     return _Candidate(family.name, accepted, sum(s['bic_gain'] for s in accepted.values()))
 
 
-GENERIC_FAMILIES = ('cross_terms', 'zero_drift')
-# Families whose coefficients a physical effect keeps over the campaign (the time-keyed ones,
-# temperature, zero drift, excitation, follow time themselves and are not tested so).
-STATIC_FAMILIES = ('hysteresis', 'bidirectional', 'cross_terms', 'creep')
 
 
 def _changes_over_campaign(problem, k, terms, added, fit, alpha, family) -> bool:

@@ -33,6 +33,7 @@ from typing import Mapping
 import numpy as np
 import scipy.stats
 
+from .candidates import STATIC_FAMILIES
 from .statistics import fit_columns, partial_f, sigma_pct_fs
 
 # A component whose repeatability is this many times the median of the others is warned about.
@@ -233,7 +234,6 @@ def _unstable(problem, k, terms, fit, found, late, alpha) -> list[tuple[str, flo
     """Families found on component k whose coefficients differ between the first and second half of
     the campaign (a Chow test on their terms x the second-half indicator): a physical effect of that
     family keeps its coefficients; something else that the family only resembles does not."""
-    from .diagnose import STATIC_FAMILIES
     out = []
     for entry in found:
         if entry['candidate'].family not in STATIC_FAMILIES:

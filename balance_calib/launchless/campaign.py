@@ -39,6 +39,15 @@ class StoryResult:
     report_dir: Path | None = None
 
 
+def graph_parameter(node: str, name: str):
+    """Parameter `name` of `node` in the shipped config/graph_params.yaml (what the graph runs)."""
+    import yaml
+
+    from ..config import resolve_config_path
+    shipped = yaml.safe_load(resolve_config_path('graph_params').read_text())
+    return shipped[node]['ros__parameters'][name]
+
+
 def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', installations=('upright', 'inverted'),
               rate_hz: float = 200.0, point_duration_s: float = 0.1, transition_s: float = 0.03, seed: int = 1,
               domain_id: int | None = None, wind_on_temperature_c: float = 20.0, compare_base: bool = False,
@@ -77,12 +86,13 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
     # counted by bridge_publisher's wait_for_subscribers, so it starts only once we listen
     node.create_subscription(WrenchStamped, '/balance/raw', lambda msg: None, reliable)
     processes = []
+    # a calibration applies the rated loads plus the calibration body's weight: the shipped graph's
+    # overload limit, which allows for them
+    overload_fraction = graph_parameter('balance_calibrator', 'overload_fraction')
     try:
         calibrator = NodeProcess('balance_calibrator', domain, logs, {'balance': balance, 'calibration_bags': [str(bag)],
                                                      'report_dir': str(report_dir), 'tare_samples': 100,
-                                                     # a calibration applies the rated loads plus the loading
-                                                     # hardware's by-products (up to 100.1 %): no interlock then
-                                                     'overload_fraction': 1.2})
+                                                     'overload_fraction': overload_fraction})
         processes.append(calibrator)
         recorder = NodeProcess('balance_recorder', domain, logs, {'output': str(bag)})
         processes.append(recorder)

@@ -12,7 +12,16 @@ of it, only the everyday verbs, with the same spelling:
     ros topic hz TOPIC [--duration S]   ros2 topic hz TOPIC
     ros service list                    ros2 service list -t
     ros service call SERVICE            ros2 service call SERVICE std_srvs/srv/Trigger
+    ros node list                       ros2 node list
+    ros node info NODE                  ros2 node info NODE              (publishers, subscribers,
+                                                                          services)
     ros bag info BAG                    ros2 bag info BAG                 (no DDS: reads the files)
+    ros bag record OUT [TOPIC ...]      ros2 bag record -s mcap -o OUT    (balance_recorder)
+    ros bag play BAG [BAG ...]          ros2 bag play BAG                 (bridge_publisher replay)
+
+The lists (topic, service, node) wait until discovery has settled: until what the graph shows has
+not changed for SETTLE_S, at most --timeout. A reader that goes away (`... | head`) ends the
+output quietly.
 
 Parameters go through the node's rcl_interfaces services (~/list_parameters, ~/get_parameters,
 ~/set_parameters), as ros2 param does. Exit status 0 on success, 1 when the node, topic or service
@@ -23,11 +32,17 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
+import os
+import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
 
 DEFAULT_TIMEOUT_S = 10.0
+SETTLE_S = 1.5          # a listing unchanged this long is the graph as discovery has it
+MIN_LISTING_S = 1.0     # and it is looked at for at least this long
+EMPTY_WAIT_S = 5.0      # an empty one this long (a loaded machine discovers slowly) before saying so
 
 
 class ToolError(Exception):
@@ -52,10 +67,12 @@ def parameter_value_to_python(value):
     return list(result) if kind >= 5 else result
 
 
-def python_to_parameter_value(text: str, current_type: int):
+def python_to_parameter_value(text: str, current_type: int, name: str = ''):
     """VALUE as typed on the command line (YAML) -> ParameterValue, in the parameter's current type
     when it has one (so `set calibration_bags bag1` gives a one-element string array, and
-    `set envelope_margin 2` stays a double)."""
+    `set envelope_margin 2` stays a double). For a double, the words YAML 1.1 leaves as strings
+    are numbers as Python spells them (`nan`, `inf`, `1e3`): the node, which knows the parameter's
+    range, is the one to refuse a NaN, with its reason."""
     import yaml
     from rcl_interfaces.msg import ParameterType, ParameterValue
 
@@ -75,6 +92,8 @@ def python_to_parameter_value(text: str, current_type: int):
                 raise ValueError
             out.integer_value = value
         elif kind == ParameterType.PARAMETER_DOUBLE:
+            if isinstance(value, str):
+                value = float(value)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ValueError
             out.double_value = float(value)
@@ -94,7 +113,8 @@ def python_to_parameter_value(text: str, current_type: int):
         else:
             raise ValueError
     except (ValueError, TypeError):
-        raise ToolError(f'value {text!r} is not a {_TYPE_NAMES.get(kind, "supported")} '
+        what = f' for {name}' if name else ''
+        raise ToolError(f'value {text!r}{what} is not a {_TYPE_NAMES.get(kind, "supported")} '
                         '(the parameter\'s type)') from None
     out.type = kind
     return out
@@ -201,6 +221,35 @@ def _node_name(name: str) -> str:
     return name if name.startswith('/') else '/' + name
 
 
+def settled(session, listing, timeout: float, *, settle_s: float = SETTLE_S,
+            min_s: float = MIN_LISTING_S, empty_s: float = EMPTY_WAIT_S):
+    """listing() once it has not changed for settle_s (looked at for at least min_s; while it is
+    empty, for at least empty_s), or at the timeout: DDS discovers the other participants and then
+    their endpoints one by one, so one early look shows only a part."""
+    start = time.monotonic()
+    last, changed = listing(), start
+    while True:
+        session.rclpy.spin_once(session.node, timeout_sec=0.05)
+        now = time.monotonic()
+        current = listing()
+        if current != last:
+            last, changed = current, now
+        looked = now - start
+        if looked >= timeout or (now - changed >= settle_s and looked >= min_s
+                                 and (last or looked >= empty_s)):
+            return last
+
+
+def _full_name(name: str, namespace: str) -> str:
+    return namespace.rstrip('/') + '/' + name
+
+
+def _other_nodes(session) -> list[str]:
+    own = _full_name(session.node.get_name(), session.node.get_namespace())
+    return sorted(n for n in (_full_name(name, ns) for name, ns in
+                              session.node.get_node_names_and_namespaces()) if n != own)
+
+
 # ---------------------------------------------------------------------------- param
 
 def param_list(args) -> int:
@@ -236,7 +285,7 @@ def param_set(args) -> int:
     with _Session() as session:
         current = _get(session, node, [args.name], args.timeout)
         kind = current[0].type if current else 0
-        value = python_to_parameter_value(args.value, kind)
+        value = python_to_parameter_value(args.value, kind, args.name)
         reply = session.call(SetParameters, f'{node}/set_parameters',
                              SetParameters.Request(parameters=[Parameter(name=args.name, value=value)]), args.timeout)
     result = reply.results[0]
@@ -250,11 +299,10 @@ def param_set(args) -> int:
 
 def topic_list(args) -> int:
     with _Session() as session:
-        deadline = time.monotonic() + min(args.timeout, 2.0)    # let discovery settle
-        while time.monotonic() < deadline:
-            session.rclpy.spin_once(session.node, timeout_sec=0.1)
-        for name, types in sorted(session.node.get_topic_names_and_types()):
-            print(f'{name} [{", ".join(types)}]')
+        topics = settled(session, lambda: sorted(session.node.get_topic_names_and_types()),
+                         args.timeout)
+    for name, types in topics:
+        print(f'{name} [{", ".join(types)}]')
     return 0
 
 
@@ -315,11 +363,12 @@ def topic_hz(args) -> int:
 
 def service_list(args) -> int:
     with _Session() as session:
-        deadline = time.monotonic() + min(args.timeout, 2.0)
-        while time.monotonic() < deadline:
-            session.rclpy.spin_once(session.node, timeout_sec=0.1)
-        for name, types in sorted(session.node.get_service_names_and_types()):
-            print(f'{name} [{", ".join(types)}]')
+        own = _full_name(session.node.get_name(), session.node.get_namespace()) + '/'
+        services = settled(session, lambda: sorted(
+            (name, types) for name, types in session.node.get_service_names_and_types()
+            if not name.startswith(own)), args.timeout)
+    for name, types in services:
+        print(f'{name} [{", ".join(types)}]')
     return 0
 
 
@@ -337,11 +386,104 @@ def service_call(args) -> int:
     return 0 if reply.success else 1
 
 
+# ---------------------------------------------------------------------------- node
+
+def node_list(args) -> int:
+    with _Session() as session:
+        nodes = settled(session, lambda: _other_nodes(session), args.timeout)
+    for name in nodes:
+        print(name)
+    return 0
+
+
+def node_info(args) -> int:
+    node = _node_name(args.node)
+    namespace, _, name = node.rpartition('/')
+    namespace = namespace or '/'
+    with _Session() as session:
+        deadline = time.monotonic() + args.timeout
+        while node not in _other_nodes(session):
+            if time.monotonic() > deadline:
+                raise ToolError(f'node {node} is not on the graph (waited {args.timeout:g} s); '
+                                'see "ros node list"')
+            session.rclpy.spin_once(session.node, timeout_sec=0.1)
+        graph = session.node
+
+        def info():
+            try:
+                return (sorted(graph.get_subscriber_names_and_types_by_node(name, namespace)),
+                        sorted(graph.get_publisher_names_and_types_by_node(name, namespace)),
+                        sorted(graph.get_service_names_and_types_by_node(name, namespace)))
+            except Exception:       # rclpy's NodeNameNonExistentError: it left meanwhile
+                return ([], [], [])
+        subscribers, publishers, services = settled(session, info, max(deadline - time.monotonic(), 0.0))
+    print(node)
+    for title, entries in (('Subscribers', subscribers), ('Publishers', publishers),
+                           ('Service Servers', services)):
+        print(f'  {title}:')
+        for topic, types in entries:
+            print(f'    {topic}: {", ".join(types)}')
+    return 0
+
+
 # ---------------------------------------------------------------------------- bag
 
 def bag_info(args) -> int:
     print(format_bag_info(Path(args.bag)))
     return 0
+
+
+def _run_node(command: list[str], duration: float = 0.0) -> int:
+    """A node executable in the foreground, its output ours; Ctrl-C, SIGTERM or the end of
+    duration (s, 0 = none) stop it with SIGINT, as a terminal's Ctrl-C would. Its exit status."""
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    # its own session: a terminal's Ctrl-C reaches it once, through us
+    child = subprocess.Popen(command, start_new_session=True)
+    try:
+        end = time.monotonic() + duration if duration > 0 else None
+        while child.poll() is None and (end is None or time.monotonic() < end):
+            time.sleep(0.05)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if child.poll() is None:
+            child.send_signal(signal.SIGINT)
+            try:
+                child.wait(timeout=15.0)
+            except subprocess.TimeoutExpired:
+                child.kill()
+                child.wait()
+        signal.signal(signal.SIGTERM, previous)
+    return child.returncode
+
+
+def bag_record(args) -> int:
+    from .processes import ros_args
+    parameters = {'output': args.out}
+    if args.topics:
+        parameters['topics'] = list(args.topics)
+    if args.duration is not None and not args.duration > 0:
+        raise ToolError(f'--duration {args.duration:g}: give a positive number of seconds')
+    status = _run_node(['balance_recorder', *ros_args(parameters)], args.duration or 0.0)
+    return 0 if status in (0, -signal.SIGINT) else status
+
+
+def bag_play(args) -> int:
+    from .processes import ros_args
+    if not args.rate > 0 or not math.isfinite(args.rate):
+        raise ToolError(f'--rate {args.rate:g}: give a positive factor')
+    for bag in args.bags:
+        if ',' in bag:
+            raise ToolError(f'{bag}: a bag path with a comma cannot be replayed (bridge_publisher\'s '
+                            'bag parameter separates paths by commas)')
+        if not Path(bag).exists():
+            raise ToolError(f'{bag}: no such bag directory or .mcap file')
+    parameters = {'mode': 'replay', 'bag': ','.join(args.bags), 'speed': args.rate,
+                  'loop': args.loop, 'exit_when_done': not args.loop,
+                  'wait_for_subscribers': args.wait_for_subscribers}
+    return _run_node(['bridge_publisher', *ros_args(parameters), '-r', '__node:=bag_player'])
 
 
 def format_bag_info(path: Path) -> str:
@@ -403,10 +545,12 @@ def _stamp(nanoseconds: int) -> str:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog='ros', description='The ros2 CLI verbs a balance_calib user needs (param, topic, service, bag info), '
+        prog='ros', description='The ros2 CLI verbs a balance_calib user needs (param, topic, service, node, '
+                                'bag info/record/play), '
                                 'over rclpy, for environments without ros2cli. Same spelling as ros2.',
         epilog='Examples: ros param set /balance_calibrator calibration_bags "[bags/campaign_1]"; '
-               'ros service call /balance_calibrator/refit; ros topic hz /balance/raw; ros bag info bags/campaign_1')
+               'ros service call /balance_calibrator/refit; ros topic hz /balance/raw; ros node info /balance_calibrator; ros bag info bags/campaign_1; '
+               'ros bag record bags/run2 --duration 10; ros bag play bags/campaign_1')
     verbs = parser.add_subparsers(dest='verb', required=True, metavar='VERB', title='verbs')
 
     def with_timeout(sub, what: str):
@@ -442,7 +586,7 @@ def build_parser() -> argparse.ArgumentParser:
     actions = topic.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
     sub = with_timeout(actions.add_parser('list', help='topics and their types',
                                           description='Print the topics seen on the graph with their types.'),
-                       'discovery (at most 2 s)')
+                       'discovery to settle')
     sub.set_defaults(func=topic_list)
     sub = with_timeout(actions.add_parser('echo', help='print messages as YAML documents',
                                           description='Print each message of a topic as a YAML document '
@@ -466,7 +610,7 @@ def build_parser() -> argparse.ArgumentParser:
     actions = service.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
     sub = with_timeout(actions.add_parser('list', help='services and their types',
                                           description='Print the services seen on the graph with their types.'),
-                       'discovery (at most 2 s)')
+                       'discovery to settle')
     sub.set_defaults(func=service_list)
     sub = actions.add_parser('call', help='call a std_srvs/srv/Trigger service and print its reply',
                              description='Call a std_srvs/srv/Trigger (default) or std_srvs/srv/Empty service; '
@@ -478,26 +622,71 @@ def build_parser() -> argparse.ArgumentParser:
                      help='seconds to wait for the service and its reply (default 300: a refit takes a while)')
     sub.set_defaults(func=service_call)
 
-    bag = verbs.add_parser('bag', help='what a recorded bag holds',
-                           description='Describe a recorded bag without DDS.')
+    node = verbs.add_parser('node', help='list nodes, show what one publishes, subscribes and serves',
+                            description='List the nodes on the graph, or show one node\'s publishers, '
+                                        'subscribers and services.')
+    actions = node.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
+    sub = with_timeout(actions.add_parser('list', help='full names of the nodes on the graph',
+                                          description='Print the full names of the nodes on the graph, '
+                                                      'once discovery has settled.'),
+                       'discovery to settle')
+    sub.set_defaults(func=node_list)
+    sub = with_timeout(actions.add_parser('info', help='a node\'s subscribers, publishers and services',
+                                          description='Print the topics a node subscribes and publishes '
+                                                      'and the services it serves, with their types.'),
+                       'the node and discovery to settle')
+    sub.add_argument('node', help='node name, e.g. /balance_calibrator')
+    sub.set_defaults(func=node_info)
+
+    bag = verbs.add_parser('bag', help='describe, record or play a bag',
+                           description='Describe a recorded bag (no DDS), record topics into a bag with '
+                                       'balance_recorder, or play bags with bridge_publisher\'s replay.')
     actions = bag.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
     sub = actions.add_parser('info', help='duration, message counts and topic types of a bag',
                              description='Print a bag\'s duration, start and end, message count, compression and '
                                          'topics with types and counts, from its MCAP summaries.')
     sub.add_argument('bag', help='rosbag2 directory (metadata.yaml + *.mcap) or a bare .mcap file')
     sub.set_defaults(func=bag_info)
+    sub = actions.add_parser('record', help='record topics into a new rosbag2 MCAP bag (balance_recorder)',
+                             description='Record topics into a new rosbag2 MCAP bag directory with the '
+                                         'package\'s balance_recorder, until Ctrl-C or --duration; the bag '
+                                         'is closed (metadata.yaml written) when it stops.')
+    sub.add_argument('out', help='bag directory to create (it must not exist)')
+    sub.add_argument('topics', nargs='*', help='topics to record (default: every topic of '
+                                               'docs/interfaces.md)')
+    sub.add_argument('--duration', type=float, help='stop after this many seconds (default: at Ctrl-C)')
+    sub.set_defaults(func=bag_record)
+    sub = actions.add_parser('play', help='publish the messages of bags as recorded (bridge_publisher '
+                                          'replay)',
+                             description='Publish every message of the bags in receive-time order, header '
+                                         'stamps as recorded, with bridge_publisher in replay mode (node '
+                                         'name bag_player); ends when the bags are played.')
+    sub.add_argument('bags', nargs='+', help='rosbag2 directories or bare .mcap files')
+    sub.add_argument('--rate', type=float, default=1.0, help='recorded seconds per real second (default 1)')
+    sub.add_argument('--loop', action='store_true', help='start again at the end, until Ctrl-C')
+    sub.add_argument('--wait-for-subscribers', type=int, default=0,
+                     help='start when /balance/raw has this many subscribers (default 0: at once; '
+                          'bridge_publisher gives up after its wait_for_subscribers_timeout_s)')
+    sub.set_defaults(func=bag_play)
     return parser
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()
+        return status
     except ToolError as err:
         print(f'ros {args.verb} {args.action}: {err}', file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        # whoever read our output is gone (`ros topic echo ... | head`): nothing more to say, and
+        # the interpreter must not fail again flushing stdout at exit
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == '__main__':

@@ -43,7 +43,7 @@ typedef struct {
                                  (half the bytes to fetch with cold caches); NULL: no uncertainty */
     double sigma2[6];         /* residual sigma^2 per component (0 where the model lacks it) */
     double tare2[6];          /* tare sigma^2 */
-    int has_component[6];     /* the model gives this component (else its uncertainty is 0) */
+    int has_component[6];     /* the model gives this component (else its uncertainty is NaN) */
     char *middle;             /* frame_id length, characters and padding of the output messages */
     Py_ssize_t middle_size;
 } Plan;
@@ -293,7 +293,7 @@ static PyObject *lone(const Plan *plan, const char *data, Py_ssize_t size, int w
         }
         double u[6], tunnel[6];
         for (int k = 0; k < 6; k++)
-            u[k] = plan->has_component[k] ? sqrt(plan->sigma2[k] * (1.0 + h) + plan->tare2[k]) : 0.0;
+            u[k] = plan->has_component[k] ? sqrt(plan->sigma2[k] * (1.0 + h) + plan->tare2[k]) : NAN;
         for (int i = 0; i < 6; i++)
             tunnel[i] = fabs(u[plan->perm[i]] * plan->signs[i]);
         uncertainty_bytes = encode(plan, sec, nanosec, tunnel);

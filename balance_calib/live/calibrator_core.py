@@ -146,6 +146,31 @@ class ActiveCalibration:
     def output_range_list(self) -> list[float]:
         return self.output_range_mv.tolist()
 
+    @cached_property
+    def unused_inputs(self) -> np.ndarray | None:
+        """Columns of the six raw outputs that the calibration does not read (a 1-, 3- or 5-bridge
+        calibration), None when it reads all six: their values, NaN included, change nothing."""
+        used = [BRIDGE_OUTPUTS.index(b) for b in self.calibration.bridge_outputs]
+        unused = [i for i in range(6) if i not in used]
+        return np.array(unused, dtype=np.intp) if unused else None
+
+    def inputs_finite(self, outputs: np.ndarray) -> np.ndarray:
+        """(N,) True where every raw output the calibration reads is finite; outputs (N, 6)."""
+        if self.unused_inputs is None:
+            return np.isfinite(outputs).all(axis=1)
+        used = np.isfinite(outputs)
+        used[:, self.unused_inputs] = True
+        return used.all(axis=1)
+
+    @cached_property
+    def absent_components(self) -> tuple[str, ...]:
+        """Components of the published wrench (tunnel axes) that the calibration does not give
+        (a 1-, 3- or 5-component balance): published as 0, their uncertainty NaN, never out of
+        the envelope or overloaded."""
+        present = set(self.calibration.components)
+        return tuple(COMPONENTS[i] for i, p in enumerate(self.installation.permutation)
+                     if COMPONENTS[p] not in present)
+
     @property
     def capacity(self) -> np.ndarray:
         """(6,) full scale per component FX..MZ (inf for components the calibration lacks)."""
@@ -175,6 +200,7 @@ def activate(calibration: Calibration, model: str = 'adopted', installation: str
         raise ValueError(f'envelope_margin must be between 0.5 and 10 (x capacity), not {envelope_margin}')
     if not np.isfinite(output_range_factor) or not 1.0 <= output_range_factor <= 100.0:
         raise ValueError(f'output_range_factor must be between 1 and 100 (x rated output), not {output_range_factor}')
+    _check_channels(calibration, source)
     for what, values, names in (('capacity', calibration.capacity, calibration.components),
                                 ('rated_output_mv', calibration.rated_output_mv, calibration.bridge_outputs)):
         bad = [f'{n}={v}' for n, v in zip(names, np.asarray(values, dtype=float)) if not (np.isfinite(v) and v > 0)]
@@ -193,6 +219,23 @@ def activate(calibration: Calibration, model: str = 'adopted', installation: str
                              float(envelope_margin) * six_axis(calibration.capacity, calibration.components, np.inf),
                              float(output_range_factor) * np.abs(six_axis(calibration.rated_output_mv,
                                                                           calibration.bridge_outputs, np.inf)))
+
+
+def _check_channels(calibration: Calibration, source: str) -> None:
+    """The live calibrator reads six raw channels (FXV..MZV in force.x..torque.z of balance/raw)
+    and publishes six components (FX..MZ): a calibration under other names (a table's own
+    symbols) or with more bridge outputs than that (an 8-channel sensor) is refused in one line."""
+    where = source or calibration.balance
+    for what, names, known, verb in (
+            ('components', calibration.components, COMPONENTS, 'publishes'),
+            ('bridge outputs', calibration.bridge_outputs, BRIDGE_OUTPUTS, 'reads')):
+        if set(names) <= set(known) and len(set(names)) == len(names):
+            continue
+        raise ConfigError(
+            f'{where}: {what} {", ".join(names)}: balance_calibrator {verb} only '
+            f'{", ".join(known)}, each once, so this calibration ({len(calibration.components)} '
+            f'components from {len(calibration.bridge_outputs)} bridge outputs) cannot run live '
+            f'(balance-calib fit --axes names a table\'s loads and bridges as TM-663\'s)')
 
 
 # --- live extra inputs ------------------------------------------------------------------------
@@ -311,7 +354,7 @@ def compute_wrench(active: ActiveCalibration, outputs_mv, *, zero_mv=None, tare_
     if outputs.shape[0] == 1 and not active.model.extra_variables:
         return _one_plain_sample(active, outputs, zero_mv, tare_load)
     with np.errstate(invalid='ignore', over='ignore'):
-        finite = np.isfinite(outputs).all(axis=1)
+        finite = active.inputs_finite(outputs)       # channels the calibration does not read aside
         saturated = finite & (np.abs(outputs) > active.output_range_mv).any(axis=1)
     accepted = finite & ~saturated
     zeroed = outputs if zero_mv is None else outputs - np.asarray(zero_mv, dtype=float)
@@ -348,7 +391,7 @@ def _one_plain_sample(active: ActiveCalibration, outputs: np.ndarray, zero_mv, t
     where every sample comes alone (the same steps as the batch, with fewer numpy calls)."""
     row = outputs[0]
     values = row.tolist()
-    rejected = not all(map(math.isfinite, values))
+    rejected = not all(map(math.isfinite, values)) and not active.inputs_finite(outputs)[0]
     saturated = not rejected and any(abs(v) > r for v, r in zip(values, active.output_range_list))
     index = active.one_sample_index
     if index is not None and not (rejected or saturated) and max(map(abs, values)) < 1e30:
@@ -514,11 +557,14 @@ def evaluate_window(window: TareWindow, active: ActiveCalibration, *, max_ratio:
     if window.kind == 'zero':
         names = active.calibration.bridge_outputs
         columns = [BRIDGE_OUTPUTS.index(v) for v in names]
-        steady = check_steady(outputs[:, columns], names, ('mV',) * len(names),
+        units = (active.calibration.output_unit,) * len(names)
+        steady = check_steady(outputs[:, columns], names, units,
                               np.asarray(active.calibration.rated_output_mv, float), max_ratio)
         if not steady.steady:
             return TareResult(False, f'zero refused: the window of {n} samples is not steady: {steady.reason}')
         zero = tare_zero(outputs)
+        if active.unused_inputs is not None:       # channels not read: no zero (finite, persisted)
+            zero[active.unused_inputs] = 0.0
         return TareResult(True, f'zero: averaged {n} samples, steady (scatter {steady.scatter_ratio:.1f}x, step '
                                 f'{steady.step_ratio:.1f}x noise); electrical zero now subtracted: '
                                 f'{describe_zero(zero, active)}', zero_mv=zero)
@@ -542,11 +588,17 @@ def evaluate_window(window: TareWindow, active: ActiveCalibration, *, max_ratio:
     return TareResult(True, f'tare: averaged {n} samples, steady (scatter {steady.scatter_ratio:.1f}x, step '
                             f'{steady.step_ratio:.1f}x noise); tare load now subtracted: '
                             f'{describe_tare(tare_load, active)}; mean wind-off outputs: ' +
-                      ', '.join(f'{b}={mean_outputs[BRIDGE_OUTPUTS.index(b)]:+.5f} mV'
+                      ', '.join(f'{b}={output_text(mean_outputs[BRIDGE_OUTPUTS.index(b)], active)}'
                                 for b in active.calibration.bridge_outputs)
                       + ('' if zero_mv is not None else '; no electrical zero taken (~/zero with nothing on the '
                          'balance): the calibration sees outputs measured from the bridges\' own zero'),
                       tare_load=tare_load, tare_sigma=np.std(batch.loads_total, axis=0, ddof=1) / np.sqrt(n))
+
+
+def output_text(value: float, active: ActiveCalibration) -> str:
+    """A bridge output with its unit: mV to 5 decimals; counts, -, mV/V to 6 digits."""
+    unit = active.calibration.output_unit
+    return f'{value:+.5f} mV' if unit == 'mV' else f'{value:+.6g} {unit}'
 
 
 def describe_loads(loads_balance, active: ActiveCalibration) -> str:
@@ -569,9 +621,9 @@ def describe_zero(zero_mv, active: ActiveCalibration) -> str:
             else np.full(6, np.nan)
     except InverseDidNotConverge:      # an iterative model without a solution there: no number
         equivalent = np.full(6, np.nan)
-    outputs = ', '.join(f'{c}={v:+.5f} mV' for c, v in zip(active.calibration.bridge_outputs,
-                                                           zero[[BRIDGE_OUTPUTS.index(b) for b in
-                                                                 active.calibration.bridge_outputs]]))
+    names = active.calibration.bridge_outputs
+    outputs = ', '.join(f'{c}={output_text(v, active)}'
+                        for c, v in zip(names, zero[[BRIDGE_OUTPUTS.index(b) for b in names]]))
     return (f'{outputs} (the load these outputs read as, {active.installation.name} tunnel axes, '
             f'{active.base_name} model: {describe_loads(equivalent, active)})')
 
@@ -652,11 +704,19 @@ class LiveState:
     refit_running: bool = False
     tare_load: np.ndarray | None = None        # balance axes, N / N·m (None: no tare)
     tare_source: str = ''                      # where the tare was persisted / restored from
+    tare_refused: str = ''                     # why the persisted zero and tare were not restored
     input_problems: tuple[tuple[str, int, int], ...] = ()   # (what, total, this period)
     input_values: tuple[tuple[str, str], ...] = ()
     overload: tuple[str, ...] | None = None    # components over the limit now (None = no overload)
     overload_values: tuple[tuple[str, str], ...] = ()
     lowpass_hz: float = 0.0
+
+
+def count_key(what: str) -> str:
+    """The /diagnostics key stem of an input problem: 'samples lost (gaps in the stamps)' ->
+    'samples_lost' (with _last_period and _since_start: the count of this diagnostics period, the
+    count since the node started)."""
+    return what.split(' (')[0].replace(' ', '_')
 
 
 def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'balance_calibrator',
@@ -676,7 +736,8 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
     if c.period_saturated:
         level = ERROR
         problems.append(f'{c.period_saturated} samples saturated (an output beyond '
-                        f'{", ".join(f"{v:.3g}" for v in active.output_range_mv)} mV): not published')
+                        f'{", ".join(f"{v:.3g}" for v in active.output_range_mv)} '
+                        f'{active.calibration.output_unit}): not published')
     if c.period_not_converged:
         level = ERROR
         problems.append(f'{c.period_not_converged} samples where the {active.model_name} model\'s Newton '
@@ -687,7 +748,9 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
     for what, total, period in state.input_problems:
         if period:
             level = max(level, WARN) if level != STALE else level
-            problems.append(f'{period} {what}')
+            # both counts, named: this period's (as the other counts here) and the total
+            problems.append(f'{period} {what} in the last {state.period_s:.1f} s '
+                            f'({total} since start)')
     input_values = (
         ('input_rate_hz', f'{rate:.1f}'),
         ('last_sample_age_s', 'never' if state.last_sample_age_s is None else f'{state.last_sample_age_s:.3f}'),
@@ -699,7 +762,9 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('newton_not_converged', str(c.not_converged)),
         ('out_of_envelope', str(c.out_of_envelope)),
         ('envelope', ', '.join(f'{k}={v:.4g}' for k, v in zip(COMPONENTS, active.envelope))),
-        *((what.replace(' ', '_'), str(total)) for what, total, _ in state.input_problems),
+        *((f'{count_key(what)}_{window}', str(count))
+          for what, total, period in state.input_problems
+          for window, count in (('last_period', period), ('since_start', total))),
         *state.input_values,
     )
     reports = [StatusReport(level, f'{node_name}: input', '; '.join(problems) or f'{rate:.1f} Hz',
@@ -716,9 +781,15 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
                            f'stale ({state.temperature_age_s:.1f} s)'))
         else:
             inputs.append((needed, 'fresh' if state.last_sample_age_s is not None else 'missing'))
-    cal_level = WARN if state.fallback_reason else OK
+    cal_level = WARN if state.fallback_reason or state.tare_refused else OK
+    absent = active.absent_components
     message = (f'{active.model_name} model, {active.installation.name} installation'
+               + (f'; {6 - len(absent)}-component calibration: {", ".join(absent)} absent '
+                  f'(published as 0, uncertainty NaN)' if absent else '')
                + (f'; FALLBACK to {active.base_name}: {state.fallback_reason}' if state.fallback_reason else ''))
+    if state.tare_refused:
+        message += (f'; zero and tare NOT restored ({state.tare_refused}): '
+                    'take ~/zero and ~/tare again')
     zero = state.tare_zero_mv
     cal_values = (
         ('calibration_file', active.source),
@@ -727,6 +798,9 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('model_in_use', active.base_name if state.fallback_reason else active.model_name),
         ('fallback_reason', state.fallback_reason or 'none'),
         ('installation', f'{active.installation.name} ({active.installation.spec})'),
+        ('components', ', '.join(cal.components)),
+        ('output_unit', cal.output_unit),
+        ('absent_components', ', '.join(absent) or 'none'),
         ('fitted_at', cal.fitted_at or 'unknown (memo matrices)'),
         ('age_days', 'unknown' if age is None else f'{age:.2f}'),
         ('sigma_pct_fs', sigma),
@@ -737,6 +811,7 @@ def diagnostics(active: ActiveCalibration, state: LiveState, node_name: str = 'b
         ('tare_load', 'none' if state.tare_load is None else
          f'{describe_loads(state.tare_load, active)} (tunnel axes)'),
         ('tare_file', state.tare_source or 'none'),
+        ('tare_not_restored', state.tare_refused or 'none'),
         ('lowpass_hz', f'{state.lowpass_hz:g}' if state.lowpass_hz else 'off'),
         ('refit_running', str(state.refit_running)),
     )

@@ -107,6 +107,18 @@ def input_scale_mv(input_units: str, excitation_v: float) -> float:
     return float(ratiometric_to_mv(1.0, input_units, excitation_v))
 
 
+def check_input_units(calibration, input_units: str, where: str) -> None:
+    """A calibration fitted from a table in counts, dimensionless or mV/V outputs (its
+    `extra.output_unit`) takes balance/raw in that unit as it is: a ratiometric input_units would
+    multiply the outputs by the excitation first and every load would be off by that factor.
+    ValueError naming both; input_units mV (no conversion) passes."""
+    unit = calibration.output_unit
+    if unit != 'mV' and input_units != 'mV':
+        raise ValueError(f'parameter input_units = {input_units} turns balance/raw into mV, but '
+                         f'{where} takes bridge outputs in {unit}: set input_units mV (balance/raw '
+                         f'passed as it is) and publish the outputs in {unit}')
+
+
 def check_regular_file(path, what: str, max_bytes: int = MAX_CALIBRATION_BYTES) -> None:
     """A path that names a missing file is left to the loader (which says so); a FIFO, a device or a
     huge file is refused here, before anything opens it (a FIFO would block, /dev/zero never ends)."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable
 
@@ -20,11 +21,13 @@ from ..calibration_file import ConfigError
 from ..config import resolve_config_path
 from . import lone_sample
 from .calibrator_core import ActiveCalibration, activate, parse_reliability
-from .parameters import check_parameter, input_scale_mv, load_calibration_checked
+from .parameters import (check_input_units, check_parameter, input_scale_mv,
+                         load_calibration_checked)
 from .raw_codec import WrenchEncoder, decode_wrenches
 from .refit_process import RefitJob, is_balance_config, make_refit_job, run_refit_job
 from .stream import LiveCalibrator, LiveSettings
-from .tare_store import load_tare, save_tare, tare_file_for
+from .tare_store import (TareOwner, calibration_sha256, load_tare, restore_refusal, save_tare,
+                         tare_file_for)
 
 CALIBRATION_PARAMETERS = {'calibration_file', 'model', 'installation', 'envelope_margin', 'output_range_factor'}
 
@@ -44,11 +47,14 @@ def live_settings(value: Callable[[str], object]) -> LiveSettings:
 def activate_file(path: str, value: Callable[[str], object]) -> ActiveCalibration:
     """The calibration `path` with the parameters `value(name)`; ConfigError/ValueError with a reason."""
     calibration = load_calibration_checked(path, 10.0)
+    check_input_units(calibration, value('input_units'), str(path))
     try:
         return activate(calibration, value('model'), value('installation'), float(value('envelope_margin')),
                         source=str(path), output_range_factor=float(value('output_range_factor')))
-    except ConfigError as err:
-        raise ConfigError(f'{path}: {err}') from None
+    except ConfigError as err:          # named by the file once (activate names it when told)
+        message = str(err)
+        named = message if message.startswith(f'{path}: ') else f'{path}: {message}'
+        raise ConfigError(named) from None
 
 
 class Output:
@@ -86,6 +92,8 @@ class CalibratorSession:
             self.input_scale = input_scale_mv(value('input_units'), value('excitation_v'))
             active = activate_file(path, value)
             self.reliability = parse_reliability(value('input_reliability'))
+        except ConfigError:                 # the calibration file: its message names it
+            raise
         except ValueError as err:
             raise ConfigError(f'invalid parameter: {err}') from None
         self.lock = threading.Lock()
@@ -101,14 +109,23 @@ class CalibratorSession:
         self.refit_running = False
         self.period_start_s = time.monotonic()
         self.pending: ActiveCalibration | None = None    # checked by validate(), applied by apply()
+        self.owner = self._owner(active)
+        # why the persisted zero and tare were not restored ('' = nothing refused): a WARN in
+        # /diagnostics until a new ~/zero or ~/tare
+        self.tare_refused = ''
         self._restore_tare()
         if not lone_sample.available:
             self.log('warning', f'the C kernel for lone samples is not built ({lone_sample.unavailable_reason}): '
                                 'every sample takes the pure core\'s path (slower at low rates; reinstall with a C '
                                 'compiler)')
+        absent = active.absent_components
+        unit = active.calibration.output_unit
         self.log('info', f'{active.model_name} model of {active.calibration.balance} from {path}, '
                          f'{active.installation.name} installation; requires '
-                         f'{", ".join(active.requires) or "bridge outputs only"}')
+                         f'{", ".join(active.requires) or "bridge outputs only"}'
+                 + (f'; {", ".join(absent)} absent from the calibration: published as 0, '
+                    f'uncertainty NaN' if absent else '')
+                 + (f'; balance/raw carries bridge outputs in {unit}' if unit != 'mV' else ''))
 
     @property
     def active(self) -> ActiveCalibration:
@@ -228,6 +245,7 @@ class CalibratorSession:
         if not result.ok:
             self.log('warning', result.message)
             return False, result.message
+        self.tare_refused = ''
         message = result.message + '; ' + self._persist_tare()
         self.log('info', message)
         return True, message
@@ -244,15 +262,27 @@ class CalibratorSession:
             return Path(self.value('tare_file')).expanduser()
         return tare_file_for(active.source, self.node_name, is_balance_config(active.source))
 
+    def _owner(self, active: ActiveCalibration) -> TareOwner:
+        """What a zero or tare taken now belongs to: calibration content, installation, node."""
+        return TareOwner.of_node(calibration_sha256(active.source), active.installation,
+                                 self.node_name)
+
     def _restore_tare(self) -> None:
         if self.tare_file is None:
             return
         try:
             state = load_tare(self.tare_file, self.live.active.calibration.balance)
         except ValueError as err:
+            self.tare_refused = str(err)
             self.log('warning', f'not restoring zero and tare: {err}')
             return
         if state is None:
+            return
+        refusal = restore_refusal(state.owner, self.owner)
+        if refusal:
+            self.tare_refused = f'{self.tare_file}: {refusal}'
+            self.log('warning', f'not restoring zero and tare from {self.tare_file}: {refusal}; '
+                                'take ~/zero and ~/tare again')
             return
         self.live.tare = state
         self.log('info', f'restored from {self.tare_file}: zero ' + (
@@ -266,7 +296,7 @@ class CalibratorSession:
             return ('not persisted: the calibration is a shipped balance config (set parameter tare_file to keep '
                     'zero and tare across restarts)')
         try:
-            save_tare(self.tare_file, self.live.tare)
+            save_tare(self.tare_file, replace(self.live.tare, owner=self.owner))
             return f'saved to {self.tare_file}'
         except OSError as err:
             self.log('error', f'cannot save zero and tare to {self.tare_file}: {err}')
@@ -317,6 +347,7 @@ class CalibratorSession:
         new_active, target, message = outcome
         with self.lock:
             self.live.set_active(new_active)
+        self.owner = self._owner(new_active)
         self.log('info', message)
         if str(target) == str(job.calibration_file):
             return True, message, None
@@ -333,6 +364,9 @@ class CalibratorSession:
         value = (lambda n: changes.get(n, self.value(n)))
         if {'input_units', 'excitation_v'} & set(changes):
             input_scale_mv(value('input_units'), value('excitation_v'))
+            if not CALIBRATION_PARAMETERS & set(changes):    # else activate_file checks the new
+                active = self.live.active
+                check_input_units(active.calibration, value('input_units'), active.source)
         if CALIBRATION_PARAMETERS & set(changes):
             path = changes.get('calibration_file', None)
             path = self.live.active.source if path is None else (path or str(default_calibration_file()))
@@ -358,6 +392,8 @@ class CalibratorSession:
                              f'{pending.installation.name} installation')
         if 'tare_file' in names or 'calibration_file' in names:
             self.tare_file = self._tare_path(self.live.active)
+        if pending is not None:       # a zero or tare taken from now on belongs to this one
+            self.owner = self._owner(self.live.active)
         return 'diagnostics_period_s' in names
 
     # --- /diagnostics ---------------------------------------------------------------------------
@@ -370,6 +406,7 @@ class CalibratorSession:
                 temperature_age_s=None if self.temperature_s is None else now_s - self.temperature_s,
                 refit_running=self.refit_running,
                 tare_source='not persisted' if self.tare_file is None else str(self.tare_file),
+                tare_refused=self.tare_refused,
                 node_name=self.node_name.lstrip('/'))
         self.period_start_s = now_s
         return reports

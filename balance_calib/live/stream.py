@@ -246,7 +246,8 @@ def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, ta
     fallback); `extra`: its variables besides the outputs (dT, dir_*) for these samples, as for its
     loads(); `loads_balance` (M, 6): the loads it gave, balance axes, so that an iterative model is not
     solved twice; `design` (M, n_terms): its design rows, if computed already. None when the model has no covariance (the memo's matrices) or needs an input it
-    was not given."""
+    was not given. A component the calibration lacks (a 1-, 3- or 5-component balance) is NaN:
+    its 0 is not a measurement."""
     from ..model.uncertainty import design_row_uncertainty, has_uncertainty, load_standard_uncertainty
     model = active.model if model is None else model
     positions = [COMPONENTS.index(c) for c in model.components]
@@ -264,7 +265,7 @@ def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, ta
             model, zeroed_outputs[:, columns], extra, tare_sigma=tare,
             loads=None if loads_balance is None or not iterative else np.asarray(loads_balance)[:, positions],
             design=design)
-    six = np.zeros((len(zeroed_outputs), 6))
+    six = np.full((len(zeroed_outputs), 6), np.nan)     # NaN: a component the calibration lacks
     six[:, positions] = per_component
     return np.abs(active.installation.to_tunnel(six))       # a signed permutation: magnitudes carry over
 
@@ -316,7 +317,7 @@ class LiveCalibrator:
         active, tare = self.active, self.tare
         direction = None
         if 'load_history' in active.requires:
-            finite = np.isfinite(outputs).all(axis=1)
+            finite = active.inputs_finite(outputs)
             zeroed = outputs[finite] - (0.0 if tare.zero_mv is None else tare.zero_mv)
             direction = np.ones((len(outputs), 6))
             direction[finite] = self.history.update(six_axis_loads(active.base_model, zeroed))
@@ -434,13 +435,15 @@ class LiveCalibrator:
         return 'published' if self.uncertainty_wanted else 'no subscriber: not computed until one subscribes'
 
     def report(self, *, period_s: float, last_sample_age_s: float | None, temperature_age_s: float | None,
-               refit_running: bool, tare_source: str, node_name: str) -> list[StatusReport]:
+               refit_running: bool, tare_source: str, node_name: str,
+               tare_refused: str = '') -> list[StatusReport]:
         interval = self.inputs.interval_ns
         state = LiveState(
             period_s=period_s, counters=self.counters, last_sample_age_s=last_sample_age_s,
             stale_after_s=self.settings.stale_after_s, temperature_age_s=temperature_age_s,
             fallback_reason=self.fallback_reason, tare_zero_mv=self.tare.zero_mv, refit_running=refit_running,
-            tare_load=self.tare.tare_load, tare_source=tare_source, input_problems=self.inputs.problems(),
+            tare_load=self.tare.tare_load, tare_source=tare_source, tare_refused=tare_refused,
+            input_problems=self.inputs.problems(),
             input_values=(('nominal_interval_ms', 'unknown' if interval is None else f'{interval * 1e-6:.4g}'),
                           ('wrench_uncertainty', self._uncertainty_state()),
                           ('frame_ids_seen_from_other_balances', ', '.join(sorted(self.inputs.foreign_frames))

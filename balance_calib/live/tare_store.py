@@ -2,24 +2,86 @@
 
 The file (YAML, replaced atomically) holds the electrical zero (mV, with the temperature and load
 direction at that moment, for models with such terms) and the tare load (N, N·m, balance
-calibration axes: independent of the installation), with the balance name and when each was taken.
+calibration axes), with the balance name and when each was taken, and what they were taken for
+(`TareOwner`): the calibration (SHA-256 of the calibration file's bytes), the installation, the
+namespace and the node. A tare load in balance axes is not independent of the installation: the
+model's weight loads the balance the other way once it is mounted inverted. The state is restored
+only for the same owner (`restore_refusal`); a file of the first format records no owner and is
+never restored.
 """
 from __future__ import annotations
 
 import datetime as _dt
+import hashlib
 import os
 import stat
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 from ..calibration_file import write_text_atomically
+from ..tunnel_axes import Installation
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
 
-FORMAT = 'balance_calib/tare 1'
+FORMAT = 'balance_calib/tare 2'
+OLDER_FORMATS = ('balance_calib/tare 1',)      # read, never restored: they record no owner
 MAX_BYTES = 1 << 16
+
+
+@dataclass(frozen=True)
+class TareOwner:
+    """What a zero and tare were taken for; restored only when all four are the same."""
+
+    calibration_sha256: str      # of the calibration file's bytes ('' = unknown: never matches)
+    installation: str            # signed permutation '-FX,FY,-FZ,MX,MY,MZ' (Installation.spec)
+    namespace: str               # e.g. '/' or '/left'
+    node: str                    # e.g. 'balance_calibrator'
+    installation_name: str = ''  # e.g. 'upright', for messages only
+
+    @classmethod
+    def of_node(cls, calibration_sha256: str, installation: Installation,
+                fully_qualified_name: str) -> TareOwner:
+        """From an installation and a node's fully qualified name ('/left/balance_calibrator')."""
+        namespace, _, node = fully_qualified_name.rpartition('/')
+        return cls(calibration_sha256, installation.spec, namespace or '/', node,
+                   installation.name)
+
+    def to_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+def calibration_sha256(path: str | Path) -> str:
+    """SHA-256 (hex) of the calibration file's bytes; '' when it cannot be read (never matches)."""
+    try:
+        return hashlib.sha256(Path(path).expanduser().read_bytes()).hexdigest()
+    except OSError:
+        return ''
+
+
+def restore_refusal(saved: TareOwner | None, current: TareOwner) -> str:
+    """'' when a zero and tare taken for `saved` belong to `current`, else why not ('; '-joined)."""
+    if saved is None:
+        return ('the file records no calibration, installation, namespace or node '
+                '(an older tare file)')
+    reasons = []
+    if not saved.calibration_sha256 or saved.calibration_sha256 != current.calibration_sha256:
+        reasons.append(f'taken with another calibration (file content sha256 '
+                       f'{saved.calibration_sha256[:12] or "unknown"}, '
+                       f'now {current.calibration_sha256[:12] or "unknown"})')
+    if saved.installation != current.installation:
+        was = saved.installation_name or saved.installation
+        now = current.installation_name or current.installation
+        reasons.append(f'taken in the {was} installation ({saved.installation}), '
+                       f'now {now} ({current.installation})')
+    if saved.namespace != current.namespace or saved.node != current.node:
+        reasons.append(f'taken by node {_qualified(saved)}, this is {_qualified(current)}')
+    return '; '.join(reasons)
+
+
+def _qualified(owner: TareOwner) -> str:
+    return owner.namespace.rstrip('/') + '/' + owner.node
 
 
 @dataclass(frozen=True)
@@ -32,6 +94,7 @@ class TareState:
     tare_load: np.ndarray | None = None           # (6,) FX..MZ, balance axes, N / N·m
     tare_taken_at: str = ''
     tare_sigma: np.ndarray | None = None          # (6,) standard uncertainty of the tare load, N / N·m
+    owner: TareOwner | None = None                # what they were taken for (None: not recorded)
 
     def to_dict(self) -> dict:
         def plain(values, names):
@@ -40,7 +103,8 @@ class TareState:
                 'zero_mv': plain(self.zero_mv, BRIDGE_OUTPUTS), 'zero_temperature_c': self.zero_temperature_c,
                 'zero_direction': plain(self.zero_direction, COMPONENTS), 'zero_taken_at': self.zero_taken_at,
                 'tare_load_balance_axes': plain(self.tare_load, COMPONENTS), 'tare_taken_at': self.tare_taken_at,
-                'tare_sigma_balance_axes': plain(self.tare_sigma, COMPONENTS)}
+                'tare_sigma_balance_axes': plain(self.tare_sigma, COMPONENTS),
+                'taken_for': None if self.owner is None else self.owner.to_dict()}
 
 
 def now_iso() -> str:
@@ -77,7 +141,7 @@ def load_tare(path: Path, balance: str) -> TareState | None:
         data = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as err:
         raise ValueError(f'{path}: unreadable tare file: {str(err).splitlines()[0]}') from None
-    if not isinstance(data, dict) or data.get('format') != FORMAT:
+    if not isinstance(data, dict) or data.get('format') not in (FORMAT, *OLDER_FORMATS):
         raise ValueError(f'{path}: not a tare file (format is not {FORMAT!r})')
     if str(data.get('balance', '')).lower() != balance.lower():
         raise ValueError(f'{path}: tare of balance {data.get("balance")!r}, not of {balance!r}')
@@ -97,4 +161,16 @@ def load_tare(path: Path, balance: str) -> TareState | None:
     return TareState(balance, vector('zero_mv', BRIDGE_OUTPUTS), None if temperature is None else float(temperature),
                      vector('zero_direction', COMPONENTS), str(data.get('zero_taken_at') or ''),
                      vector('tare_load_balance_axes', COMPONENTS), str(data.get('tare_taken_at') or ''),
-                     vector('tare_sigma_balance_axes', COMPONENTS))
+                     vector('tare_sigma_balance_axes', COMPONENTS),
+                     _owner(path, data.get('taken_for')))
+
+
+def _owner(path: Path, recorded) -> TareOwner | None:
+    """`taken_for` of a tare file; None when absent (a file of the first format)."""
+    if recorded is None:
+        return None
+    names = [f.name for f in fields(TareOwner)]
+    if not isinstance(recorded, dict) or not all(isinstance(recorded.get(n, ''), str)
+                                                 for n in names):
+        raise ValueError(f'{path}: taken_for needs the strings {", ".join(names)}')
+    return TareOwner(**{n: recorded.get(n, '') for n in names})

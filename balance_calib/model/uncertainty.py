@@ -126,13 +126,30 @@ def with_fitted_covariance(model, bridge_outputs_mv, residuals, extra: Mapping[s
     residual σ per component with N − rank degrees of freedom. For refit's calibration.yaml."""
     design = model.design(bridge_outputs_mv, extra)
     residuals = np.atleast_2d(np.asarray(residuals, dtype=float))
+    covariance, rank = unscaled_covariance(design)
+    dof = max(design.shape[0] - rank, 1)
+    sigma = np.sqrt((residuals ** 2).sum(axis=0) / dof)
+    return with_covariance(model, covariance, sigma, dof)
+
+
+def with_covariance(model, covariance: np.ndarray, sigma, dof: int):
+    """The model with `metadata.uncertainty` = this (n_terms, n_terms) unscaled covariance (XᵀX)⁻¹
+    and residual σ (n_components,), N / N·m, as calibration.yaml stores them."""
+    return model.with_coefficients(model.coefficients, uncertainty={
+        'residual_sigma': np.asarray(sigma, dtype=float).tolist(),
+        'covariance_unscaled': np.asarray(covariance, dtype=float).tolist(), 'dof': int(dof)})
+
+
+def unscaled_covariance(design: np.ndarray) -> tuple[np.ndarray, int]:
+    """(XᵀX)⁻¹ (n_terms, n_terms) of design rows X (N, n_terms), and the rank of X.
+
+    By SVD of the unit-norm-scaled design; directions the rows do not determine (rank-deficient)
+    are left out, so they add nothing rather than infinity.
+    """
+    design = np.atleast_2d(np.asarray(design, dtype=float))
     scales = np.linalg.norm(design, axis=0)
     scales[scales == 0] = 1.0
     _, singular, vt = np.linalg.svd(design / scales, full_matrices=False)
     keep = singular > singular[0] * 1e-10 if singular.size else np.zeros(0, bool)
     v_scaled = vt[keep].T / singular[keep]
-    covariance = (v_scaled @ v_scaled.T) / np.outer(scales, scales)
-    dof = max(design.shape[0] - int(keep.sum()), 1)
-    sigma = np.sqrt((residuals ** 2).sum(axis=0) / dof)
-    return model.with_coefficients(model.coefficients, uncertainty={
-        'residual_sigma': sigma.tolist(), 'covariance_unscaled': covariance.tolist(), 'dof': int(dof)})
+    return (v_scaled @ v_scaled.T) / np.outer(scales, scales), int(keep.sum())

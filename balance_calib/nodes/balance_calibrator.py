@@ -6,7 +6,8 @@ its covariance and someone subscribes), balance/overload (std_msgs/Bool, transie
 (std_srvs/Trigger): ~/zero (electrical zero, output space: only with nothing on the balance),
 ~/tare (tare load, e.g. the model's weight wind-off: load space, the calibration on the full outputs),
 ~/clear_tare, ~/refit. ~/zero and ~/tare refuse a window that is not steady and say why; both are
-kept in <calibration>.tare.yaml beside the calibration file and restored at start-up. QoS through
+kept in <calibration>.tare.yaml beside the calibration file and restored at start-up for the same
+calibration content, installation, namespace and node (live/tare_store.py). QoS through
 the standard overrides, e.g. -p qos_overrides./balance/raw.subscription.reliability:=best_effort.
 
 This node translates; live/session.py does the work (math in live/calibrator_core.py; each sample in

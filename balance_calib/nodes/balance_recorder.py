@@ -2,12 +2,15 @@
 
 Parameters:
   output (string, required)   bag directory to create; it must not exist yet.
-  topics (string[])           topics to record (default: the topics of docs/interfaces.md).
+  topics (string[])           topics to record (default: every topic of docs/interfaces.md, the
+                              calibration's, the live wrench's and the wind-on run's).
 
 Each topic's type and its publishers' QoS come from the graph; topics without publishers yet are
 looked up again every half second. Messages are recorded as serialized bytes (raw subscriptions)
 through the pure BagWriter. SIGINT and SIGTERM both end the recording cleanly: the bag's MCAP
-summary and metadata.yaml are complete afterwards.
+summary and metadata.yaml are complete afterwards. While it records, what it received is put into
+the file every FLUSH_PERIOD_S (one chunk each), so a refit of the bag still being recorded reads it
+up to a second ago.
 """
 import importlib
 import signal
@@ -21,9 +24,13 @@ from rclpy.signals import SignalHandlerOptions
 from balance_calib.bags.errors import BagError
 from balance_calib.bags.writer import BagWriter, qos_profiles_yaml
 
+# every topic of docs/interfaces.md: a calibration campaign, the live calibrator, a wind-on run
 DEFAULT_TOPICS = ['/balance/raw', '/balance/temperature', '/calibration/applied_load',
-                  '/calibration/gravity', '/balance/wrench', '/diagnostics']
+                  '/calibration/gravity', '/balance/wrench', '/balance/wrench_uncertainty',
+                  '/balance/overload', '/diagnostics', '/model/attitude', '/tunnel/dynamic_pressure',
+                  '/aero/coefficients', '/aero/wind_coefficients']
 DISCOVERY_PERIOD_S = 0.5
+FLUSH_PERIOD_S = 1.0  # the file holds what was received up to this long ago
 QUEUE_DEPTH = 1000  # a recorder would rather buffer than drop
 
 
@@ -63,6 +70,7 @@ class BalanceRecorder(Node):
     def __init__(self):
         super().__init__('balance_recorder')
         topics = self.declare_parameter('topics', DEFAULT_TOPICS).value
+        self._default_topics = {self.resolve_topic_name(topic) for topic in DEFAULT_TOPICS}
         output = self.declare_parameter('output', '').value
         if not output:
             raise BagError('parameter output (the bag directory to create) is required')
@@ -75,7 +83,15 @@ class BalanceRecorder(Node):
         # spin() for a signal *before* it shuts the context down, so without a periodic wakeup
         # spin() could sleep through the shutdown until the next message.
         self.create_timer(DISCOVERY_PERIOD_S, self._discover)
+        self._flushed = 0
+        self.create_timer(FLUSH_PERIOD_S, self._flush)
         self._discover()
+
+    def _flush(self):
+        written = sum(self._writer.message_counts.values())
+        if self._writer.is_open and written != self._flushed:
+            self._writer.flush()
+            self._flushed = written
 
     def _discover(self):
         if not self._pending:
@@ -127,7 +143,14 @@ class BalanceRecorder(Node):
         self.get_logger().info(f'bag {self._writer.path} closed; messages written: '
                                f'{summary or "none"}')
         if self._pending:
-            self.get_logger().warn(f'never saw publishers on {", ".join(self._pending)}')
+            # the defaults cover every interface topic and a run publishes only some of them: a
+            # silent default topic is not news, a silent topic the user added is
+            quiet = [t for t in self._pending if t in self._default_topics]
+            odd = [t for t in self._pending if t not in self._default_topics]
+            if quiet:
+                self.get_logger().info(f'no publishers seen on {", ".join(quiet)}')
+            if odd:
+                self.get_logger().warn(f'never saw publishers on {", ".join(odd)}')
 
 
 def main(args=None):

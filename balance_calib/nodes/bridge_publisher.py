@@ -1,7 +1,8 @@
 """bridge_publisher: a simulated balance (or a recorded bag) on /balance/raw, in real time.
 
 Modes (parameter `mode`):
-  calibration   plays the balance config's load schedule (Appendix A/B) like a real campaign:
+  calibration   plays the balance config's load schedule (Appendix A/B), or the one of parameter
+                `schedule_file`, like a real campaign:
                 /calibration/gravity when the body is rotated, /calibration/applied_load when a
                 point settles (all NaN while weights are changed), /balance/raw (mV) and
                 /balance/temperature (°C). Simulated by simulation.balance_sim.simulate_campaign.
@@ -45,10 +46,12 @@ from balance_calib.bags.errors import BagError
 from balance_calib.config import ConfigError, load_balance_config
 from balance_calib.live import timeline as tl
 from balance_calib.live.replay import read_recorded_messages
+from balance_calib.refit.gates import acceptance_limits
+from balance_calib.schedule_file import schedule_for
 from balance_calib.aero.model_file import load_model
 from balance_calib.live.wind_on import aero_run_profile, aoa_sweep_profile, csv_profile, wind_on_outputs
-from balance_calib.simulation.balance_sim import (SimulationSettings, noise_mv_for_load_sigma, simulate_campaign,
-                                                  table17_noise)
+from balance_calib.simulation.balance_sim import (noise_mv_for_load_sigma, paced_settings,
+                                                  simulate_campaign, table17_noise)
 from balance_calib.simulation.effects import parse_effects
 from balance_calib.tunnel_axes import parse_installation
 
@@ -66,6 +69,9 @@ PARAMETERS = {                       # name: default (the type of the default is
     'physical_seconds_per_point': 90.0,   # calibration: the campaign's temperature and drift follow
                                           # a real one of this many seconds a point, however fast it plays
     'points': '',                    # e.g. '1-60,100' (point numbers as printed); '' = all
+    'schedule_file': '',             # calibration: a load schedule CSV (layout of the
+                                     # Appendix A/B sheets, e.g. from balance-calib design);
+                                     # '' = the config's
     'speed': 1.0,                    # simulated (or recorded) seconds per real second
     'bag': '',                       # replay: bag directory or .mcap; several separated by commas
     'profile_csv': '',               # wind_on: time_s,FX,FY,FZ,MX,MY,MZ (balance axes); '' = α sweep
@@ -90,6 +96,8 @@ PARAMETERS = {                       # name: default (the type of the default is
     'wait_for_subscribers': 0,       # start only when /balance/raw has this many subscribers (with aero_model
                                      # /model/attitude and /tunnel/dynamic_pressure too) ...
     'start_delay_s': 0.5,            # ... and this long after, so their other topics are matched too
+    'wait_for_subscribers_timeout_s': 30.0,   # give up (exit status 1) after waiting this long for
+                                              # them, s; 0 = wait for ever
 }
 RAW_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 # timeline kinds of the physical wind-on run, after live/timeline.py's
@@ -126,8 +134,9 @@ class BridgePublisher(Node):
         self._start = None
         self._last_time_s = None
         self._stamp_ns = 0
-        self._waiting_logged = False
+        self._waiting_since = None
         self._ready_at = None
+        self.failure = ''                       # why the run gave up (then done completes too)
         tick_hz = min(max(float(self._settings['rate_hz']), 20.0), 250.0)
         self._timer = self.create_timer(1.0 / tick_hz, self._on_tick)
         self.get_logger().info(f'{self.mode}: {len(self._timeline)} events over '
@@ -154,7 +163,11 @@ class BridgePublisher(Node):
 
     def _calibration(self):
         config, truth, noise = self._balance()
-        schedule = tl.select_points(config.schedule, self._settings['points'])
+        schedule_file = str(self._settings['schedule_file'])
+        schedule = config.schedule
+        if schedule_file:     # within capacity as the refit's capacity gate will judge it
+            schedule = schedule_for(config, schedule_file, acceptance_limits(config).capacity_margin)
+        schedule = tl.select_points(schedule, self._settings['points'])
         effects = parse_effects(self._settings['effects'])
         rate, duration, transition = float(self._settings['rate_hz']), float(self._settings['point_duration_s']), \
             float(self._settings['transition_s'])
@@ -164,12 +177,9 @@ class BridgePublisher(Node):
         self._publisher(tl.APPLIED_LOAD, WrenchStamped, '/calibration/applied_load')
 
         def build(cycle):
-            settings = SimulationSettings(
-                samples_per_point=max(1, round(duration * rate)), sample_rate_hz=rate,
-                point_duration_s=duration, transition_s=transition,
-                transition_samples=round(transition * rate), noise_sigma_pct_fs=noise,
-                seed=int(self._settings['seed']) + cycle,
-                time_scale=float(self._settings['physical_seconds_per_point']) / max(duration + transition, 1e-9))
+            settings = paced_settings(rate, duration, transition, noise,
+                                      int(self._settings['seed']) + cycle,
+                                      float(self._settings['physical_seconds_per_point']))
             campaign = simulate_campaign(config, truth, schedule=schedule, settings=settings, effects=effects)
             return tl.campaign_timeline(campaign, transition, self._temperature_every())
         return build
@@ -312,10 +322,12 @@ class BridgePublisher(Node):
                       if k in self._outputs and self.mode == 'calibration']
             if wanted > 0 and raw is not None and (min(p.get_subscription_count() for p in gated) < wanted
                                                    or any(p.get_subscription_count() < 1 for p in events)):
-                if not self._waiting_logged:
-                    self.get_logger().info(f'waiting for {wanted} subscriber(s) on /balance/raw'
-                                           + (' and the attitude and dynamic pressure' if len(gated) > 1 else ''))
-                    self._waiting_logged = True
+                what = (f'{wanted} subscriber(s) on /balance/raw'
+                        + (' and the attitude and dynamic pressure' if len(gated) > 1 else ''))
+                if self._waiting_since is None:
+                    self.get_logger().info(f'waiting for {what}')
+                    self._waiting_since = now
+                self._give_up_if_waited_too_long(now, what, gated, events)
                 return
             self._ready_at = self._ready_at or now
             if (now - self._ready_at).nanoseconds * 1e-9 < float(self._settings['start_delay_s']):
@@ -328,6 +340,19 @@ class BridgePublisher(Node):
         self._cursor = end
         if self._cursor >= len(self._timeline):
             self._finish(now)
+
+    def _give_up_if_waited_too_long(self, now: Time, what: str, gated, events) -> None:
+        limit = float(self._settings['wait_for_subscribers_timeout_s'])
+        waited = (now - self._waiting_since).nanoseconds * 1e-9
+        if limit <= 0 or waited < limit:
+            return
+        seen = ', '.join(f'{p.topic_name} {p.get_subscription_count()}' for p in gated + events)
+        self.failure = (f'gave up after {limit:g} s waiting for {what} (subscribers seen: {seen}); '
+                        'start the subscribers first, or set wait_for_subscribers or '
+                        'wait_for_subscribers_timeout_s')
+        self._timer.cancel()
+        if not self.done.done():
+            self.done.set_result(False)
 
     def _stamp(self, time_s: float, now: Time):
         if time_s != self._last_time_s:      # a new sampling instant: a new, strictly later stamp
@@ -391,6 +416,9 @@ def main(args=None):
     try:
         node = BridgePublisher()
         rclpy.spin_until_future_complete(node, node.done)
+        if node.failure:
+            rclpy.logging.get_logger('bridge_publisher').error(node.failure)
+            status = 1
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except StartupError as err:

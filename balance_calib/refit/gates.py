@@ -19,6 +19,9 @@ calibration.yaml is written or swapped in:
     capacity           applied loads within the rated loads
     clipping           no bridge flat-topped at one value (an amplifier or ADC at its limit)
     marker_order       applied_load stamps in the order they were recorded
+    schedule           the load points found are the schedule's (Appendix A/B, or the one the
+                       campaign ran): at most a share of its points missing in all, and of the
+                       points loading each component (markers dropped, a session lost)
 
 Limits come from the balance config's `acceptance:` mapping, with the defaults below. Each gate
 gives one line a person can act on. A failed gate raises nothing here: the pipeline decides
@@ -31,7 +34,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..config import BalanceConfig, ConfigError
+from ..config import BalanceConfig, ConfigError, LoadSchedule
 from ..fit.crossval import press_residuals
 from ..model.inverse import linear_part
 
@@ -43,6 +46,9 @@ DEFAULT_SENSITIVITY_ACTIVE_TOLERANCE = 0.05
 DEFAULT_BODY_WEIGHT_TOLERANCE = 0.10
 DEFAULT_CAPACITY_MARGIN = 0.05
 DEFAULT_ZERO_SHIFT_PCT_FS = 2.0        # between consecutive zero points of one block
+DEFAULT_MISSING_POINTS_SHARE = 0.10    # of the schedule's points, at most
+DEFAULT_MISSING_COMPONENT_SHARE = 0.20  # of the scheduled points loading one component, at most
+SCHEDULE_MATCH_PCT_FS = 0.5            # a found point is a scheduled one: every load this close
 
 
 @dataclass(frozen=True)
@@ -55,6 +61,8 @@ class AcceptanceLimits:
     body_weight_tolerance: float = DEFAULT_BODY_WEIGHT_TOLERANCE
     capacity_margin: float = DEFAULT_CAPACITY_MARGIN
     zero_shift_pct_fs: float = DEFAULT_ZERO_SHIFT_PCT_FS
+    missing_points_share: float = DEFAULT_MISSING_POINTS_SHARE
+    missing_component_share: float = DEFAULT_MISSING_COMPONENT_SHARE
 
 
 def acceptance_limits(config: BalanceConfig, base_model: str = 'cubic') -> AcceptanceLimits:
@@ -77,7 +85,7 @@ def acceptance_limits(config: BalanceConfig, base_model: str = 'cubic') -> Accep
     numbers = {}
     for key in ('outlier_robust_sigmas', 'outlier_floor_pct_fs', 'sensitivity_nominal_tolerance',
                 'sensitivity_active_tolerance', 'body_weight_tolerance', 'capacity_margin',
-                'zero_shift_pct_fs'):
+                'zero_shift_pct_fs', 'missing_points_share', 'missing_component_share'):
         if key in data:
             numbers[key] = _positive(data[key], f'{where}.{key}')
     unknown = set(data) - {'sigma_limit_pct_fs', *AcceptanceLimits.__dataclass_fields__}
@@ -130,11 +138,15 @@ def _plain(value):
 # -- the gates ------------------------------------------------------------------------------------
 
 def data_gates(config: BalanceConfig, points, reduction, fits, cut=None, active=None,
-               limits: AcceptanceLimits | None = None) -> list[Gate]:
+               limits: AcceptanceLimits | None = None,
+               schedule: LoadSchedule | None = None) -> list[Gate]:
     """Gates on the data and the sensitivities, before the (slow) diagnosis. points: LoadPoints;
-    fits: order -> ModelFit; cut: load_points.CutSummary or None; active: Calibration or None."""
+    fits: order -> ModelFit; cut: load_points.CutSummary or None; active: Calibration or None;
+    schedule: the one the campaign ran (None: the balance config's own)."""
     limits = limits or acceptance_limits(config)
-    gates = [_sensitivity_gate(config, fits, limits)]
+    gates = [_sensitivity_gate(config, fits, limits),
+             schedule_gate(config, points, schedule if schedule is not None else config.schedule,
+                           limits)]
     if active is not None:
         gates.append(_active_gate(config, fits, active, limits))
     gates += [_zero_gate(config, points, reduction, limits), _body_gate(config, reduction, limits),
@@ -162,12 +174,13 @@ def base_fit_arrays(reduction, base_fit) -> tuple[np.ndarray, np.ndarray]:
 
 
 def evaluate_gates(config: BalanceConfig, points, reduction, fits, base_model: str, cut=None,
-                   active=None, limits: AcceptanceLimits | None = None) -> list[Gate]:
+                   active=None, limits: AcceptanceLimits | None = None,
+                   schedule: LoadSchedule | None = None) -> list[Gate]:
     """All gates, σ and outliers on the base model (no diagnosis)."""
     limits = limits or acceptance_limits(config, base_model)
     residuals, press = base_fit_arrays(reduction, fits[base_model])
     return (fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits)
-            + data_gates(config, points, reduction, fits, cut, active, limits))
+            + data_gates(config, points, reduction, fits, cut, active, limits, schedule))
 
 
 OUTPUT_RANGE = (0.05, 20.0)     # largest |zeroed output| / rated output, per bridge
@@ -392,3 +405,94 @@ def _marker_gate(cut) -> Gate:
                                            f'before the one recorded ahead of it ({cut.markers_out_of_order} '
                                            f'marker(s) out of time order): points cannot be trusted', details)
     return Gate('marker_order', True, 'applied_load markers in time order', details)
+
+
+def match_schedule(applied_loads: np.ndarray, orientation: np.ndarray, schedule: LoadSchedule,
+                   tolerance: np.ndarray) -> np.ndarray:
+    """Which schedule row each found load point is, or -1 for a point the schedule does not have.
+
+    Parameters
+    ----------
+    applied_loads : (P, n) N, N·m, the points' applied loads (body weight excluded).
+    orientation : (P,) I_g of each point.
+    schedule : the schedule's N rows, loads in the same components and units.
+    tolerance : (n,) N, N·m: a point is a row when every load is this close.
+
+    Returns
+    -------
+    (P,) int: each schedule row is taken by one point at most (the first in the points' order),
+    a row of the point's own I_g before a row of another (a schedule repeats loads at each I_g).
+    """
+    found = np.asarray(applied_loads, float)
+    rows = np.asarray(schedule.loads, float)
+    close = np.all(np.abs(found[:, None, :] - rows[None, :, :]) <= tolerance, axis=2)     # (P, N)
+    same_ig = np.asarray(orientation)[:, None] == np.asarray(schedule.orientation)[None, :]
+    taken = np.zeros(len(rows), bool)
+    match = np.full(len(found), -1)
+    for p in np.flatnonzero(close.any(axis=1)):
+        for candidates in (close[p] & same_ig[p] & ~taken, close[p] & ~taken):
+            if candidates.any():
+                match[p] = int(np.argmax(candidates))
+                taken[match[p]] = True
+                break
+    return match
+
+
+def schedule_gate(config: BalanceConfig, points, schedule: LoadSchedule | None,
+                  limits: AcceptanceLimits | None = None) -> Gate:
+    """The load points found against the schedule the campaign ran: count and coverage.
+
+    A campaign that lost a share of its points (applied_load markers dropped, a session or a
+    bag missing) still fits, but its calibration rests on fewer points than the schedule was
+    designed with, and a component may have lost the loads that determine its terms. Refused when
+    more than `missing_points_share` of the schedule's points are missing, or more than
+    `missing_component_share` of the points loading one component (in either direction).
+
+    points: LoadPoints (P,); schedule: LoadSchedule (N,) in the config's components, or None.
+    """
+    limits = limits or acceptance_limits(config)
+    if schedule is None or len(schedule) == 0:
+        return Gate('schedule', True, 'no load schedule to compare the points with')
+    capacity = np.asarray(config.capacity, float)
+    tolerance = SCHEDULE_MATCH_PCT_FS / 100.0 * capacity
+    match = match_schedule(points.applied_loads, points.orientation, schedule, tolerance)
+    expected = len(schedule)
+    found = np.zeros(expected, bool)
+    found[match[match >= 0]] = True
+    missing = expected - int(found.sum())
+    extra = int(np.count_nonzero(match < 0))
+    share = missing / expected
+    rows = np.asarray(schedule.loads, float)
+    coverage, lost = {}, []
+    for k, component in enumerate(config.components):
+        entry = {}
+        for sign, side in ((1.0, '+'), (-1.0, '-')):
+            loading = sign * rows[:, k] > tolerance[k]
+            if loading.any():
+                entry[side] = [int(np.count_nonzero(found & loading)),
+                               int(np.count_nonzero(loading))]
+        if not entry:
+            continue
+        got = sum(e[0] for e in entry.values())
+        of = sum(e[1] for e in entry.values())
+        coverage[component] = {'found': got, 'expected': of, **entry}
+        short = [side for side, (g, n) in entry.items() if g == 0]
+        if (of - got) / of > limits.missing_component_share or short:
+            none = f' (none {component}{short[0]})' if short else ''
+            lost.append(f'{component} {got} of {of}{none}')
+    details = {'expected': expected, 'found': expected - missing, 'missing': missing,
+               'not_in_schedule': extra, 'missing_share': share, 'coverage': coverage,
+               'limit_share': limits.missing_points_share,
+               'limit_component_share': limits.missing_component_share,
+               'missing_points': [int(p) for p in np.asarray(schedule.point)[~found][:50]]}
+    counts = (f'{expected - missing} of the {expected} scheduled points found ({missing} missing, '
+              f'{100 * share:.0f} %')
+    unknown = f'; {extra} point(s) not in the schedule' if extra else ''
+    if share > limits.missing_points_share or lost:
+        hint = ('; a campaign of another schedule (--schedule FILE)?' if extra > missing / 2
+                else '; applied_load markers or a session lost?')
+        coverage_text = '; lost coverage: ' + ', '.join(lost) if lost else ''
+        return Gate('schedule', False, f'{counts}, limit {100 * limits.missing_points_share:g} %)'
+                                       f'{coverage_text}{unknown}{hint}', details)
+    return Gate('schedule', True, f'{counts}, within {100 * limits.missing_points_share:g} %; '
+                                  f'every component covered){unknown}', details)

@@ -60,6 +60,8 @@ class CutSummary:
     point_samples: np.ndarray | None = field(default=None, compare=False, repr=False)         # (P,)
 
 
+# An applied load beyond this many rated loads is no calibration weight.
+ABSURD_LOAD_CAPACITIES = 1000.0
 # A pause longer than this many typical point spacings separates two sessions.
 PAUSE_SPACINGS = 10.0
 # A point's samples end at most this many typical marker periods after its marker.
@@ -173,6 +175,20 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
         raise LoadPointError(f'{source}: {names.applied_load} message {bad + 1} has some but not all fields NaN')
     if np.any(~np.isfinite(marker_loads[is_point])):
         raise LoadPointError(f'{source}: {names.applied_load} has infinite loads')
+    if config is not None:
+        # no calibration weight is 1000x the rated load: a flipped exponent bit or wrong units,
+        # which would overflow the fits long before the capacity gate could name it
+        capacity = np.asarray(config.capacity, float)
+        factor = np.abs(marker_loads) / (ABSURD_LOAD_CAPACITIES * capacity)
+        absurd = np.flatnonzero(is_point & np.any(factor > 1.0, axis=1))
+        if len(absurd):
+            i = int(absurd[0])
+            k = int(np.argmax(factor[i]))
+            raise LoadPointError(f'{source}: {names.applied_load} message {i + 1}: '
+                                 f'{config.components[k]} {marker_loads[i, k]:.4g} is beyond '
+                                 f'{ABSURD_LOAD_CAPACITIES:g}x its rated load {capacity[k]:g} '
+                                 f'({len(absurd)} such message(s)): a corrupted value or wrong '
+                                 f'units')
     point_index = np.flatnonzero(is_point)
     first_gravity = gravity.stamps_ns.min()
     if marker_stamps[point_index[0]] < first_gravity:

@@ -10,11 +10,9 @@ and moved into place only when complete, so a failure or a kill leaves `out_dir`
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
@@ -22,11 +20,12 @@ import numpy as np
 
 from ..accuracy.sigma import sigma_by_component
 from ..calibration_file import Calibration, ConfigError, now_iso, save_calibration
-from ..config import BalanceConfig, load_balance_config
+from ..config import BalanceConfig, LoadSchedule, load_balance_config
 from ..fit.crossval import press_residuals
 from ..fit.least_squares import FitResult, UnexcitedTermsError, fit_model
 from ..model.inverse import InverseDidNotConverge
 from ..model.tm663 import MODEL_ORDERS, tm663_terms
+from ..schedule_file import schedule_for
 from ..reduction import LoadPoints, Reduction, reduce_points, retare_with_model
 from ..zero_points import ZeroPointError
 from .load_points import CutSummary, LoadPointError, cut_load_points
@@ -89,11 +88,13 @@ def _fit_all(reduction: Reduction, config: BalanceConfig, orders: Sequence[str])
 def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: str = 'cubic',
                      diagnose: bool = True, estimate_body: bool = True, progress: Progress | None = None,
                      cut: CutSummary | None = None, sources: Sequence[str] = (),
-                     active: Calibration | None = None, force: bool = False) -> CalibrationResult:
+                     active: Calibration | None = None, force: bool = False,
+                     schedule: LoadSchedule | None = None) -> CalibrationResult:
     """Everything after the load points; pure (writes nothing).
 
     Raises RefitError when an acceptance gate fails (refit/gates.py), unless force; active is the
-    calibration in use, whose sensitivities the new one must stay near.
+    calibration in use, whose sensitivities the new one must stay near; schedule the load
+    schedule the campaign ran (None: the balance config's own), which the points must cover.
     """
     from .gates import (acceptance_limits, base_fit_arrays, data_gates, failed, fit_gates, gates_report,
                         output_range_gate)
@@ -119,7 +120,8 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
     except (np.linalg.LinAlgError, FloatingPointError, ValueError) as err:
         # absurd numbers that survived the edges (a flipped exponent bit): say so, never a traceback
         raise RefitError(f'{_where(sources)}: the load points cannot be fitted ({" ".join(str(err).split())})') from None
-    gates = [range_gate] + data_gates(config, points, reduction, fits, cut, active, limits)
+    gates = [range_gate] + data_gates(config, points, reduction, fits, cut, active, limits,
+                                      schedule)
     if not diagnose:
         residuals, press = base_fit_arrays(reduction, fits[base_model])
         gates += fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits)
@@ -145,6 +147,7 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
     calibration = build_calibration(config, reduction, fits, base_model, diagnosis, sources)
     report = build_report(config, points, reduction, fits, base_model, diagnosis, cut, sources)
     report['acceptance'] = gates_report(gates, forced=force)
+    report['warnings'] = list(report.get('warnings', [])) + _missing_points_warning(gates)
     if cut is not None:
         report['sessions'] = {'count': len(cut.pauses_s) + 1, 'pauses_s': [round(p, 1) for p in cut.pauses_s]}
     bad = failed(gates)
@@ -160,12 +163,21 @@ def _refuse_unless_forced(gates, force: bool, sources: Sequence[str], say: Progr
         say(f'gate {gate.name}: {"ok" if gate.passed else "FAILED"}: {gate.reason}')
     # the most specific cause first: a unit error also spoils σ, not the other way round
     priority = ('marker_order', 'clipping', 'output_range', 'sensitivity', 'active_calibration', 'capacity', 'body_weight',
-                'zero_points', 'outliers', 'sigma')
+                'zero_points', 'schedule', 'outliers', 'sigma')
     bad = sorted(failed(gates), key=lambda g: priority.index(g.name) if g.name in priority else len(priority))
     if bad and not force:
         also = f' (also failed: {", ".join(g.name for g in bad[1:])})' if len(bad) > 1 else ''
         raise RefitError(f'{_where(sources)}: refused by acceptance gate {bad[0].name}: {bad[0].reason}{also}; '
                          f'nothing written (--force writes it anyway)')
+
+
+def _missing_points_warning(gates) -> list[str]:
+    """A campaign that lost a few of its scheduled points passes the schedule gate: say so."""
+    gate = next((g for g in gates if g.name == 'schedule'), None)
+    if gate is None or not gate.passed or not gate.details.get('missing'):
+        return []
+    return [f'{gate.details["missing"]} of the schedule\'s {gate.details["expected"]} points are '
+            f'missing from the campaign (within the schedule gate\'s limit): {gate.reason}']
 
 
 def _named(text: str, sources: Sequence[str]) -> str:
@@ -215,28 +227,39 @@ def _run_diagnosis(reduction, config, base_model, base_fit, say, cut=None):
 def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str | Path, *,
               model: str = 'cubic', diagnose: bool = True, estimate_body: bool = True,
               progress: Progress | None = None, plots: bool = True, force: bool = False,
-              salvage: bool = False, active_calibration: Calibration | str | Path | None = None) -> RefitResult:
+              salvage: bool = False, active_calibration: Calibration | str | Path | None = None,
+              overwrite: bool = True, schedule: str | Path | None = None) -> RefitResult:
     """Refit from bags and write calibration.yaml, report.json, report.md and plots into out_dir.
 
     Every input error, integrity failure (bags/reader.py) and failed acceptance gate raises
     RefitError with one line naming the file; `out_dir` is checked before any work. force writes
     a calibration that failed a gate (marked in the report); salvage reads what is intact of a
     damaged bag and the report says what was lost; active_calibration (a Calibration or a file)
-    is the calibration in use, which the new one's sensitivities must stay near.
+    is the calibration in use, which the new one's sensitivities must stay near. overwrite: an
+    out_dir holding an earlier calibration record is replaced (the command line refuses it unless
+    --overwrite; output_dir.py). schedule (a CSV in the layout of ../data/*_schedule.csv): the
+    schedule the campaign ran when it is not the balance config's own; it replaces
+    config.schedule, which the gates (the schedule gate among them) judge the campaign against.
     """
     from ..bags.errors import BagError
     from ..bags.reader import read_bags
     from ..calibration_file import load_calibration
+    from ..simulation.campaign_bag import SIMULATION_TOPIC
     say = progress or (lambda message: None)
     started = time.monotonic()
     paths = [Path(p) for p in bag_paths]
     if not paths:
         raise RefitError('no bags given (parameter calibration_bags is empty)')
     out_dir = Path(out_dir)
-    check_out_dir(out_dir)
+    check_out_dir(out_dir, overwrite)
     _require_regular_file(balance, 'balance config')
     try:
         config = load_balance_config(balance)
+        if schedule is not None:
+            _require_regular_file(schedule, 'schedule')
+            from .gates import acceptance_limits
+            margin = acceptance_limits(config, model).capacity_margin
+            config = replace(config, schedule=schedule_for(config, schedule, margin))
     except ConfigError as err:
         raise RefitError(str(err)) from None
     active = active_calibration
@@ -244,8 +267,9 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
         _require_regular_file(active, 'active calibration')
         try:
             active = load_calibration(active)
-        except (ConfigError, OSError) as err:
-            raise RefitError(f'active calibration {active}: {err}') from None
+        except (ConfigError, OSError) as err:     # ConfigError names the file (and line) itself
+            text = str(err) if str(err).startswith(str(active)) else f'{active}: {err}'
+            raise RefitError(f'active calibration {text}') from None
     say(f'reading {len(paths)} bag(s)...')
 
     said = ['']
@@ -258,7 +282,7 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
 
     try:
         bag = read_bags(paths, required=('raw', 'applied_load', 'gravity'), progress=bag_progress,
-                        salvage=salvage)
+                        salvage=salvage, extra_topics=(SIMULATION_TOPIC,))
     except BagError as err:
         raise RefitError(str(err)) from None
     for loss in bag.losses:
@@ -279,8 +303,12 @@ def run_refit(bag_paths: Sequence[str | Path], balance: str | Path, out_dir: str
     result.report['bag_integrity'] = {'salvaged': bool(salvage and bag.losses), 'lost': list(bag.losses),
                                       'messages_read': dict(bag.message_counts)}
     result.report['wall_time_s'] = round(time.monotonic() - started, 3)
+    simulated = bag.extra.get(SIMULATION_TOPIC)
+    if simulated is not None and len(simulated.messages) and 'record' in result.report:
+        # the stamps are a simulator's clock: the report must not date a campaign by them
+        result.report['record']['campaign']['clock'] = str(simulated.messages[0].data)
     say(f'writing calibration.yaml, report.json, report.md{" and plots" if plots else ""} into {out_dir}')
-    out = write_outputs(result, out_dir, plots=plots)
+    out = write_outputs(result, out_dir, plots=plots, overwrite=overwrite)
     say(f'wrote {out}')
     return RefitResult(result.calibration, out_dir / 'calibration.yaml', result.report,
                        summary_line(result.report), out_dir)
@@ -293,34 +321,15 @@ def summary_line(report: Mapping) -> str:
     return f'{report["balance"]}: {report["points"]} points; σ % FS {parts}; effects: {effects}'
 
 
-def _writable(directory: Path) -> bool:
-    try:  # os.access says yes to root everywhere: try it
-        with tempfile.TemporaryFile(dir=directory, prefix='.refit-probe-'):
-            return True
-    except OSError:
-        return False
+def check_out_dir(out_dir: Path, overwrite: bool = True) -> Path:
+    """output_dir.check_out_dir with its refusal as a RefitError (before any work)."""
+    from ..output_dir import OutputError, check_out_dir as check
+    try:
+        return check(out_dir, overwrite=overwrite)
+    except OutputError as err:
+        raise RefitError(str(err)) from None
 
 
-def check_out_dir(out_dir: Path) -> Path:
-    """Refuse, before any work, an --out that is not a directory or cannot be written.
-
-    Returns where to stage the outputs: DIR's parent (so that a new DIR appears with one rename),
-    or DIR itself when only DIR is writable.
-    """
-    out_dir = Path(out_dir).absolute()
-    if out_dir.exists() and not out_dir.is_dir():
-        raise RefitError(f'{out_dir}: --out exists and is not a directory')
-    base = next((p for p in [out_dir, *out_dir.parents] if p.exists()), Path('/'))
-    if not base.is_dir():
-        raise RefitError(f'{out_dir}: cannot create the output directory ({base} is not a directory)')
-    if not _writable(base):
-        raise RefitError(f'{out_dir}: output directory not writable ({base} is not writable)')
-    if out_dir.exists() and not _writable(out_dir.parent):
-        return out_dir
-    return out_dir.parent
-
-
-_STAGING_PREFIX = '.refit-staging-'
 _MAX_CONFIG_BYTES = 64 * 1024 * 1024
 
 
@@ -337,40 +346,18 @@ def _require_regular_file(path: str | Path, what: str) -> None:
         raise RefitError(f'{path}: {what} of {path.stat().st_size} bytes is too large')
 
 
-def _clean_stale_staging(parent: Path, name: str) -> None:
-    """Remove staging directories of killed refits (their process is gone)."""
-    for stale in parent.glob(f'{_STAGING_PREFIX}{name}-*'):
-        try:
-            pid = int(stale.name.rsplit('-', 2)[-2])
-        except (ValueError, IndexError):
-            continue
-        if pid != os.getpid() and not _alive(pid):
-            shutil.rmtree(stale, ignore_errors=True)
+def write_outputs(result: CalibrationResult, out_dir: Path, *, plots: bool = True,
+                  overwrite: bool = True) -> Path:
+    """Write the files into a staging directory, then move them in (nothing half-written).
 
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def write_outputs(result: CalibrationResult, out_dir: Path, *, plots: bool = True) -> Path:
-    """Write the files into a staging directory beside out_dir, then move them in (nothing half-written).
-
-    The staging directory (named after this process, so that a later run removes it if this one is
-    killed) lies in out_dir's parent: a new out_dir appears whole with one rename; into an existing
-    one each file is replaced by a rename. Files are readable by others (0644, directory 0755).
+    output_dir.py says how: a new out_dir appears whole with one rename; into an existing one
+    (allowed with overwrite) the earlier run's outputs not written again are removed and each
+    file is replaced by a rename. Files are readable by others (0644, directory 0755).
     """
+    from ..output_dir import install_outputs, make_staging
     from .report import report_markdown
     out_dir = Path(out_dir)
-    parent = check_out_dir(out_dir)
-    parent.mkdir(parents=True, exist_ok=True)
-    _clean_stale_staging(parent, out_dir.name)
-    staging = Path(tempfile.mkdtemp(prefix=f'{_STAGING_PREFIX}{out_dir.name}-{os.getpid()}-', dir=parent))
+    staging = make_staging(out_dir, check_out_dir(out_dir, overwrite), 'refit')
     try:
         save_calibration(staging / 'calibration.yaml', result.calibration)
         figures = []
@@ -381,19 +368,10 @@ def write_outputs(result: CalibrationResult, out_dir: Path, *, plots: bool = Tru
         result.report.setdefault('plots', [f.name for f in figures])
         (staging / 'report.json').write_text(json.dumps(result.report, indent=2, allow_nan=False) + '\n')
         (staging / 'report.md').write_text(report_markdown(result.report, result))
-        for item in staging.iterdir():
-            os.chmod(item, 0o644)
-        os.chmod(staging, 0o755)
-        try:
-            os.rename(staging, out_dir)       # a new or empty out_dir: one atomic rename
-        except OSError:
-            out_dir.mkdir(parents=True, exist_ok=True)
-            # calibration.yaml last: whoever watches it sees the report of the same refit
-            for item in sorted(staging.iterdir(), key=lambda p: p.name == 'calibration.yaml'):
-                item.replace(out_dir / item.name)
-    finally:
+    except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
-    return out_dir
+        raise
+    return install_outputs(staging, out_dir, overwrite=overwrite)
 
 
 def campaign_points(campaign) -> LoadPoints:

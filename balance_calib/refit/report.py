@@ -81,8 +81,21 @@ def build_calibration(config, reduction, fits, base_model, diagnosis, sources: S
         {'calibration_body': {'weight_n': round(body.weight_n, 4), 'cg_m': [round(x, 6) for x in body.cg_m],
                               'source': source},
          'points': int(len(reduction.points.label)), 'sources': list(sources),
+         # where the schedule put loads, alone and in pairs: `coverage` tells a run outside it
+         'support': _support(config, reduction, models[base_model]),
          'effects': [e['name'] for e in effects],
          'sigma_pct_fs_base': _round(before)})
+
+
+def _support(config, reduction, base) -> dict:
+    """The schedule's support (coverage/support.py) in the base model's terms, for
+    calibration.yaml."""
+    from ..coverage.support import support_of_points
+    from ..model.uncertainty import covariance_and_sigma
+    covariance, _ = covariance_and_sigma(base)
+    corrected = reduction.corrected
+    return support_of_points(corrected.loads, base.design(corrected.bridge_outputs_mv), covariance,
+                             config.capacity, config.components, base.name).to_dict()
 
 
 def build_report(config, points, reduction, fits, base_model, diagnosis, cut, sources) -> dict:

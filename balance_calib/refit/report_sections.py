@@ -178,6 +178,8 @@ def record_markdown(report: Mapping) -> list[str]:
     campaign = record['campaign']
     span = (f'{campaign["first_point_utc"]} to {campaign["last_point_utc"]} UTC'
             if 'first_point_utc' in campaign else 'simulated clock (no wall-clock date)')
+    if campaign.get('clock'):         # a simulated bag says so (simulation/campaign_bag.py)
+        span += f' — {campaign["clock"]}'
     temperature_text = (f'{temperature["min"]:.2f} to {temperature["max"]:.2f} °C '
                         f'(mean {temperature["mean"]:.2f} °C, {temperature["points_with_temperature"]} points)'
                         if temperature

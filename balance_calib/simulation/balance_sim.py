@@ -93,6 +93,27 @@ class SimulationSettings:
     time_scale: float = 1.0
 
 
+def paced_settings(rate_hz: float, point_duration_s: float, transition_s: float,
+                   noise_sigma_pct_fs, seed: int,
+                   physical_seconds_per_point: float) -> SimulationSettings:
+    """A campaign played in real time (bridge_publisher's calibration mode).
+
+    Parameters
+    ----------
+    rate_hz : samples per second, also while the weights change (transition samples)
+    point_duration_s, transition_s : s a point is held, s its weights take to change
+    noise_sigma_pct_fs : (6,) or float, σ of a held point's mean, % FS
+    seed : of the noise
+    physical_seconds_per_point : s of a real campaign's point, which temperature and drift follow
+    """
+    return SimulationSettings(
+        samples_per_point=max(1, round(point_duration_s * rate_hz)), sample_rate_hz=rate_hz,
+        point_duration_s=point_duration_s, transition_s=transition_s,
+        transition_samples=round(transition_s * rate_hz), noise_sigma_pct_fs=noise_sigma_pct_fs,
+        seed=seed,
+        time_scale=physical_seconds_per_point / max(point_duration_s + transition_s, 1e-9))
+
+
 def noise_mv_for_load_sigma(truth: BalanceModel, capacity, sigma_pct_fs) -> np.ndarray:
     """Per-bridge output noise (mV) that gives a load noise of sigma_pct_fs (% FS) per component."""
     from scipy.optimize import nnls

@@ -3,7 +3,9 @@
 The messages are the ones `bridge_publisher` publishes in calibration mode: /calibration/gravity
 on every orientation change, an all-NaN /calibration/applied_load while weights change, the load
 when a point settles, /balance/raw samples in mV and /balance/temperature. Serialised with the
-rosbags type store (CDR), written by bags.writer.BagWriter.
+rosbags type store (CDR), written by bags.writer.BagWriter. One message on SIMULATION_TOPIC (this
+simulation only, as /aero/truth is for wind-on runs) says that the stamps are the simulator's
+clock, so that a report of the bag does not present them as the date of a campaign.
 """
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ from ..bags.writer import BagWriter, qos_profiles_yaml
 from .balance_sim import Campaign
 
 _STORE = None
+SIMULATION_TOPIC = '/simulation/campaign'     # std_msgs/String: the stamps are a simulated clock
 RELIABLE_QOS = [{'history': 'keep_last', 'depth': 1000, 'reliability': 'reliable', 'durability': 'volatile'}]
 LATCHED_QOS = [{'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'transient_local'}]
 
@@ -60,6 +63,20 @@ def _temperature(ns: int, frame: str, value: float) -> bytes:
     return store.serialize_cdr(msg, 'sensor_msgs/msg/Temperature')
 
 
+def simulated_clock_note(start_ns: int) -> str:
+    """The text of SIMULATION_TOPIC's message for a campaign whose clock starts at start_ns."""
+    import datetime as _dt
+    start = _dt.datetime.fromtimestamp(start_ns / 1e9, _dt.timezone.utc)
+    return (f'simulated campaign (balance_calib): stamps are the simulation\'s clock, started at '
+            f'{start.isoformat(timespec="seconds")}, not the date of a campaign')
+
+
+def _note(text: str) -> bytes:
+    store = _store()
+    message = store.types['std_msgs/msg/String'](data=text)
+    return store.serialize_cdr(message, 'std_msgs/msg/String')
+
+
 def write_campaign_bag(campaign: Campaign, path: str | Path, *, start_ns: int = 1_700_000_000 * 10 ** 9,
                        temperature_every: int = 1, points: slice | None = None) -> Path:
     """Write the campaign (or a slice of its points) as a rosbag2 MCAP bag directory at path."""
@@ -74,7 +91,9 @@ def write_campaign_bag(campaign: Campaign, path: str | Path, *, start_ns: int = 
         writer.add_topic('/balance/temperature', 'sensor_msgs/msg/Temperature', qos_profiles_yaml(RELIABLE_QOS))
         writer.add_topic('/calibration/applied_load', 'geometry_msgs/msg/WrenchStamped', qos_profiles_yaml(RELIABLE_QOS))
         writer.add_topic('/calibration/gravity', 'geometry_msgs/msg/Vector3Stamped', qos_profiles_yaml(LATCHED_QOS))
-        events = []   # (time_ns, order, topic, bytes): markers before samples at equal times
+        writer.add_topic(SIMULATION_TOPIC, 'std_msgs/msg/String', qos_profiles_yaml(LATCHED_QOS))
+        # (time_ns, order, topic, bytes): the note first, markers before samples at equal times
+        events = [(start_ns, -1, SIMULATION_TOPIC, _note(simulated_clock_note(start_ns)))]
         gap = campaign.start_s[1] - campaign.end_s[0] if len(campaign.start_s) > 1 else 1.0
         previous_orientation = None
         for p in selected:

@@ -3,7 +3,8 @@
 FILE_TYPE DATA_FOR_ITERATIVE_REGRESSION_ANALYSIS: keyword rows, then blocks announced by comment
 rows (symbols, units, capacities, natural zeros, data). Any number of loads and outputs. Values are
 kept as the file writes them (so that the writer reproduces them exactly) and converted to the
-package's units on demand: loads to N / N·m, outputs to mV (or mV/V for ratio units, see units.py).
+package's units on demand: loads to N / N·m, outputs to mV (mV/V for ratio units; counts and -
+outputs as written: see units.py).
 Every malformed input raises TableError with one line naming the file, row and column.
 """
 from __future__ import annotations
@@ -18,7 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .units import is_load_unit, is_output_unit, unit_factor
+from .units import is_load_unit, is_output_unit, known_units, unit_factor
 
 KEYWORDS = ('FILE_TYPE', 'BALANCE_NAME', 'DESCRIPTION')
 FILE_TYPE = 'DATA_FOR_ITERATIVE_REGRESSION_ANALYSIS'
@@ -279,9 +280,9 @@ def read_table(path: str | Path, text: str | None = None,
             raise TableError(f'{where}: symbol {symbols[i]} has no unit')
         if unit_factor(unit) is None:
             raise TableError(f'{where}: unit {unit!r} of {symbols[i]} is not known '
-                             f'(lbs, in-lbs, N, N-m, kgf, microV/V, mV/V, mV, degF, degC ...)')
+                             f'(known: {known_units()})')
 
-    n_loads = _count_loads(zero_rows, capacity_row, n_columns, name)
+    n_loads = _count_loads(zero_rows, capacity_row, units, n_columns)
     if not 0 < n_loads < n_columns:
         raise TableError(f'{name}: cannot tell loads from outputs ({n_loads} loads among {n_columns} symbols)')
     for i in range(n_columns):
@@ -289,7 +290,8 @@ def read_table(path: str | Path, text: str | None = None,
         if i < n_loads and not is_load_unit(units[i]):
             raise TableError(f'{where}: load {symbols[i]} has unit {units[i]!r}, not a force or moment unit')
     if not any(is_output_unit(u) for u in units[n_loads:]):
-        raise TableError(f'{name}: row {unit_line}: no output has a bridge unit (mV, mV/V, microV/V)')
+        raise TableError(f'{name}: row {unit_line}: no output has a bridge unit (mV, mV/V, microV/V, '
+                         f'counts, - ...)')
 
     load_capacity = np.full(n_loads, np.nan)
     output_capacity = np.full(n_columns - n_loads, np.nan)
@@ -368,9 +370,10 @@ def read_table(path: str | Path, text: str | None = None,
         np.array(outputs, float).reshape(-1, n_outputs), disabled, np.array(point_row, dtype=int))
 
 
-def _count_loads(zero_rows, capacity_row, n_columns: int, name: str) -> int:
+def _count_loads(zero_rows, capacity_row, units: Sequence[str], n_columns: int) -> int:
     """field_data_format.md: blank load cells of a natural-zero row; else filled load capacities when
-    the output capacities are blank; else half the symbols."""
+    the output capacities are blank; else, where the units tell (force and moment units first,
+    none after: e.g. 6 loads and 8 outputs), their count; else half the symbols."""
     if zero_rows:
         line, cells = zero_rows[0]
         count = 0
@@ -387,6 +390,10 @@ def _count_loads(zero_rows, capacity_row, n_columns: int, name: str) -> int:
             count += 1
         if count < n_columns and not any(filled[count:]):
             return count
+    kinds = [is_load_unit(u) for u in units]
+    count = kinds.index(False) if False in kinds else len(kinds)
+    if 0 < count < n_columns and not any(kinds[count:]):
+        return count
     return n_columns // 2
 
 
