@@ -8,7 +8,8 @@ outlier rule and limits): a calibration is written only when its data and its re
     overfit       cross-validated σ (PRESS) against the in-sample σ, per load: an honest model of q
                   coefficients on N points gives a ratio near N / (N - q) (equal leverages); beyond
                   OVERFIT_FACTOR times that the model fits the noise of its own points
-    outliers      no point whose leave-one-out residual is beyond k robust σ (point ids named)
+    outliers      no point whose leave-one-out residual is beyond k robust σ (point ids named);
+                  many points of a load beyond it alike are structure (odd_components.py)
     condition     condition number of the column-scaled design within CONDITION_LIMIT
 
 A failed gate raises nothing here: `calibrate_table` refuses unless forced.
@@ -25,6 +26,8 @@ OVERFIT_FACTOR = 2.0
 RATED_OUTPUT_FACTOR = 2.0        # fitted response at capacity within [1/2, 2] x the rated output
 CONDITION_LIMIT = 1e8            # of the unit-norm-column design (terms and tares)
 CONSTANT_FRACTION = 1e-6         # a channel whose spread is below this of its size is constant
+STRUCTURE_MIN_POINTS = 3         # more points of one load beyond the outlier limit than this,
+DOMINANCE = 4.0                  # and only those this far beyond the median of them are outliers
 PRIORITY = ('channels', 'sensitivity', 'outliers', 'overfit', 'condition')
 
 
@@ -98,7 +101,13 @@ def overfit_gate(sigma_cal: dict, sigma_cv: dict, points: int, coefficients: int
 
 def outlier_gate(point_ids: Sequence[str], symbols: Sequence[str], residuals: np.ndarray,
                  press: np.ndarray, capacity: np.ndarray, what: str) -> Gate:
-    """Leave-one-out residuals (N, k) standardised to equal variance, against k robust σ (MAD)."""
+    """Leave-one-out residuals (N, k) standardised to equal variance, against k robust σ (MAD).
+
+    When more than STRUCTURE_MIN_POINTS points of one load are beyond it, only those beyond
+    DOMINANCE times the median of them are outliers: a typed weight stands out of the points it
+    drags along with it; a shape the model lacks (a low-load knee on every series of the load,
+    against a MAD set by the points that never load it) moves many points alike, and is
+    structure, named by odd_components.py, not refused here."""
     press_pct = press / capacity * 100.0
     with np.errstate(divide='ignore', invalid='ignore'):
         scale = np.sqrt(np.clip(np.where(press != 0, residuals / press, 1.0), 0.0, 1.0))
@@ -106,6 +115,14 @@ def outlier_gate(point_ids: Sequence[str], symbols: Sequence[str], residuals: np
     robust = 1.4826 * np.median(np.abs(standardized - np.median(standardized, axis=0)), axis=0)
     threshold = np.maximum(DEFAULT_OUTLIER_ROBUST_SIGMAS * robust, DEFAULT_OUTLIER_FLOOR_PCT_FS)
     flagged = (np.abs(standardized) > threshold) | ~np.isfinite(standardized)
+    structure = {}
+    for k, symbol in enumerate(symbols):
+        off = flagged[:, k] & np.isfinite(standardized[:, k])
+        if np.count_nonzero(off) > STRUCTURE_MIN_POINTS:
+            size = np.abs(standardized[:, k])
+            alike = off & (size <= DOMINANCE * np.median(size[off]))
+            structure[symbol] = [point_ids[i] for i in np.flatnonzero(alike)]
+            flagged[alike, k] = False
     rows = np.flatnonzero(np.any(flagged, axis=1))
     excess = np.nan_to_num(np.abs(standardized) / threshold, nan=np.inf)
     severity = np.max(np.where(flagged, excess, 0.0), axis=1)
@@ -116,11 +133,14 @@ def outlier_gate(point_ids: Sequence[str], symbols: Sequence[str], residuals: np
         entries.append({'point_id': point_ids[i], 'component': symbols[k],
                         'residual_pct_capacity': float(press_pct[i, k]),
                         'robust_sigmas': float(abs(standardized[i, k]) / max(robust[k], 1e-12))})
-    details = {'points': entries, 'count': int(len(rows)),
+    details = {'points': entries, 'count': int(len(rows)), 'structure': structure,
                'threshold_pct_capacity': dict(zip(symbols, threshold.tolist()))}
+    alike = ''.join(f'; {s}: {len(p)} points beyond it alike, structure not outliers (named in '
+                    f'effects/unexplained)' for s, p in structure.items() if p)
     if not len(rows):
-        return Gate('outliers', True, f'no point beyond {DEFAULT_OUTLIER_ROBUST_SIGMAS:g} robust '
-                                      f'σ (leave-one-out residuals of the {what})', details)
+        return Gate('outliers', True, f'no point beyond {DEFAULT_OUTLIER_ROBUST_SIGMAS:g} '
+                                      f'robust σ (leave-one-out residuals of the {what})'
+                                      f'{alike}', details)
     first = entries[0]
     more = (f' and {len(rows) - 1} more ({", ".join(e["point_id"] for e in entries[1:6])}'
             f'{"…" if len(rows) > 6 else ""})') if len(rows) > 1 else ''
