@@ -32,7 +32,8 @@ def register(subparsers) -> None:
                              'to the terms the schedule determines, by cross-validated σ, then prune by PRESS), '
                              'tm663-cubic, r091-96 or a file of term names')
     parser.add_argument('--excitation-v', type=float, default=None,
-                        help='bridge excitation (V): turns mV/V tables into mV calibrations')
+                        help='bridge excitation (V): turns mV/V tables into mV calibrations '
+                             '(refused on outputs in mV, V, counts or -)')
     parser.add_argument('--axes', default=None, metavar='FX,FY,FZ,MX,MY,MZ',
                         help='name the loads (in column order) as these TM-663 components, and the bridge '
                              'outputs FXV..MZV likewise, so balance_calibrator can run the calibration '

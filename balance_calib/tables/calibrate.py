@@ -45,7 +45,8 @@ class TableCalibration:
 
 def rename_axes(table: CalibrationTable, axes: str) -> CalibrationTable:
     """The table with its loads named as TM-663 components (comma-separated, column order) and its
-    bridge outputs as the matching bridges (FX -> FXV); other channels keep their symbols."""
+    bridge outputs as the matching bridges (FX -> FXV); other channels keep their symbols, and so
+    do the bridges of a table with more bridges than loads."""
     from dataclasses import replace
     from ..units import BRIDGE_OUTPUTS, COMPONENTS
     names = tuple(a.strip() for a in axes.split(','))
@@ -53,9 +54,13 @@ def rename_axes(table: CalibrationTable, axes: str) -> CalibrationTable:
         raise TableCalibrationError(f'--axes {axes!r}: give {table.n_loads} distinct names from '
                                     f'{", ".join(COMPONENTS)}, one per load of {table.source} '
                                     f'({", ".join(table.load_symbols)})')
-    if len(table.bridge_columns) != len(names):
+    if len(table.bridge_columns) < len(names):
         raise TableCalibrationError(f'--axes: {table.source} has {len(table.bridge_columns)} '
                                     f'bridge outputs for {len(names)} loads')
+    if len(table.bridge_columns) > len(names):
+        # more bridges than loads (an 8-channel sensor): no bridge is one component's, so only
+        # the loads are named; the outputs keep the table's symbols
+        return replace(table, load_symbols=names)
     outputs = list(table.output_symbols)
     for column, name in zip(table.bridge_columns, names):
         outputs[column] = BRIDGE_OUTPUTS[COMPONENTS.index(name)]
@@ -72,9 +77,16 @@ def _check_names(table: CalibrationTable) -> None:
 
 def _outputs(table: CalibrationTable, excitation_v: float | None) -> np.ndarray:
     outputs = table.bridge_outputs
-    if excitation_v is not None and table.output_internal_unit == 'mV/V':
-        outputs = outputs * excitation_v
-    return outputs
+    if excitation_v is None:
+        return outputs
+    unit = table.output_internal_unit
+    if unit != 'mV/V':
+        written = ', '.join(sorted({table.output_units[i] for i in table.bridge_columns}))
+        raise TableCalibrationError(
+            f'{table.source}: --excitation-v {excitation_v:g} turns outputs that are ratios to the '
+            f'excitation (mV/V, microV/V) into mV; this table\'s bridge outputs are in {written}, '
+            f'which it cannot change: leave --excitation-v out')
+    return outputs * excitation_v
 
 
 def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str = 'auto',
