@@ -75,7 +75,7 @@ def odd_components(method: str, fit, terms: Sequence[Term], table,
         if best is not None:
             term, after = best
             effects.append({
-                'name': 'bidirectional' if any(f.absolute for f in term.factors) else 'curvature',
+                'name': 'bidirectional' if any(f.absolute for f in term.factors) else 'nonlinearity',
                 'components': [symbol],
                 'evidence': f'{evidence}; adding {term.name} lowers it to {after[k]:.3g} %',
                 'terms': [term.name], 'points': points,
