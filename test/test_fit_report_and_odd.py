@@ -62,6 +62,10 @@ def test_a_knee_at_low_load_fits_and_names_the_component_and_its_first_steps(tmp
                     else {'FX*FY', 'FX*FZ', 'FY*FZ'})
         assert products <= listed and all(d['why'] for d in dropped), method
     assert not any('*' in t for t in report['terms'])
+    # never a model that cross-validates worse than the form's linear one on any load
+    linear = next(c for c in report['model_selection']['candidates']
+                  if c['method'] == report['method'] and c['term_set'] == 'linear')
+    assert all(v <= linear['crossval'][s] for s, v in report['sigma_pct_capacity']['crossval'].items())
     # FZ's points stand out alike: structure, not outliers (the gate passes and says so)
     gate = {g['name']: g for g in report['gates']}['outliers']
     assert gate['passed'] and gate['structure']['FZ'] and 'structure' in gate['reason']
