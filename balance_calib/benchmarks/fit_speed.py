@@ -1,5 +1,6 @@
 """Fit time of a 2 000-point, 96-term iterative (AIAA R-091) calibration beside the direct
-(TM-663 cubic) one on the same data, and the per-sample cost of evaluating each.
+(TM-663 cubic) one on the same data, the time of `fit --method auto` (model selection over both
+forms and four term sets) against one direct fit, and the per-sample cost of evaluating each.
 
     python -m balance_calib.benchmarks.fit_speed [--points 2000] [--repeat 3]
 
@@ -60,6 +61,19 @@ def main(argv=None) -> None:
     print(f'{"fit":72}  {"fit (s)":>8}  {"+ term stats (s)":>16}')
     for label, bare, with_stats in rows:
         print(f'{label:72}  {bare:8.3f}  {with_stats:16.3f}')
+
+    from balance_calib.tables.calibrate import calibrate_table
+    table = sy.make_table(applied, outputs, schedule.series)
+    auto = calibrate_table(table, force=True)
+    one = _best_of(lambda: direct(True), args.repeat)
+    whole = _best_of(lambda: calibrate_table(table, force=True), args.repeat)
+    print(f'\n--method auto --terms auto: {len(auto.report["model_selection"]["candidates"])} candidates '
+          f'(both forms x {", ".join(sorted({c["term_set"] for c in auto.report["model_selection"]["candidates"]}))}), '
+          f'PRESS pruning, gates; adopted {auto.method} {auto.report["term_set"]} '
+          f'({len(auto.report["terms"])} terms)')
+    print(f'{"auto, the whole calibrate_table (s)":72}  {whole:8.3f}')
+    print(f'{"one direct tm663-cubic fit with term statistics (s)":72}  {one:8.3f}')
+    print(f'{"ratio":72}  {whole / one:8.1f}')
 
     direct_model = direct(False).model
     batch = outputs[:1000]

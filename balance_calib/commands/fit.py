@@ -20,20 +20,29 @@ def register(subparsers) -> None:
                         help='replace the calibration record of an earlier run in --out '
                              '(its files are removed)')
     parser.add_argument('--validate', nargs='+', default=[], metavar='VAL.csv',
-                        help='validation table(s): same series, the calibration\'s tares applied')
+                        help='validation table(s): series the calibration has get its tares; other '
+                             'series (other setups) their own, estimated with the model held fixed')
     parser.add_argument('--method', default='auto', choices=['auto', 'direct', 'iterative'],
                         help='direct: loads as a polynomial of the outputs (TM-663); iterative: outputs as a '
                              'polynomial of the loads, inverted per point (AIAA R-091); auto: the one with the lower '
-                             'cross-validated σ, within 2 %% the one with fewer non-normal residuals (default auto)')
-    parser.add_argument('--terms', default='auto', help='auto, tm663-cubic, r091-96 or a file of term names')
+                             'cross-validated σ, within 2 %% the one with fewer non-normal residuals, else '
+                             'TM-663\'s direct form unless the iterative one is lower on every load (default auto)')
+    parser.add_argument('--terms', default='auto',
+                        help='auto (compare linear, tm663-quadratic, tm663-cubic and r091-96, each restricted '
+                             'to the terms the schedule determines, by cross-validated σ, then prune by PRESS), '
+                             'tm663-cubic, r091-96 or a file of term names')
     parser.add_argument('--excitation-v', type=float, default=None,
-                        help='bridge excitation (V): turns mV/V tables into mV calibrations')
+                        help='bridge excitation (V): turns mV/V tables into mV calibrations '
+                             '(refused on outputs in mV, V, counts or -)')
     parser.add_argument('--axes', default=None, metavar='FX,FY,FZ,MX,MY,MZ',
                         help='name the loads (in column order) as these TM-663 components, and the bridge '
                              'outputs FXV..MZV likewise, so balance_calibrator can run the calibration '
                              '(e.g. a table whose loads are FX..MZ under other symbols)')
     parser.add_argument('--select', action='store_true',
                         help='drop terms by backward elimination (insignificant everywhere and lowering PRESS)')
+    parser.add_argument('--force', action='store_true',
+                        help='write the calibration even when an acceptance gate fails (report.json '
+                             'gates says which, forced: true)')
     parser.add_argument('--no-plots', action='store_true', help='skip the residual figures')
     parser.set_defaults(func=run)
 
@@ -64,7 +73,7 @@ def run(args) -> int:
             table = rename_axes(table, args.axes)
             validation = rename_axes(validation, args.axes) if validation is not None else None
         result = calibrate_table(table, method=args.method, terms=args.terms, validation=validation,
-                                 excitation_v=args.excitation_v, select=args.select)
+                                 excitation_v=args.excitation_v, select=args.select, force=args.force)
     except (TableError, TableCalibrationError, OutputError) as err:
         raise CommandError(str(err)) from None
     try:
@@ -75,12 +84,14 @@ def run(args) -> int:
     except OSError as err:      # the disk filled, a file vanished: one line naming it
         raise CommandError(f'{err.filename or args.out}: {err.strerror or err}') from None
     report = result.report
-    sigma = report['sigma_pct_capacity']
-    line = ' '.join(f'{k} {v:.4f}' for k, v in sigma['calibration'].items())
     print(f'{report["balance"]}: {report["points"]["calibration"]} points, method {report["method"]} '
-          f'({report["method_choice"]}); σ % capacity {line}')
-    if 'validation' in sigma:
-        print('validation σ % capacity ' + ' '.join(f'{k} {v:.4f}' for k, v in sigma['validation'].items()))
+          f'({report["method_choice"]})')
+    print(sigma_headline(report))
+    if report.get('forced'):
+        import sys
+        failed = [g['name'] for g in report['gates'] if not g['passed']]
+        print(f'balance-calib fit: written with --force although gate(s) failed: {", ".join(failed)}',
+              file=sys.stderr)
     print(f'report: {out / "report.md"}')
     return 0
 
@@ -127,6 +138,62 @@ def _plots(result, directory: Path):
             for method, fit in result.fits.items()]
 
 
+def sigma_headline(report) -> str:
+    """One line: σ % capacity in-sample, cross-validated and (when validated) validation, per load."""
+    sigma = report['sigma_pct_capacity']
+    parts = [(name, sigma[key]) for name, key in (('in-sample', 'calibration'),
+                                                  ('cross-validated', 'crossval'),
+                                                  ('validation', 'validation')) if key in sigma]
+    return 'σ % capacity ' + '; '.join(
+        f'{name} ' + ' '.join(f'{k} {v:.4f}' for k, v in values.items()) for name, values in parts)
+
+
+def _gates_and_selection(report) -> list[str]:
+    """report.md: the acceptance gates, the models compared and the terms dropped."""
+    lines = ['## Acceptance gates' + (' (written with --force although one failed)'
+                                      if report.get('forced') else ''), '']
+    lines += [f'- {g["name"]}: {"passed" if g["passed"] else "FAILED"}: {g["reason"]}'
+              for g in report.get('gates', [])]
+    lines += ['', '## Models compared (cross-validated σ, mean over loads, % capacity)', '']
+    for c in report.get('model_selection', {}).get('candidates', []):
+        figure = f'{c["crossval_mean"]:.4f}' if 'crossval_mean' in c else f'not fitted: {c["error"]}'
+        lines.append(f'- {c["method"]}, {c["term_set"]} ({c["terms"]} terms): {figure}')
+    for method, dropped in report.get('terms_dropped', {}).items():
+        if dropped:
+            shown = '; '.join(f'{d["term"]} ({d["why"]})' for d in dropped[:12])
+            more = f' … and {len(dropped) - 12} more in report.json' if len(dropped) > 12 else ''
+            lines.append(f'- {method}, terms dropped: {shown}{more}')
+    return lines + [''] + _signing(report)
+
+
+def _signing(report) -> list[str]:
+    """report.md: identification, largest residuals, effects offered, the adopted coefficients."""
+    ident = report.get('identification', {})
+    lines = ['## Identification', '',
+             f'Balance {ident.get("balance_name") or "-"}: {ident.get("description") or "-"}; '
+             f'fitted by {ident.get("package", "balance_calib")} {ident.get("package_version", "")}. '
+             f'Rated loads: ' + ', '.join(f'{s} {r["capacity"]:g} {r["unit"]}'
+                                          for s, r in report.get('rated_loads', {}).items()) + '.', '',
+             '## Largest residual of each load (% capacity, point id)', '']
+    for name, per_load in report.get('largest_residual', {}).items():
+        lines.append(f'- {name}: ' + ', '.join(f'{s} {v["residual_pct_capacity"]:+.4f} ({v["point_id"]})'
+                                               for s, v in per_load.items()))
+    for effect in report.get('effects', []):
+        lines.append(f'- offered, not adopted: {effect["name"]} on {", ".join(effect["components"])}: '
+                     f'{effect["evidence"]}')
+    coefficients = report.get('coefficients')
+    if coefficients:
+        targets = coefficients['targets']
+        lines += ['', f'## Coefficients of the adopted {coefficients["form"]} model ± standard error '
+                      f'({coefficients["units"]})', '',
+                  '| term | ' + ' | '.join(targets) + ' |', '|---|' + '---|' * len(targets)]
+        for j, term in enumerate(coefficients['terms']):
+            lines.append(f'| {term} | ' + ' | '.join(
+                f'{coefficients["values"][t][j]:.6g} ± {coefficients["standard_errors"][t][j]:.2g}'
+                for t in targets) + ' |')
+    return lines + ['']
+
+
 def report_markdown(report) -> str:
     from ..accuracy.sigma import format_sigma_table
     loads = report['load_symbols']
@@ -136,6 +203,7 @@ def report_markdown(report) -> str:
              f'switched off). Loads {", ".join(f"{s} [{u}]" for s, u in zip(loads, report["load_units"]))}.', '',
              f'**Method adopted: {report["method"]}** ({len(report["terms"])} terms, set '
              f'{report["term_set"]}). Why: {report["method_choice"]}.', '',
+             f'**{sigma_headline(report)}**', ''] + _gates_and_selection(report) + [
              '## σ in % of capacity (sample standard deviation of applied − predicted)', '', '```']
     rows = {}
     for method, entry in report['methods_compared'].items():

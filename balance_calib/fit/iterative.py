@@ -18,7 +18,7 @@ import numpy as np
 
 from ..model.r091 import IterativeModel, TermEvaluator
 from ..model.terms import Term
-from .least_squares import UnexcitedTermsError
+from .least_squares import TooFewPointsError
 from .series_tares import SeriesTareFit, series_indicator, series_rows, solve_scaled
 from .term_selection import term_statistics
 
@@ -43,7 +43,7 @@ def fit_iterative(terms: Sequence[Term], applied_loads, outputs, series, *, comp
     term_names = [t.name for t in terms]
     n_series = len(labels)
     if n - len(terms) - n_series <= 0:
-        raise UnexcitedTermsError(term_names[max(n - n_series, 0):], name)
+        raise TooFewPointsError(n, len(terms), n_series, name)
 
     # start: output intercepts per series, mapped to loads by the linear part
     design = evaluator.design(applied)

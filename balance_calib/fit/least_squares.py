@@ -33,6 +33,15 @@ class UnexcitedTermsError(ValueError):
             f'{", ".join(self.terms)}; load those bridges (alone and combined) or fit a smaller model')
 
 
+class TooFewPointsError(ValueError):
+    """More coefficients than points: the message says how many of each."""
+
+    def __init__(self, points: int, terms: int, tares: int, model_name: str):
+        super().__init__(
+            f'{points} points cannot determine the {model_name} model\'s {terms} terms and {tares} '
+            f'series tare(s) (it needs at least {terms + tares + 1} points); fit fewer terms')
+
+
 @dataclass(frozen=True)
 class FitResult:
     """A fitted model with what a person needs to trust it."""

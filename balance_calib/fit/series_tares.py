@@ -19,7 +19,7 @@ import scipy.linalg
 
 from ..model.balance_model import BalanceModel
 from ..model.terms import Term, as_variables, design_matrix
-from .least_squares import UnexcitedTermsError
+from .least_squares import TooFewPointsError, UnexcitedTermsError
 from .term_selection import TermStatistics, term_statistics
 
 RANK_TOLERANCE = 1e-9
@@ -107,14 +107,14 @@ def fit_direct(terms: Sequence[Term], outputs, applied_loads, series, *, compone
     x = design_matrix(terms, as_variables(tuple(inputs), outputs), len(outputs))
     design = np.hstack([x, -onehot])
     names = [t.name for t in terms] + [f'tare of series {s}' for s in labels]
-    solution = solve_scaled(design, applied, names, name)
     p = len(terms)
+    dof = len(outputs) - design.shape[1]
+    if dof <= 0:
+        raise TooFewPointsError(len(outputs), p, len(labels), name)
+    solution = solve_scaled(design, applied, names, name)
     coefficients = solution.coefficients[:p].T
     tares = solution.coefficients[p:]
     residuals = applied - design @ solution.coefficients
-    dof = len(outputs) - design.shape[1]
-    if dof <= 0:
-        raise UnexcitedTermsError(names[len(outputs):], name)
     sigma = np.sqrt((residuals ** 2).sum(axis=0) / dof)
     cov_diag = np.diag(solution.covariance_unscaled)
     tare_sigma = np.sqrt(np.outer(cov_diag[p:], sigma ** 2))
