@@ -111,10 +111,8 @@ def test_export_table_and_fit_follow_the_same_rule(bag, tmp_path, capsys):
     _refused(capsys, main(export[:-1] + [str(tmp_path)]), 'is a directory')
 
     out = tmp_path / 'fit'
-    # --force: this checks the --out rule, not the acceptance gates (issue 20), and the outlier
-    # gate refuses point P-0094 of this small simulated campaign (7.3 robust σ on FY)
     fit = ['fit', str(table), '--out', str(out), '--method', 'direct', '--terms', 'tm663-cubic',
-           '--no-plots', '--force']
+           '--no-plots']
     assert main(fit) == 0
     capsys.readouterr()
     # fit wrote calibration.yaml 0600 before: the same 0644 as refit now

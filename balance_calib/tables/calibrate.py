@@ -195,7 +195,7 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
         rated = rated * excitation_v
     gates = [channels, sensitivity_gate(table, outputs, rated),
              outlier_gate(table.point_id, loads, fit.load_residuals, fit.press_load_residuals, capacity,
-                          f'{chosen} model'),
+                          f'{chosen} model', applied=table.applied_loads_si),
              overfit_gate(report['sigma_pct_capacity']['calibration'], report['sigma_pct_fs_crossval']['after'],
                           table.points, len(term_sets[chosen]) + len(fit.series_labels), f'{chosen} model'),
              condition_gate(fit.condition_number, f'{chosen} model')]

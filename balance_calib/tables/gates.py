@@ -100,8 +100,14 @@ def overfit_gate(sigma_cal: dict, sigma_cv: dict, points: int, coefficients: int
 
 
 def outlier_gate(point_ids: Sequence[str], symbols: Sequence[str], residuals: np.ndarray,
-                 press: np.ndarray, capacity: np.ndarray, what: str) -> Gate:
+                 press: np.ndarray, capacity: np.ndarray, what: str,
+                 applied: np.ndarray | None = None) -> Gate:
     """Leave-one-out residuals (N, k) standardised to equal variance, against k robust σ (MAD).
+
+    The robust σ comes from the loaded points (any applied load (N, k) not zero), as refit's gate
+    takes it: a table's zero points (all loads zero, e.g. TM-663's §5(4) brackets in an exported
+    campaign) fit their series tare almost exactly and would shrink the scale until the ordinary
+    scatter of loaded points looked like typing errors.
 
     When more than STRUCTURE_MIN_POINTS points of one load are beyond it, only those beyond
     DOMINANCE times the median of them are outliers: a typed weight stands out of the points it
@@ -112,7 +118,16 @@ def outlier_gate(point_ids: Sequence[str], symbols: Sequence[str], residuals: np
     with np.errstate(divide='ignore', invalid='ignore'):
         scale = np.sqrt(np.clip(np.where(press != 0, residuals / press, 1.0), 0.0, 1.0))
     standardized = press_pct * scale
-    robust = 1.4826 * np.median(np.abs(standardized - np.median(standardized, axis=0)), axis=0)
+    loaded = (np.ones(len(standardized), bool) if applied is None
+              else np.any(np.abs(applied) > 1e-9 * np.abs(capacity), axis=1))
+    basis = standardized[loaded] if np.count_nonzero(loaded) >= 10 else standardized
+    spread = np.abs(basis - np.median(basis, axis=0))
+    # σ from the median (MAD) and from the 90th percentile of |residual|, the larger: a table's
+    # points mix load levels and zero brackets of unequal scatter, so its residuals have wider
+    # tails than one Gaussian (the 90 % point at ~1.45 MAD-σ on simulated campaigns) and 7 MAD-σ
+    # alone flags ordinary points; a typed weight is far beyond either and moves neither.
+    robust = np.maximum(1.4826 * np.median(spread, axis=0),
+                        np.quantile(spread, 0.9, axis=0) / 1.6449)
     threshold = np.maximum(DEFAULT_OUTLIER_ROBUST_SIGMAS * robust, DEFAULT_OUTLIER_FLOOR_PCT_FS)
     flagged = (np.abs(standardized) > threshold) | ~np.isfinite(standardized)
     structure = {}
