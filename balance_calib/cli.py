@@ -8,6 +8,8 @@ import argparse
 import importlib
 import sys
 
+from .commands.errors import CommandError
+
 # module path -> provides register(subparsers) that adds one or more sub-commands
 COMMAND_MODULES = (
     'balance_calib.commands.simulate',
@@ -20,8 +22,6 @@ COMMAND_MODULES = (
 )
 
 
-class CommandError(Exception):
-    """Bad input: printed as one line on stderr, exit status 2."""
 
 
 DESCRIPTION = ('Calibrate six-component wind-tunnel strain-gauge balances after NAL TM-663 '

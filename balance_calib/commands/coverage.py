@@ -37,7 +37,7 @@ def register(subparsers) -> None:
 def run(args) -> int:
     from ..bags.errors import BagError
     from ..calibration_file import ConfigError, load_calibration, write_text_atomically
-    from ..cli import CommandError
+    from .errors import CommandError
     from ..coverage.plots import coverage_figure
     from ..coverage.run import run_coverage, summary_table
     from ..coverage.run_inputs import RunInputError, read_loads_csv, read_wrench_bags

@@ -38,7 +38,7 @@ def _model_and_sigma(path: str, config):
     import numpy as np
 
     from ..calibration_file import load_calibration
-    from ..cli import CommandError
+    from .errors import CommandError
     from ..coverage.design import sigma_of
     calibration = load_calibration(path)
     if str(calibration.balance).lower() != str(config.name).lower():
@@ -57,7 +57,7 @@ def _model_and_sigma(path: str, config):
 
 def run(args) -> int:
     from ..calibration_file import ConfigError, write_text_atomically
-    from ..cli import CommandError
+    from .errors import CommandError
     from ..config import load_balance_config
     from ..coverage.design import DesignError, design_points
     from ..coverage.run_inputs import RunInputError, read_loads_csv

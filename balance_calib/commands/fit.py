@@ -58,7 +58,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..cli import CommandError
+    from .errors import CommandError
     from ..output_dir import OutputError, check_out_dir
     from ..tables.balfit_reader import TableError, read_tables
     from ..tables.calibrate import TableCalibrationError, calibrate_table
@@ -254,7 +254,7 @@ def report_markdown(report) -> str:
 
 
 def run_export(args) -> int:
-    from ..cli import CommandError
+    from .errors import CommandError
     from ..output_dir import OutputError, check_out_file
     from ..tables.export import ExportError, export_bags_table
     try:

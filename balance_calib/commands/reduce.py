@@ -50,7 +50,7 @@ def run(args) -> int:
     from ..aero.pipeline import ReduceError, reduce_bags
     from ..aero.report import write_outputs
     from ..bags.errors import BagError
-    from ..cli import CommandError
+    from .errors import CommandError
     from ..config import ConfigError
 
     compare = [c.strip() for c in args.compare.split(',') if c.strip()]

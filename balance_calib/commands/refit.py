@@ -41,7 +41,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..cli import CommandError
+    from .errors import CommandError
     from ..refit.pipeline import RefitError, run_refit
 
     def progress(message: str) -> None:

@@ -7,7 +7,6 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 
 
 TRANSITION_SAMPLES = 2       # per load change, as a recorded campaign has them
@@ -41,7 +40,7 @@ def register(subparsers) -> None:
 def run(args) -> int:
     from ..accuracy.sigma import format_sigma_table
     from ..accuracy.tables import format_coefficient_tables
-    from ..cli import CommandError
+    from .errors import CommandError
     from ..config import ConfigError, load_balance_config
     from ..refit.pipeline import RefitError, calibrate_points, campaign_points, summary_line
     from ..refit.gates import acceptance_limits
@@ -122,7 +121,7 @@ def _bag_path(bag: str, config, balances: int) -> Path:
 
 
 def _check_new_bag(path: Path) -> None:
-    from ..cli import CommandError
+    from .errors import CommandError
     if path.exists() or path.is_symlink():
         raise CommandError(f'--bag {path}: exists already; give a new directory (a bag is never '
                            f'overwritten)')

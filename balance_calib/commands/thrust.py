@@ -8,7 +8,7 @@ import math
 import sys
 from pathlib import Path
 
-from balance_calib.cli import CommandError
+from .errors import CommandError
 
 LINE_FIT_MIN_POINTS = 3
 
