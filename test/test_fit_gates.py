@@ -101,3 +101,16 @@ def test_overfit_and_condition_limits_by_hand():
     assert overfit_gate({'F': 1.0}, {'F': 3.9}, 20, 10, 'm').passed
     assert not overfit_gate({'F': 1.0}, {'F': 4.1}, 20, 10, 'm').passed
     assert condition_gate(1e7, 'm').passed and not condition_gate(1e9, 'm').passed
+
+
+def test_overfit_gate_judges_the_ratio_only_above_round_off():
+    from balance_calib.tables.gates import OVERFIT_FLOOR_PCT, overfit_gate
+    # a noise-free table: both σ round to 0 % capacity; the ratio of round-offs is no overfit
+    zero = {'FX': 0.0, 'FY': 0.0}
+    assert overfit_gate(zero, zero, 516, 117, 'iterative model').passed
+    # 60 points, 47 coefficients: honest ratio about 60/13 = 4.6, limit 9.2; 20 % against 0.5 %
+    gate = overfit_gate({'FX': 0.5, 'FY': 0.4}, {'FX': 20.0, 'FY': 0.9}, 60, 47, 'direct model')
+    assert not gate.passed and 'FX 20 %' in gate.reason and 'FY' not in gate.reason.split(':')[1]
+    # just above the floor the ratio counts again
+    tiny = {'FX': OVERFIT_FLOOR_PCT / 100}
+    assert not overfit_gate(tiny, {'FX': 2 * OVERFIT_FLOOR_PCT}, 60, 47, 'direct model').passed

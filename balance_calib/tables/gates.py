@@ -23,6 +23,9 @@ import numpy as np
 from ..refit.gates import DEFAULT_OUTLIER_FLOOR_PCT_FS, DEFAULT_OUTLIER_ROBUST_SIGMAS, Gate, failed
 
 OVERFIT_FACTOR = 2.0
+# a load predicted within this (% capacity) on left-out points passes whatever its ratio: a
+# noise-free table's in-sample σ is round-off, the ratio of two round-offs means nothing
+OVERFIT_FLOOR_PCT = 1e-3
 RATED_OUTPUT_FACTOR = 2.0        # fitted response at capacity within [1/2, 2] x the rated output
 CONDITION_LIMIT = 1e8            # of the unit-norm-column design (terms and tares)
 CONSTANT_FRACTION = 1e-6         # a channel whose spread is below this of its size is constant
@@ -87,14 +90,14 @@ def overfit_gate(sigma_cal: dict, sigma_cv: dict, points: int, coefficients: int
     limit = OVERFIT_FACTOR * expected
     ratio = {s: (sigma_cv[s] / sigma_cal[s] if sigma_cal[s] > 0 else np.inf) for s in sigma_cal}
     details = {'ratio': ratio, 'limit': limit, 'points_per_coefficient': points / coefficients}
-    over = [s for s in ratio if not ratio[s] <= limit]
+    over = [s for s in ratio if not ratio[s] <= limit and not sigma_cv[s] <= OVERFIT_FLOOR_PCT]
     if over:
         text = ', '.join(f'{s} {sigma_cv[s]:.3g} % against {sigma_cal[s]:.3g} %' for s in over)
         return Gate('overfit', False,
                     f'the {what} fits its own points far better than it predicts left-out ones: '
                     f'cross-validated σ {text} in-sample (ratio > {limit:.3g}; {coefficients} '
                     f'coefficients per load on {points} points): fit fewer terms', details)
-    worst = max(ratio, key=ratio.get)
+    worst = max(ratio, key=lambda s: ratio[s] if sigma_cv[s] > OVERFIT_FLOOR_PCT else 0.0)
     return Gate('overfit', True, f'cross-validated σ within {limit:.3g}x the in-sample σ '
                                  f'(largest: {worst} {ratio[worst]:.3g}x)', details)
 
