@@ -41,7 +41,8 @@ from ..closed_pipe import stdout_closed
 
 DEFAULT_TIMEOUT_S = 10.0
 SETTLE_S = 1.5          # a listing unchanged this long is the graph as discovery has it
-MIN_LISTING_S = 1.0     # and it is looked at for at least this long
+MIN_LISTING_S = 3.0     # and it is looked at for at least this long (a second participant can
+                        # take 2 s to be discovered by a new process on a busy machine)
 EMPTY_WAIT_S = 5.0      # an empty one this long before it counts (a loaded machine is slow)
 
 
@@ -222,10 +223,12 @@ def _node_name(name: str) -> str:
 
 
 def settled(session, listing, timeout: float, *, settle_s: float = SETTLE_S,
-            min_s: float = MIN_LISTING_S, empty_s: float = EMPTY_WAIT_S):
+            min_s: float = MIN_LISTING_S, empty_s: float = EMPTY_WAIT_S,
+            complete=lambda listing: True):
     """listing() once it has not changed for settle_s (looked at for at least min_s; while it is
-    empty, for at least empty_s), or at the timeout: DDS discovers the other participants and then
-    their endpoints one by one, so one early look shows only a part."""
+    empty, for at least empty_s) and complete(listing) holds, or at the timeout: DDS discovers the
+    other participants and then their endpoints one by one, so one early look shows only a part
+    (and a loaded machine can pause longer than settle_s between two nodes' endpoints)."""
     start = time.monotonic()
     last, changed = listing(), start
     while True:
@@ -236,12 +239,20 @@ def settled(session, listing, timeout: float, *, settle_s: float = SETTLE_S,
             last, changed = current, now
         looked = now - start
         if looked >= timeout or (now - changed >= settle_s and looked >= min_s
-                                 and (last or looked >= empty_s)):
+                                 and (last or looked >= empty_s) and complete(last)):
             return last
 
 
 def _full_name(name: str, namespace: str) -> str:
     return namespace.rstrip('/') + '/' + name
+
+
+def _rosout_nodes(session) -> set[str]:
+    """The other nodes whose /rosout publisher discovery has seen (every rclpy node has one):
+    endpoints and node names arrive separately, so a node can be known by this before its name."""
+    own = _full_name(session.node.get_name(), session.node.get_namespace())
+    return {_full_name(info.node_name, info.node_namespace)
+            for info in session.node.get_publishers_info_by_topic('/rosout')} - {own}
 
 
 def _other_nodes(session) -> list[str]:
@@ -366,10 +377,25 @@ def service_list(args) -> int:
         own = _full_name(session.node.get_name(), session.node.get_namespace()) + '/'
         services = settled(session, lambda: sorted(
             (name, types) for name, types in session.node.get_service_names_and_types()
-            if not name.startswith(own)), args.timeout)
+            if not name.startswith(own)), args.timeout,
+            complete=lambda listing: _every_node_listed(session, listing))
     for name, types in services:
         print(f'{name} [{", ".join(types)}]')
     return 0
+
+
+# what every rclpy node serves (unless started without parameter services)
+PARAMETER_SERVICES = ('describe_parameters', 'get_parameter_types', 'get_parameters',
+                      'list_parameters', 'set_parameters', 'set_parameters_atomically')
+
+
+def _every_node_listed(session, services) -> bool:
+    """Every other node on the graph has all its parameter services in the listing: DDS brings a
+    node's service servers one by one, so a node with only some of them is not yet the whole
+    picture (a node without parameter services makes the listing wait for --timeout)."""
+    names = {name for name, _ in services}
+    nodes = set(_other_nodes(session)) | _rosout_nodes(session)
+    return all(f'{node}/{service}' in names for node in nodes for service in PARAMETER_SERVICES)
 
 
 def service_call(args) -> int:
@@ -390,7 +416,8 @@ def service_call(args) -> int:
 
 def node_list(args) -> int:
     with _Session() as session:
-        nodes = settled(session, lambda: _other_nodes(session), args.timeout)
+        nodes = settled(session, lambda: _other_nodes(session), args.timeout,
+                        complete=lambda listing: _rosout_nodes(session) <= set(listing))
     for name in nodes:
         print(name)
     return 0
