@@ -32,7 +32,8 @@ PARAMETERS: dict[str, Spec] = {
                                     'stale, s', 0.0, low_open=True),
     'match_wait_s': startup(2.0, 'how long a wrench sample waits for its attitude and q∞ to '
                                  'arrive, s', 0.0, low_open=True),
-    'diagnostics_period_s': startup(1.0, 'period of /diagnostics, s', 0.0, low_open=True),
+    'diagnostics_period_s': startup(1.0, 'period of /diagnostics, s (0: as often as the '
+                                         'executor can)', 0.0),
     'take_point_samples': startup(100, '~/take_point: a point of the next N wind-on samples of '
                                        'the held attitude', 1),
     'take_point_timeout_s': startup(30.0, '~/take_point gives up after this long, s', 0.0,

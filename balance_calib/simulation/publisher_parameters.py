@@ -31,7 +31,7 @@ PARAMETERS: dict[str, Spec] = {
                                  'weights being changed)', 0.0),
     'physical_seconds_per_point': startup(90.0, "calibration: the campaign's temperature and "
                                                 'drift follow a real one of this many seconds a '
-                                                'point, however fast it plays', 0.0),
+                                                'point, however fast it plays'),
     'points': startup('', "e.g. '1-60,100' (point numbers as printed); '' = all"),
     'schedule_file': startup('', 'calibration: a load schedule CSV (layout of the Appendix A/B '
                                  "sheets, e.g. from balance-calib design); '' = the config's"),
@@ -64,15 +64,15 @@ PARAMETERS: dict[str, Spec] = {
     'electrical_zero_mv': startup(0.04, 'calibration and wind_on: bridge outputs with nothing on '
                                         'the balance, mV'),
     'temperature_c': startup(20.0, 'wind_on: balance temperature, °C'),
-    'temperature_rate_hz': startup(10.0, '/balance/temperature messages per second', 0.0),
+    'temperature_rate_hz': startup(10.0, '/balance/temperature messages per second'),
     'loop': startup(False, 'start again from the beginning when the schedule, sweep or bag ends'),
     'exit_when_done': startup(False, 'end the node when the schedule, sweep or bag ends (exit '
                                      'status 0)'),
     'wait_for_subscribers': startup(0, 'start only when /balance/raw has this many subscribers '
                                        '(with aero_model /model/attitude and '
-                                       '/tunnel/dynamic_pressure too) ...', 0),
+                                       '/tunnel/dynamic_pressure too) ...'),
     'start_delay_s': startup(0.5, '... and this long after, so their other topics are matched '
-                                  'too, s', 0.0),
+                                  'too, s'),
     'wait_for_subscribers_timeout_s': startup(30.0, 'give up (exit status 1) after waiting this '
-                                                    'long for them, s; 0 = wait for ever', 0.0),
+                                                    'long for them, s; 0 = wait for ever'),
 }

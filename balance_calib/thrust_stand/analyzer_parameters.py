@@ -25,8 +25,8 @@ PARAMETERS: dict[str, Spec] = {
                              "time on the node's clock)", 0.0, low_open=True),
     'publish_period_s': startup(0.5, 'period of /diagnostics, s', 0.0, low_open=True),
     'stale_after_s': startup(2.0, 'an input silent this long is STALE, s', 0.0, low_open=True),
-    'thrust_relative_sigma': startup(0.01, 'σ of the calibration constant a, relative', 0.0),
-    'throat_diameter_sigma_m': startup(1e-5, 'σ of the throat diameter, m', 0.0),
+    'thrust_relative_sigma': startup(0.01, 'σ of the calibration constant a, relative'),
+    'throat_diameter_sigma_m': startup(1e-5, 'σ of the throat diameter, m'),
     'report_path': startup('', "'' = none; else on shutdown, and when the std_srvs/Trigger "
                                'service ~/report is called, write <report_path>.json and '
                                "<report_path>.md (a '.json' or '.md' suffix is replaced) "
