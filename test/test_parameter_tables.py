@@ -63,8 +63,8 @@ def test_a_table_with_a_default_outside_its_range_is_reported():
 
 
 def test_the_tables_import_without_rclpy():
-    probe = ('import sys, balance_calib.node_parameters; '
-             'assert not [m for m in sys.modules if m.split(".")[0] in ("rclpy", "rcl_interfaces")]')
+    probe = ('import sys, balance_calib.node_parameters; assert not [m for m in sys.modules '
+             'if m.split(".")[0] in ("rclpy", "rcl_interfaces")]')
     done = subprocess.run([sys.executable, '-c', probe], capture_output=True, text=True,
                           timeout=60)
     assert done.returncode == 0, done.stderr
@@ -83,7 +83,8 @@ def test_numbers_in_and_out_of_their_range():
     assert refused('period_s', PERIOD, -2.5) == 'parameter period_s must be in (0, inf), not -2.5'
     assert check_value('tare_samples', SAMPLES, 10) == 10             # both ends are inside
     assert check_value('tare_samples', SAMPLES, 1_000_000) == 1_000_000
-    assert refused('tare_samples', SAMPLES, 9) == 'parameter tare_samples must be in [10, 1e+06], not 9'
+    assert refused('tare_samples', SAMPLES, 9) == \
+        'parameter tare_samples must be in [10, 1e+06], not 9'
     assert refused('tare_samples', SAMPLES, 1_000_001).endswith('not 1e+06')   # %g of 1000001
     assert 'must be an integer' in refused('tare_samples', SAMPLES, 10.0)
     assert 'must be an integer' in refused('tare_samples', SAMPLES, 2.5)
@@ -120,7 +121,8 @@ def test_choices_are_exact():
 def test_lists():
     topics = Spec(['/a', '/b'], 'topics to record')
     assert topics.kind == STRING_ARRAY and check_value('topics', topics, ['/c']) == ['/c']
-    assert refused('topics', topics, '/c') == "parameter topics must be a list of strings, not '/c'"
+    assert refused('topics', topics, '/c') == \
+        "parameter topics must be a list of strings, not '/c'"
     assert 'list of strings' in refused('topics', topics, [1])
     no_default = Spec(STRING_ARRAY, 'bags that a refit fits')
     assert not no_default.has_default and check_value('bags', no_default, None) is None

@@ -44,16 +44,18 @@ def test_each_table_declares_with_its_descriptors(context, node):
             assert described.description == spec.description and described.type == \
                 ROS_TYPE[spec.kind] and described.read_only == spec.read_only, name
             assert values[name] == (spec.default if spec.has_default else None), name
+            constrained = spec.low_open or bool(spec.choices)      # what a closed range cannot say
+            assert (described.additional_constraints != '') == constrained, name
             ranges = list(described.floating_point_range) + list(described.integer_range)
             if spec.low is None and spec.high is None:
                 assert ranges == [], name
                 continue
             (bounds,) = ranges
-            low = -math.inf if spec.low is None else spec.low + (spec.kind == 'integer'
-                                                                 and spec.low_open)
-            assert bounds.from_value == low or spec.low is None, name
-            assert bounds.to_value == spec.high or spec.high is None, name
-            assert (described.additional_constraints != '') == (spec.low_open or bool(spec.choices))
+            unbounded = 2 ** 63 - 1 if spec.kind == 'integer' else math.inf
+            low = -unbounded - (spec.kind == 'integer') if spec.low is None else \
+                spec.low + (spec.kind == 'integer' and spec.low_open)
+            assert bounds.from_value == low, name
+            assert bounds.to_value == (unbounded if spec.high is None else spec.high), name
     finally:
         made.destroy_node()
 

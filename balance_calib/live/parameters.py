@@ -2,8 +2,8 @@
 
 The node declares each with its description and range (nodes/_parameters.py: rclpy's
 FloatingPointRange / IntegerRange, so `ros2 param describe` shows them) and checks every value, at
-start-up and at runtime, with `check_parameter`: the table's own check (parameter_table.check_value,
-which also refuses what a range cannot express: NaN, inf) and a FIFO or a device as a file.
+start-up and at runtime, with `check_parameter`: the table's own check (check_value of
+parameter_table.py, which also refuses NaN and inf) and a FIFO or a device as a file.
 """
 from __future__ import annotations
 
@@ -46,9 +46,9 @@ PARAMETERS: dict[str, Spec] = {
                              0.0, 3600.0),
     'publish_uncertainty': Spec(True, 'publish balance/wrench_uncertainty (k = 1, N and N·m, tunnel axes) when the '
                                       'calibration carries its coefficient covariance'),
-    'input_units': Spec('mV', 'unit of the bridge outputs on balance/raw: mV | mV/V | microV/V (ratiometric '
-                              'outputs are multiplied by excitation_v); the wire format of the interface is mV',
-                        choices=INPUT_UNITS),
+    'input_units': Spec('mV', 'unit of the bridge outputs on balance/raw: mV | mV/V | microV/V '
+                              '(ratiometric outputs are multiplied by excitation_v); the wire '
+                              'format of the interface is mV', choices=INPUT_UNITS),
     'excitation_v': Spec(0.0, 'bridge excitation voltage, V, for ratiometric input_units (0 = not given)',
                          0.0, 100.0),
     'lowpass_hz': Spec(0.0, 'first-order low-pass cut-off on the published wrench, Hz (0 = off); reset by '

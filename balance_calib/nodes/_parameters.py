@@ -16,8 +16,8 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.parameter import Parameter
 
-from balance_calib.parameter_table import (DOUBLE, DOUBLE_ARRAY, INT64_MAX, INTEGER, ParameterError,
-                                           Spec, range_text, table_checker)
+from balance_calib.parameter_table import (DOUBLE, DOUBLE_ARRAY, INT64_MAX, INTEGER,
+                                           ParameterError, Spec, range_text, table_checker)
 
 Check = Callable[[str, object], object]
 HELD_AS = {DOUBLE: Parameter.Type.DOUBLE, DOUBLE_ARRAY: Parameter.Type.DOUBLE_ARRAY}
