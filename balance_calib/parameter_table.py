@@ -20,7 +20,6 @@ STRING_ARRAY = 'string_array'        # the default of a string list that has non
 
 BOOL, INTEGER, DOUBLE, STRING = 'bool', 'integer', 'double', 'string'
 DOUBLE_ARRAY = 'double_array'
-TYPES = (BOOL, INTEGER, DOUBLE, STRING, STRING_ARRAY, DOUBLE_ARRAY)   # as `ros2 param describe`
 INT64_MAX = 2 ** 63 - 1
 
 
@@ -47,7 +46,7 @@ class Spec:
 
     @property
     def kind(self) -> str:
-        """The parameter's type, one of TYPES."""
+        """The parameter's type as `ros2 param describe` names it: bool, integer, double..."""
         return type_of(self.default)
 
     @property
@@ -62,7 +61,7 @@ def startup(default: object, description: str, low: float | None = None,
 
 
 def type_of(default: object) -> str:
-    """TYPES name of a default value; ValueError for one no parameter can have."""
+    """The parameter type of a default value; ValueError for one no parameter can have."""
     if isinstance(default, bool):
         return BOOL
     if isinstance(default, int):
