@@ -5,6 +5,7 @@ import math
 import pytest
 import rclpy
 from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -12,7 +13,7 @@ from rclpy.parameter import Parameter
 from balance_calib.node_parameters import TABLES
 from balance_calib.nodes._parameters import declare_table
 from balance_calib.parameter_table import ParameterError
-from ros_harness import NodeProcess, new_domain_id
+from ros_harness import NodeProcess, Probe, new_domain_id
 
 pytestmark = pytest.mark.ros
 
@@ -102,3 +103,32 @@ def test_a_bad_value_stops_each_node_with_one_line_naming_it(tmp_path):
         lines = [line for line in process.output().splitlines() if line.strip()]
         assert status == 1 and len(lines) == 1, (node, status, lines)
         assert lines[0].startswith('[ERROR]') and lines[0].endswith(f'[{node}]: {said}'), lines
+
+
+def test_a_running_node_describes_its_table_over_dds_and_keeps_read_only_values(tmp_path):
+    """What `ros2 param describe` and `ros2 param set` get from a node that reads its parameters
+    at start-up (an int on the command line for a double is that double)."""
+    domain = new_domain_id()
+    analyzer = NodeProcess('thrust_analyzer', domain, tmp_path, {'window_s': 2})
+    probe = Probe(domain)
+    try:
+        described = probe.call(DescribeParameters, '/thrust_analyzer/describe_parameters', 30.0,
+                               DescribeParameters.Request(names=['gamma', 'report_path']))
+        gamma, report_path = described.descriptors
+        assert gamma.description == TABLES['thrust_analyzer']['gamma'].description
+        assert gamma.type == ParameterType.PARAMETER_DOUBLE and gamma.read_only
+        assert [(r.from_value, r.to_value) for r in gamma.floating_point_range] == [(1.0, math.inf)]
+        assert gamma.additional_constraints == '(1, inf)'
+        assert report_path.type == ParameterType.PARAMETER_STRING and report_path.read_only
+        change = Parameter('gamma', value=1.3).to_parameter_msg()
+        result = probe.call(SetParameters, '/thrust_analyzer/set_parameters', 30.0,
+                            SetParameters.Request(parameters=[change])).results[0]
+        assert not result.successful and 'read-only' in result.reason, result
+        values = probe.call(GetParameters, '/thrust_analyzer/get_parameters', 30.0,
+                            GetParameters.Request(names=['gamma', 'window_s'])).values
+        assert [(v.type, v.double_value) for v in values] == \
+            [(ParameterType.PARAMETER_DOUBLE, 1.402), (ParameterType.PARAMETER_DOUBLE, 2.0)]
+        assert 'Traceback' not in analyzer.output()
+    finally:
+        probe.close()
+        analyzer.stop()

@@ -12,6 +12,7 @@ up to a second ago.
 """
 import importlib
 import signal
+import sys
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -181,4 +182,4 @@ def main(args=None):
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())
