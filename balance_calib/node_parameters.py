@@ -12,7 +12,7 @@ from typing import Mapping
 from .aero.live_parameters import PARAMETERS as AERO_COEFFICIENTS
 from .bags.recorder_parameters import PARAMETERS as BALANCE_RECORDER
 from .live.parameters import PARAMETERS as BALANCE_CALIBRATOR
-from .parameter_table import Spec, range_text, show_default
+from .parameter_table import range_text, show_default, Spec
 from .simulation.publisher_parameters import PARAMETERS as BRIDGE_PUBLISHER
 from .thrust_stand.analyzer_parameters import PARAMETERS as THRUST_ANALYZER
 

@@ -12,8 +12,8 @@ strings or doubles); `STRING_ARRAY` as the default is a string list without a de
 from __future__ import annotations
 
 import array
-import math
 from dataclasses import dataclass
+import math
 from typing import Callable, Mapping
 
 STRING_ARRAY = 'string_array'        # the default of a string list that has none (rclpy: not set)
@@ -108,14 +108,15 @@ def _check_number(name: str, spec: Spec, value: float) -> None:
 
 def check_value(name: str, spec: Spec, value: object) -> object:
     """The value as the parameter holds it (an integer given for a double is that double);
-    ParameterError with one line naming the parameter, the values it takes and `value`."""
+    ParameterError with one line naming the parameter, the values it takes and `value`.
+    """
     kind = spec.kind
     if kind == BOOL:
         if not isinstance(value, bool):
             raise ParameterError(f'parameter {name} must be true or false, not {value!r}')
         return value
     if kind in (INTEGER, DOUBLE):
-        if not _is_number(value):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ParameterError(f'parameter {name} must be a number, not {value!r}')
         if kind == INTEGER and not isinstance(value, int):
             raise ParameterError(f'parameter {name} must be an integer, not {value!r}')
@@ -149,7 +150,7 @@ def table_checker(table: Mapping[str, Spec]) -> Callable[[str, object], object]:
 
 
 def defaults(table: Mapping[str, Spec]) -> dict[str, object]:
-    """name -> default of every parameter that has one."""
+    """The default of every parameter that has one, by name."""
     return {name: spec.default for name, spec in table.items() if spec.has_default}
 
 

@@ -1,22 +1,33 @@
 """One parameter table per node: its check refuses a bad value in one line naming the parameter,
 `NODE --help` lists every entry, docs/parameters.md is what the tables generate, and every node
-executable has a table, importable without rclpy."""
+executable has a table, importable without rclpy.
+"""
 import array
 import ast
 import math
+from pathlib import Path
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 import yaml
 
 from balance_calib import node_parameters
 from balance_calib.node_parameters import TABLES
-from balance_calib.parameter_table import (BOOL, DOUBLE, DOUBLE_ARRAY, INTEGER, STRING,
-                                           STRING_ARRAY, ParameterError, Spec, check_value,
-                                           problems, show_default)
+from balance_calib.parameter_table import (
+    BOOL,
+    check_value,
+    DOUBLE,
+    DOUBLE_ARRAY,
+    INTEGER,
+    ParameterError,
+    problems,
+    show_default,
+    Spec,
+    STRING,
+    STRING_ARRAY,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 ENTRIES = [(node, name, spec) for node, table in TABLES.items() for name, spec in table.items()]

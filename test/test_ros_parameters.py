@@ -1,19 +1,20 @@
 """Every node declares its table through rclpy with descriptors (description, range, read-only)
-and refuses a bad value from the command line in one line naming the parameter, exit status 1."""
+and refuses a bad value from the command line in one line naming the parameter, exit status 1.
+"""
 import math
 
 import pytest
-import rclpy
 from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
+import rclpy
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from ros_harness import new_domain_id, NodeProcess, Probe
 
 from balance_calib.node_parameters import TABLES
 from balance_calib.nodes._parameters import declare_table
 from balance_calib.parameter_table import ParameterError
-from ros_harness import NodeProcess, Probe, new_domain_id
 
 pytestmark = pytest.mark.ros
 
@@ -107,7 +108,8 @@ def test_a_bad_value_stops_each_node_with_one_line_naming_it(tmp_path):
 
 def test_a_running_node_describes_its_table_over_dds_and_keeps_read_only_values(tmp_path):
     """What `ros2 param describe` and `ros2 param set` get from a node that reads its parameters
-    at start-up (an int on the command line for a double is that double)."""
+    at start-up (an int on the command line for a double is that double).
+    """
     domain = new_domain_id()
     analyzer = NodeProcess('thrust_analyzer', domain, tmp_path, {'window_s': 2})
     probe = Probe(domain)
@@ -117,7 +119,8 @@ def test_a_running_node_describes_its_table_over_dds_and_keeps_read_only_values(
         gamma, report_path = described.descriptors
         assert gamma.description == TABLES['thrust_analyzer']['gamma'].description
         assert gamma.type == ParameterType.PARAMETER_DOUBLE and gamma.read_only
-        assert [(r.from_value, r.to_value) for r in gamma.floating_point_range] == [(1.0, math.inf)]
+        bounds = [(r.from_value, r.to_value) for r in gamma.floating_point_range]
+        assert bounds == [(1.0, math.inf)]
         assert gamma.additional_constraints == '(1, inf)'
         assert report_path.type == ParameterType.PARAMETER_STRING and report_path.read_only
         change = Parameter('gamma', value=1.3).to_parameter_msg()

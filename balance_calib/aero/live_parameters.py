@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from ..parameter_table import Spec, startup
 
-
 PARAMETERS: dict[str, Spec] = {
     'model': startup('euler_replica', 'the wind-tunnel model: config/models/NAME.yaml or a path'),
     'estimate_weight': startup(False, 'true: weight and CG from the wind-off sweep, whatever the '

@@ -60,7 +60,8 @@ MAX_CALIBRATION_BYTES = 16 << 20
 
 def check_parameter(name: str, value) -> object:
     """The value as the parameter holds it (5 for a double is 5.0); ValueError with one line
-    naming the parameter, its range and the value, if `value` is not valid."""
+    naming the parameter, its range and the value, if `value` is not valid.
+    """
     spec = PARAMETERS.get(name)
     if spec is None:
         return value

@@ -46,7 +46,8 @@ def parameter_table(module) -> list[tuple[str, str, str]]:
 
 def parameter_lines(node: str) -> list[str]:
     """The help's parameter section: a line `NAME = DEFAULT  (type, range, read-only)` and the
-    description under it, for every entry of the node's table."""
+    description under it, for every entry of the node's table.
+    """
     table = TABLES.get(node, {})
     if not table:
         return []

@@ -16,8 +16,16 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.parameter import Parameter
 
-from balance_calib.parameter_table import (DOUBLE, DOUBLE_ARRAY, INT64_MAX, INTEGER,
-                                           ParameterError, Spec, range_text, table_checker)
+from balance_calib.parameter_table import (
+    DOUBLE,
+    DOUBLE_ARRAY,
+    INT64_MAX,
+    INTEGER,
+    ParameterError,
+    range_text,
+    Spec,
+    table_checker,
+)
 
 Check = Callable[[str, object], object]
 HELD_AS = {DOUBLE: Parameter.Type.DOUBLE, DOUBLE_ARRAY: Parameter.Type.DOUBLE_ARRAY}
@@ -75,7 +83,7 @@ def _checked(check: Check, name: str, value: object) -> object:
 
 
 def value_getter(node):
-    """name -> the parameter's current value (None for a string array never set)."""
+    """value(name): the parameter's current value (None for a string array never set)."""
     def value(name):
         try:
             return node.get_parameter(name).value

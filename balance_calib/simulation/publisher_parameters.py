@@ -14,7 +14,7 @@ MODES = ('calibration', 'wind_on', 'replay', 'thrust_stand')
 
 PARAMETERS: dict[str, Spec] = {
     'mode': startup('calibration', 'what the node plays: a calibration campaign, a wind_on run, '
-                                   'a replay of bags or the thrust_stand (the node\'s --help '
+                                   "a replay of bags or the thrust_stand (the node's --help "
                                    'describes each)', choices=MODES),
     'balance': startup('lmc6522', 'balance config: lmc6522, b660h or a path'),
     'truth_model': startup('cubic', "which of the config's matrices the simulated balance obeys: "

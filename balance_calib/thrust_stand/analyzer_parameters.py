@@ -6,8 +6,13 @@ the lab manual's (thrust_stand/nozzle.py); the ranges are those Nozzle holds its
 from __future__ import annotations
 
 from ..parameter_table import Spec, startup
-from .nozzle import (DEFAULT_CHAMBER_K, DEFAULT_EXIT_DIAMETER_M, DEFAULT_GAMMA,
-                     DEFAULT_GAS_CONSTANT_J_KG_K, DEFAULT_THROAT_DIAMETER_M)
+from .nozzle import (
+    DEFAULT_CHAMBER_K,
+    DEFAULT_EXIT_DIAMETER_M,
+    DEFAULT_GAMMA,
+    DEFAULT_GAS_CONSTANT_J_KG_K,
+    DEFAULT_THROAT_DIAMETER_M,
+)
 
 PARAMETERS: dict[str, Spec] = {
     'throat_diameter_m': startup(DEFAULT_THROAT_DIAMETER_M,
