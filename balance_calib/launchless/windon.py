@@ -51,7 +51,7 @@ class WindOnRun:
 
 def recorder_topics() -> list[str]:
     """The recorder's default topics (interfaces.md) and the simulation's truth."""
-    from ..nodes.balance_recorder import DEFAULT_TOPICS
+    from ..bags.recorder_parameters import DEFAULT_TOPICS
     return list(DEFAULT_TOPICS) + [t for t in TRUTH_TOPICS if t not in DEFAULT_TOPICS]
 
 

@@ -1,27 +1,18 @@
-"""balance_calibrator's parameters: default, description and valid range of each, checked without rclpy.
+"""balance_calibrator's parameter table (parameter_table.Spec) and its checks, without rclpy.
 
-The node declares each with its description and range (rclpy's FloatingPointRange / IntegerRange, so
-`ros2 param describe` shows them) and checks every value, at start-up and at runtime, with
-`check_parameter`, which also refuses what a range cannot express (NaN, inf, a FIFO as a file).
+The node declares each with its description and range (nodes/_parameters.py: rclpy's
+FloatingPointRange / IntegerRange, so `ros2 param describe` shows them) and checks every value, at
+start-up and at runtime, with `check_parameter`: the table's own check (check_value of
+parameter_table.py, which also refuses NaN and inf) and a FIFO or a device as a file.
 """
 from __future__ import annotations
 
-import math
 import os
 import stat
-from dataclasses import dataclass
 
+from ..parameter_table import STRING_ARRAY, Spec, check_value
 
-@dataclass(frozen=True)
-class Spec:
-    default: object
-    description: str
-    low: float | None = None         # inclusive range, for numbers
-    high: float | None = None
-    read_only: bool = False          # fixed when the subscription is made
-
-
-STRING_ARRAY = 'string_array'        # calibration_bags: no default value
+INPUT_UNITS = ('mV', 'mV/V', 'microV/V')
 
 PARAMETERS: dict[str, Spec] = {
     'calibration_file': Spec('', 'calibration.yaml or balance config, also by name (default: the shipped '
@@ -55,8 +46,9 @@ PARAMETERS: dict[str, Spec] = {
                              0.0, 3600.0),
     'publish_uncertainty': Spec(True, 'publish balance/wrench_uncertainty (k = 1, N and N·m, tunnel axes) when the '
                                       'calibration carries its coefficient covariance'),
-    'input_units': Spec('mV', 'unit of the bridge outputs on balance/raw: mV | mV/V | microV/V (ratiometric '
-                              'outputs are multiplied by excitation_v); the wire format of the interface is mV'),
+    'input_units': Spec('mV', 'unit of the bridge outputs on balance/raw: mV | mV/V | microV/V '
+                              '(ratiometric outputs are multiplied by excitation_v); the wire '
+                              'format of the interface is mV', choices=INPUT_UNITS),
     'excitation_v': Spec(0.0, 'bridge excitation voltage, V, for ratiometric input_units (0 = not given)',
                          0.0, 100.0),
     'lowpass_hz': Spec(0.0, 'first-order low-pass cut-off on the published wrench, Hz (0 = off); reset by '
@@ -66,32 +58,17 @@ PARAMETERS: dict[str, Spec] = {
 MAX_CALIBRATION_BYTES = 16 << 20
 
 
-def check_parameter(name: str, value) -> None:
-    """ValueError with one line naming the parameter, its range and the value, if `value` is not valid."""
+def check_parameter(name: str, value) -> object:
+    """The value as the parameter holds it (5 for a double is 5.0); ValueError with one line
+    naming the parameter, its range and the value, if `value` is not valid.
+    """
     spec = PARAMETERS.get(name)
     if spec is None:
-        return
-    if isinstance(spec.default, bool):
-        if not isinstance(value, bool):
-            raise ValueError(f'parameter {name} must be true or false, not {value!r}')
-        return
-    if isinstance(spec.default, (int, float)) and not isinstance(spec.default, bool):
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f'parameter {name} must be a number, not {value!r}')
-        if isinstance(spec.default, int) and not isinstance(value, int):
-            raise ValueError(f'parameter {name} must be an integer, not {value!r}')
-        if not math.isfinite(value):
-            raise ValueError(f'parameter {name} must be a finite number in [{spec.low:g}, {spec.high:g}], not {value}')
-        if not spec.low <= value <= spec.high:
-            raise ValueError(f'parameter {name} must be in [{spec.low:g}, {spec.high:g}], not {value:g}')
-        return
+        return value
+    held = check_value(name, spec, value)
     if name == 'calibration_file' and value:
         check_regular_file(value, 'calibration_file')
-    if name == 'input_units' and value not in INPUT_UNITS:
-        raise ValueError(f'parameter input_units must be one of {", ".join(INPUT_UNITS)}, not {value!r}')
-
-
-INPUT_UNITS = ('mV', 'mV/V', 'microV/V')
+    return held
 
 
 def input_scale_mv(input_units: str, excitation_v: float) -> float:

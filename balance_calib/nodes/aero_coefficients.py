@@ -19,13 +19,9 @@ Service ~/take_point (std_srvs/Trigger): a point on demand, the next `take_point
 samples of the current hold, published on the point topics like the automatic ones; the reply
 gives its coefficients ± scatter, or why there is none (attitude moved, wind off, no tare, timeout).
 
-The steps are aero/live.py's, the same as `balance-calib reduce` (aero/run.py). Parameters:
-model (a config/models file or name), estimate_weight, calibration_file and installation (for the
-calibration σ that weights the tare fit and gives the uncertainty; as the calibrator's), wind_off_q_pa,
-attitude_tolerance_rad, q_tolerance_pa, q_tolerance_fraction, settle_samples, point_samples (0: a
-point per hold at its end; N: a point of the first N settled samples, as soon as they are in),
-min_samples, max_input_age_s, match_wait_s (how long a wrench sample waits for its attitude and q∞
-to arrive), diagnostics_period_s, take_point_samples, take_point_timeout_s.
+The steps are aero/live.py's, the same as `balance-calib reduce` (aero/run.py). The parameters
+(the model, the calibration for the σ that weights the tare fit and gives the uncertainty, what
+makes a hold, a point and a stale sample) are aero/live_parameters.py's table.
 """
 from __future__ import annotations
 
@@ -45,30 +41,15 @@ from std_srvs.srv import Trigger
 
 from balance_calib.aero.held_points import HoldSettings
 from balance_calib.aero.live import LiveReduction
+from balance_calib.aero.live_parameters import PARAMETERS
 from balance_calib.aero.model_file import load_model
 from balance_calib.aero.pipeline import calibration_sigma
 from balance_calib.calibration_file import load_calibration
 from balance_calib.config import ConfigError
 from balance_calib.tunnel_axes import parse_installation
 
-PARAMETERS = {
-    'model': 'euler_replica',
-    'estimate_weight': False,
-    'calibration_file': 'lmc6522',
-    'installation': 'upright',
-    'wind_off_q_pa': 1.0,
-    'attitude_tolerance_rad': 1e-4,
-    'q_tolerance_pa': 1.0,
-    'q_tolerance_fraction': 0.01,
-    'settle_samples': 0,
-    'point_samples': 0,
-    'min_samples': 5,
-    'max_input_age_s': 0.5,
-    'match_wait_s': 2.0,
-    'diagnostics_period_s': 1.0,
-    'take_point_samples': 100,
-    'take_point_timeout_s': 30.0,
-}
+from ._parameters import declare_table
+
 QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
 
@@ -92,8 +73,8 @@ def _wrench(stamp_ns: int, frame: str, values) -> WrenchStamped:
 class AeroCoefficients(Node):
     def __init__(self, **kwargs):
         super().__init__('aero_coefficients', **kwargs)
-        p = {name: self.declare_parameter(name, default).value for name, default in PARAMETERS.items()}
         try:
+            p = declare_table(self, PARAMETERS)      # read once, here (read-only)
             model = load_model(p['model'])
             if p['estimate_weight']:
                 model = model.with_estimated_weight()
@@ -108,8 +89,6 @@ class AeroCoefficients(Node):
             raise StartupError(f'aero_coefficients: {err}') from None
         self._max_age_s = float(p['max_input_age_s'])
         self._take_samples, self._take_timeout_s = int(p['take_point_samples']), float(p['take_point_timeout_s'])
-        if self._take_samples < 1 or not self._take_timeout_s > 0:
-            raise StartupError('aero_coefficients: take_point_samples and take_point_timeout_s must be positive')
         self._request = None          # (core request, Future, deadline)
         out = {name: self.create_publisher(WrenchStamped, f'aero/{name}', QOS)
                for name in ('coefficients', 'wind_coefficients', 'point', 'point_wind', 'point_scatter',

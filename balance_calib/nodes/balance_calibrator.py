@@ -42,11 +42,11 @@ from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
 from balance_calib.calibration_file import ConfigError
-from balance_calib.live.parameters import PARAMETERS, STRING_ARRAY, check_parameter
+from balance_calib.live.parameters import PARAMETERS, check_parameter
 from balance_calib.live.raw_codec import wrench_arrays
 from balance_calib.live.session import CalibratorSession
 
-from ._parameters import declare_checked, value_getter
+from ._parameters import declare_table, value_getter
 from ._raw_input import RawInput
 
 WRENCH_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -60,7 +60,7 @@ class BalanceCalibrator(Node):
         """refit_function: run_refit's signature, run in a thread; None = the pipeline in its own process."""
         super().__init__('balance_calibrator', **kwargs)
         try:
-            declare_checked(self, PARAMETERS, check_parameter, STRING_ARRAY)
+            declare_table(self, PARAMETERS, check_parameter)
         except (ParameterException, ValueError) as err:
             raise ConfigError(f'invalid parameter: {err}') from None
         self._refit_function = refit_function

@@ -1,9 +1,7 @@
 """balance_recorder: record named topics into a rosbag2 MCAP bag (there is no `ros2 bag` here).
 
-Parameters:
-  output (string, required)   bag directory to create; it must not exist yet.
-  topics (string[])           topics to record (default: every topic of docs/interfaces.md, the
-                              calibration's, the live wrench's and the wind-on run's).
+Its parameters, `output` (the bag directory to create) and `topics`, are the table of
+bags/recorder_parameters.py.
 
 Each topic's type and its publishers' QoS come from the graph; topics without publishers yet are
 looked up again every half second. Messages are recorded as serialized bytes (raw subscriptions)
@@ -14,6 +12,7 @@ up to a second ago.
 """
 import importlib
 import signal
+import sys
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -22,13 +21,12 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 
 from balance_calib.bags.errors import BagError
+from balance_calib.bags.recorder_parameters import DEFAULT_TOPICS, PARAMETERS
 from balance_calib.bags.writer import BagWriter, qos_profiles_yaml
+from balance_calib.parameter_table import ParameterError
 
-# every topic of docs/interfaces.md: a calibration campaign, the live calibrator, a wind-on run
-DEFAULT_TOPICS = ['/balance/raw', '/balance/temperature', '/calibration/applied_load',
-                  '/calibration/gravity', '/balance/wrench', '/balance/wrench_uncertainty',
-                  '/balance/overload', '/diagnostics', '/model/attitude',
-                  '/tunnel/dynamic_pressure', '/aero/coefficients', '/aero/wind_coefficients']
+from ._parameters import declare_table
+
 DISCOVERY_PERIOD_S = 0.5
 FLUSH_PERIOD_S = 1.0  # the file holds what was received up to this long ago
 QUEUE_DEPTH = 1000  # a recorder would rather buffer than drop
@@ -69,9 +67,9 @@ class BalanceRecorder(Node):
 
     def __init__(self):
         super().__init__('balance_recorder')
-        topics = self.declare_parameter('topics', DEFAULT_TOPICS).value
+        parameters = declare_table(self, PARAMETERS)      # read once, here (read-only)
+        topics, output = parameters['topics'], parameters['output']
         self._default_topics = {self.resolve_topic_name(topic) for topic in DEFAULT_TOPICS}
-        output = self.declare_parameter('output', '').value
         if not output:
             raise BagError('parameter output (the bag directory to create) is required')
         self._writer = BagWriter(output)
@@ -168,7 +166,7 @@ def main(args=None):
         rclpy.spin(recorder)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except BagError as error:
+    except (BagError, ParameterError) as error:
         rclpy.logging.get_logger('balance_recorder').error(str(error))
         return 1
     except RuntimeError:
@@ -184,4 +182,4 @@ def main(args=None):
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

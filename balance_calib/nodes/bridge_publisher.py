@@ -54,51 +54,14 @@ from balance_calib.simulation.balance_sim import (noise_mv_for_load_sigma, paced
                                                   simulate_campaign, table17_noise)
 from balance_calib.simulation.effects import parse_effects
 from balance_calib.tunnel_axes import parse_installation
+from balance_calib.parameter_table import defaults
+from balance_calib.simulation.publisher_parameters import PARAMETERS as TABLE
 
-MODES = ('calibration', 'wind_on', 'replay', 'thrust_stand')
-PARAMETERS = {                       # name: default (the type of the default is the parameter's type)
-    'mode': 'calibration',
-    'balance': 'lmc6522',
-    'truth_model': 'cubic',
-    'rate_hz': 100.0,
-    'effects': '',
-    'seed': 0,
-    'noise_sigma_pct_fs': -1.0,      # σ of a point mean, % FS, all components; < 0: Table 17 cubic row
-    'point_duration_s': 1.0,
-    'transition_s': 0.3,
-    'physical_seconds_per_point': 90.0,   # calibration: the campaign's temperature and drift follow
-                                          # a real one of this many seconds a point, however fast it plays
-    'points': '',                    # e.g. '1-60,100' (point numbers as printed); '' = all
-    'schedule_file': '',             # calibration: a load schedule CSV (layout of the
-                                     # Appendix A/B sheets, e.g. from balance-calib design);
-                                     # '' = the config's
-    'speed': 1.0,                    # simulated (or recorded) seconds per real second
-    'bag': '',                       # replay: bag directory or .mcap; several separated by commas
-    'profile_csv': '',               # wind_on: time_s,FX,FY,FZ,MX,MY,MZ (balance axes); '' = α sweep
-    'installation': 'upright',
-    'hold_s': 1.0,                   # wind_on sweep: time at each α
-    'wind_off_s': 2.0,               # wind_on sweep: wind-off samples first (for ~/tare)
-    'alpha_start_deg': -2.0,
-    'alpha_end_deg': 22.0,
-    'alpha_step_deg': 2.0,
-    'model_weight_n': 0.0,           # wind_on; with aero_model: > 0 overrides the model file's weight (and CG)
-    'aero_model': '',                # wind_on: a model file (config/models) -> the physical run of §10.3
-    'dynamic_pressure_pa': 50000.0,  # wind_on with aero_model: q∞ of the wind-on holds
-    'model_cg_m': [0.0, 0.0, 0.0],   # wind_on with aero_model and model_weight_n > 0: the true CG, body axes
-    'wind_off_rolls_deg': [0.0, 90.0, 180.0, 270.0],   # wind_on with aero_model: the wind-off sweep's
-    'wind_off_alphas_deg': [-2.0, 10.0, 22.0],         # attitudes (every roll at every α)
-    'wind_off_hold_s': 0.3,          # wind_on with aero_model: time at each wind-off attitude
-    'electrical_zero_mv': 0.04,      # calibration and wind_on: bridge outputs with nothing on the balance
-    'temperature_c': 20.0,           # wind_on: balance temperature
-    'temperature_rate_hz': 10.0,
-    'loop': False,
-    'exit_when_done': False,
-    'wait_for_subscribers': 0,       # start only when /balance/raw has this many subscribers (with aero_model
-                                     # /model/attitude and /tunnel/dynamic_pressure too) ...
-    'start_delay_s': 0.5,            # ... and this long after, so their other topics are matched too
-    'wait_for_subscribers_timeout_s': 30.0,   # give up (exit status 1) after waiting this long for
-                                              # them, s; 0 = wait for ever
-}
+from ._parameters import declare_table
+
+# name -> default, as tests and tools read them; the table (type, range, description) is the
+# pure simulation/publisher_parameters.py's
+PARAMETERS = defaults(TABLE)
 RAW_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 # timeline kinds of the physical wind-on run, after simulation/timeline.py's
 ATTITUDE, DYNAMIC_PRESSURE, AERO_TRUTH, AERO_TRUTH_WIND = 7, 8, 9, 10
@@ -112,12 +75,11 @@ class StartupError(ValueError):
 class BridgePublisher(Node):
     def __init__(self, **kwargs):
         super().__init__('bridge_publisher', **kwargs)
-        self._settings = {name: self.declare_parameter(name, default).value for name, default in PARAMETERS.items()}
+        try:     # every parameter read once, here (read-only); mode, rate_hz, speed... checked
+            self._settings = declare_table(self, TABLE)
+        except ValueError as err:
+            raise StartupError(str(err)) from None
         self.mode = str(self._settings['mode'])
-        if self.mode not in MODES:
-            raise StartupError(f'parameter mode = {self.mode!r}: choose one of {", ".join(MODES)}')
-        if self._settings['rate_hz'] <= 0 or self._settings['speed'] <= 0:
-            raise StartupError('parameters rate_hz and speed must be positive')
         self.done = Future()                    # completes when the run is over and exit_when_done
         self._outputs = {}
         self._frame_id = ''
@@ -171,8 +133,6 @@ class BridgePublisher(Node):
         effects = parse_effects(self._settings['effects'])
         rate, duration, transition = float(self._settings['rate_hz']), float(self._settings['point_duration_s']), \
             float(self._settings['transition_s'])
-        if duration <= 0 or transition < 0:
-            raise ValueError('point_duration_s must be positive and transition_s not negative')
         self._publisher(tl.GRAVITY, Vector3Stamped, '/calibration/gravity')
         self._publisher(tl.APPLIED_LOAD, WrenchStamped, '/calibration/applied_load')
 
@@ -195,8 +155,6 @@ class BridgePublisher(Node):
             samples_per_condition = 1
         else:
             step = float(self._settings['alpha_step_deg'])
-            if step <= 0:
-                raise ValueError('alpha_step_deg must be positive')
             alphas = np.arange(self._settings['alpha_start_deg'], self._settings['alpha_end_deg'] + step / 2, step)
             profile = aoa_sweep_profile(config.capacity, installation, rate, alphas_deg=alphas,
                                         hold_s=self._settings['hold_s'], wind_off_s=self._settings['wind_off_s'],
@@ -232,8 +190,6 @@ class BridgePublisher(Node):
             raise ValueError(f'{model.path}: the model file says estimate; give the simulated model its true '
                              f'weight and CG with model_weight_n and model_cg_m')
         step = float(self._settings['alpha_step_deg'])
-        if step <= 0:
-            raise ValueError('alpha_step_deg must be positive')
         alphas = np.arange(self._settings['alpha_start_deg'], self._settings['alpha_end_deg'] + step / 2, step)
         wind_off = [(r, a) for r in self._settings['wind_off_rolls_deg'] for a in self._settings['wind_off_alphas_deg']]
         profile = aero_run_profile(model, installation, rate, q_pa=float(self._settings['dynamic_pressure_pa']),

@@ -26,13 +26,8 @@ STALE while an input is missing or older than `stale_after_s`. Its key/values (n
   flow_regime (shock-free / shock in nozzle / not choked), firing (true/false)
   samples_thrust, samples_chamber, samples_ambient, rejected_samples, window_s
 
-Parameters: throat_diameter_m (2.5e-3), exit_diameter_m (3.3e-3), gamma (1.402),
-gas_constant (287.1 J/(kg·K)), chamber_k (293.15; T_c only enters m_dot, u_e, C*, I_sp of the
-report), window_s (1.0), publish_period_s (0.5), stale_after_s (2.0), thrust_relative_sigma
-(0.01: σ of the calibration constant a, relative), throat_diameter_sigma_m (1e-5),
-report_path ('' = none): on shutdown, and when the std_srvs/Trigger service ~/report is called,
-write <report_path>.json and <report_path>.md (a '.json' or '.md' suffix is replaced) comparing
-the last firing (the last window whose throat was choked; the last window if none was).
+The nozzle, the windows and the report (std_srvs/Trigger service ~/report, and on shutdown) are
+set by the parameters of thrust_stand/analyzer_parameters.py's table.
 """
 from __future__ import annotations
 
@@ -52,9 +47,11 @@ from sensor_msgs.msg import FluidPressure
 from std_srvs.srv import Trigger
 
 from balance_calib.thrust_stand.analysis import ThrustComparison, compare_with_theory, window_mean
-from balance_calib.thrust_stand.nozzle import (DEFAULT_CHAMBER_K, DEFAULT_EXIT_DIAMETER_M, DEFAULT_GAMMA,
-                                               DEFAULT_GAS_CONSTANT_J_KG_K, DEFAULT_THROAT_DIAMETER_M, Nozzle)
+from balance_calib.thrust_stand.analyzer_parameters import PARAMETERS
+from balance_calib.thrust_stand.nozzle import Nozzle
 from balance_calib.thrust_stand.report import write_report
+
+from ._parameters import declare_table
 
 STATUS_NAME = 'thrust_analyzer: thrust coefficient'
 HARDWARE_ID = 'thrust_stand'
@@ -95,20 +92,17 @@ class ThrustAnalyzer(Node):
 
     def __init__(self):
         super().__init__('thrust_analyzer')
-        self._nozzle = Nozzle(
-            throat_diameter_m=float(self.declare_parameter('throat_diameter_m', DEFAULT_THROAT_DIAMETER_M).value),
-            exit_diameter_m=float(self.declare_parameter('exit_diameter_m', DEFAULT_EXIT_DIAMETER_M).value),
-            gamma=float(self.declare_parameter('gamma', DEFAULT_GAMMA).value),
-            gas_constant_j_kg_k=float(self.declare_parameter('gas_constant', DEFAULT_GAS_CONSTANT_J_KG_K).value))
-        self._chamber_k = float(self.declare_parameter('chamber_k', DEFAULT_CHAMBER_K).value)
-        self._window_s = float(self.declare_parameter('window_s', 1.0).value)
-        publish_period_s = float(self.declare_parameter('publish_period_s', 0.5).value)
-        self._stale_after_s = float(self.declare_parameter('stale_after_s', 2.0).value)
-        self._thrust_relative_sigma = float(self.declare_parameter('thrust_relative_sigma', 0.01).value)
-        self._throat_sigma_m = float(self.declare_parameter('throat_diameter_sigma_m', 1e-5).value)
-        self._report_path = str(self.declare_parameter('report_path', '').value)
-        if self._window_s <= 0 or publish_period_s <= 0 or self._stale_after_s <= 0:
-            raise ValueError('window_s, publish_period_s and stale_after_s must be positive')
+        p = declare_table(self, PARAMETERS)      # read once, here (read-only)
+        self._nozzle = Nozzle(throat_diameter_m=p['throat_diameter_m'],
+                              exit_diameter_m=p['exit_diameter_m'], gamma=p['gamma'],
+                              gas_constant_j_kg_k=p['gas_constant'])
+        self._chamber_k = p['chamber_k']
+        self._window_s = p['window_s']
+        publish_period_s = p['publish_period_s']
+        self._stale_after_s = p['stale_after_s']
+        self._thrust_relative_sigma = p['thrust_relative_sigma']
+        self._throat_sigma_m = p['throat_diameter_sigma_m']
+        self._report_path = p['report_path']
 
         self._signals = {'thrust': SignalWindow(), 'chamber': SignalWindow(), 'ambient': SignalWindow()}
         self._topics = {'thrust': '/balance/wrench', 'chamber': '/thrust_stand/chamber_pressure',
