@@ -39,7 +39,7 @@ naming the parameter. Ranges: `[a, b]` inclusive, `(a, ...` a itself refused, `i
 Read-only parameters are read once, at start-up (`--ros-args -p NAME:=VALUE` or `--params-file`);
 the others can be set while the node runs too (`launchless_scripts/ros param set`). `NODE --help`
 prints the same table. The simulated thrust stand (`bridge_publisher` with `mode` thrust_stand,
-nodes/thrust_stand_source.py) is not a node of its own: it takes bridge_publisher's parameters."""
+simulation/thrust_stand.py) is not a node of its own: it takes bridge_publisher's parameters."""
 
 
 def _cell(text: str) -> str:

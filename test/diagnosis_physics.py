@@ -30,7 +30,7 @@ Others
 
 Each effect is an `Effect` of the simulator (it gets the sample context, returns the outputs).
 `scaled(...)` sizes one so that it adds `floors` x Table 17's cubic σ (RMS) to a component's
-cubic-fit residual, measured on the noise-free campaign, the size convention of diagnosis/rates.
+cubic-fit residual, measured on the noise-free campaign, the size convention of simulation/diagnosis_rates.
 """
 from __future__ import annotations
 
@@ -40,7 +40,7 @@ from functools import lru_cache
 import numpy as np
 
 from balance_calib.config import load_balance_config
-from balance_calib.diagnosis.rates import noise_floor_pct_fs, simulate_reduction
+from balance_calib.simulation.diagnosis_rates import noise_floor_pct_fs, simulate_reduction
 from balance_calib.diagnosis.statistics import fit_columns
 from balance_calib.model.terms import as_variables, design_matrix
 from balance_calib.model.tm663 import tm663_terms

@@ -8,7 +8,7 @@ raised (launchless_scripts/diagnosis_rates runs 50 other seeds per balance).
 import pytest
 
 from balance_calib.diagnosis import diagnose
-from balance_calib.diagnosis.rates import simulate_reduction
+from balance_calib.simulation.diagnosis_rates import simulate_reduction
 
 
 @pytest.mark.parametrize('name, seeds, samples', [('lmc6522', range(20), 1), ('b660h', range(20), 1),

@@ -17,7 +17,7 @@ from balance_calib.config import load_balance_config
 from balance_calib.diagnosis import diagnose
 from balance_calib.diagnosis.contrasts import schedule_contrasts
 from balance_calib.diagnosis.plots import contrast_figures
-from balance_calib.diagnosis.rates import simulate_reduction
+from balance_calib.simulation.diagnosis_rates import simulate_reduction
 
 BALANCE, COMPONENT = 'lmc6522', 'MY'
 

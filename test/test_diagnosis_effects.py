@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from balance_calib.diagnosis import EFFECT_NAMES, DiagnosisSettings, diagnose
-from balance_calib.diagnosis.rates import (calibrated_parameter, injected_effects, noise_floor_pct_fs,
+from balance_calib.simulation.diagnosis_rates import (calibrated_parameter, injected_effects, noise_floor_pct_fs,
                                            simulate_reduction)
 
 SEED = 11

@@ -15,7 +15,7 @@ from balance_calib.config import load_balance_config
 from balance_calib.diagnosis import diagnose
 from balance_calib.diagnosis.loop_or_sign import (LOOP_RATIO, MIN_DIRECTION_PAIRS,
                                                   components_to_drop, direction_pairs, shows_loop)
-from balance_calib.diagnosis.rates import simulate_reduction
+from balance_calib.simulation.diagnosis_rates import simulate_reduction
 
 PAIRS = [(2 * i, 2 * i + 1) for i in range(40)]      # (falling, rising)
 

@@ -19,7 +19,7 @@ import pytest
 import diagnosis_physics as physics
 from balance_calib.config import load_balance_config
 from balance_calib.diagnosis import diagnose
-from balance_calib.diagnosis.rates import simulate_reduction
+from balance_calib.simulation.diagnosis_rates import simulate_reduction
 
 CELLS = [('lmc6522', 'preisach', 'MY'), ('lmc6522', 'masing', 'MY'), ('lmc6522', 'bouc_wen', 'MY'),
          ('lmc6522', 'reseating', 'MY'), ('lmc6522', 'sign_step', 'MY'),

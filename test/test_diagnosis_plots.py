@@ -5,7 +5,7 @@ from matplotlib.image import imread
 
 from balance_calib.diagnosis import diagnose
 from balance_calib.diagnosis.plots import CLIP_PCT_FS, plot_diagnosis, plot_residuals
-from balance_calib.diagnosis.rates import calibrated_parameter, injected_effects, simulate_reduction
+from balance_calib.simulation.diagnosis_rates import calibrated_parameter, injected_effects, simulate_reduction
 
 
 @pytest.fixture(scope='module')

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from balance_calib.diagnosis import diagnose
-from balance_calib.diagnosis.rates import calibrated_parameter, shape_effects, shape_family, simulate_reduction
+from balance_calib.simulation.diagnosis_rates import calibrated_parameter, shape_effects, shape_family, simulate_reduction
 from balance_calib.reduction import LoadPoints, reduce_points, retare_with_model
 
 CASES = [

@@ -13,7 +13,7 @@ import pytest
 
 from balance_calib.diagnosis import diagnose
 from balance_calib.diagnosis.leftovers import directed_lack_of_fit, slow_structure_bases
-from balance_calib.diagnosis.rates import calibrated_parameter, shape_effects, simulate_reduction
+from balance_calib.simulation.diagnosis_rates import calibrated_parameter, shape_effects, simulate_reduction
 
 
 class _Plain:

@@ -2,7 +2,7 @@
 import numpy as np
 
 from balance_calib.diagnosis.candidates import load_directions, refer_to_zero_points
-from balance_calib.diagnosis.rates import simulate_reduction
+from balance_calib.simulation.diagnosis_rates import simulate_reduction
 from balance_calib.diagnosis.statistics import ZeroPointWhitening, fit_columns, forward_select, partial_f
 from balance_calib.simulation.balance_sim import _direction_history
 from balance_calib.tare.calibration_body import tare_loads

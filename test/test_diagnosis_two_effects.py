@@ -12,7 +12,7 @@ import pytest
 import diagnosis_physics as physics
 from balance_calib.config import load_balance_config
 from balance_calib.diagnosis import diagnose
-from balance_calib.diagnosis.rates import simulate_reduction
+from balance_calib.simulation.diagnosis_rates import simulate_reduction
 
 CASES = [('lmc6522', (('lagged_temperature', 'FX'), ('bouc_wen', 'MY'))),
          ('lmc6522', (('lagged_temperature', 'FX'), ('preisach', 'MY'))),

@@ -54,7 +54,7 @@ def node_executables() -> set[str]:
 
 def test_every_node_has_a_table_and_nothing_else_does():
     assert set(TABLES) == node_executables()
-    # any other rclpy node in nodes/ would need one too (thrust_stand_source is a pure simulator
+    # any other rclpy node in nodes/ would need one too (simulation/thrust_stand.py is a pure simulator
     # that bridge_publisher's thrust_stand mode runs: its parameters are bridge_publisher's)
     with_a_node = {path.stem for path in (ROOT / 'balance_calib' / 'nodes').glob('*.py')
                    if re.search(r'^class \w+\(Node\):', path.read_text(), re.M)}

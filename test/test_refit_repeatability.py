@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from balance_calib.config import load_balance_config
-from balance_calib.diagnosis.rates import calibrated_parameter, shape_effects
+from balance_calib.simulation.diagnosis_rates import calibrated_parameter, shape_effects
 from balance_calib.model.inverse import linear_part
 from balance_calib.model.tm663 import tm663_terms
 from balance_calib.refit.pipeline import run_refit

@@ -133,7 +133,7 @@ def test_unknown_mode_exits_with_a_message(tmp_path):
 
 
 def test_thrust_stand_mode_without_its_simulator_fails_clearly(monkeypatch):
-    monkeypatch.setitem(sys.modules, 'balance_calib.nodes.thrust_stand_source', None)   # import fails
+    monkeypatch.setitem(sys.modules, 'balance_calib.simulation.thrust_stand', None)   # import fails
     context = Context()
     rclpy.init(context=context, domain_id=new_domain_id())
     try:

@@ -5,7 +5,7 @@ import pytest
 
 from balance_calib.fit.least_squares import fit_model
 from balance_calib.model.terms import parse_terms
-from balance_calib.nodes.thrust_stand_source import ThrustStandSimulator
+from balance_calib.simulation.thrust_stand import ThrustStandSimulator
 from balance_calib.thrust_stand.calibration import CalibrationReadings, calibrate
 from balance_calib.thrust_stand.line_fit import fit_line, slope_and_intercept, line_sums, slope_partials
 from balance_calib.thrust_stand.significant import format_value_error, round_result

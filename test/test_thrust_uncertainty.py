@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from balance_calib.nodes.thrust_stand_source import ThrustStandSimulator
+from balance_calib.simulation.thrust_stand import ThrustStandSimulator
 from balance_calib.thrust_stand.analysis import compare_with_theory, window_mean
 from balance_calib.thrust_stand.nozzle import Nozzle
 from balance_calib.thrust_stand.report import write_report

@@ -16,7 +16,7 @@ Modes (parameter `mode`):
                 /tunnel/dynamic_pressure with every raw sample, and the true coefficients on
                 /aero/truth (body) and /aero/truth_wind (wind axes), also not public interfaces.
   replay        the messages of bag(s) as `ros2 bag play` sends them (header stamps as recorded).
-  thrust_stand  the lab manual's thrust stand (nodes/thrust_stand_source.py): strain channel on
+  thrust_stand  the lab manual's thrust stand (simulation/thrust_stand.py): strain channel on
                 /balance/raw force.x (mV), /thrust_stand/chamber_pressure (gauge) and
                 /thrust_stand/ambient_pressure (sensor_msgs/FluidPressure, Pa), and the
                 calibration weights on /calibration/applied_load (force.x, N).
@@ -240,10 +240,10 @@ class BridgePublisher(Node):
 
     def _thrust_stand(self):
         try:
-            module = importlib.import_module('balance_calib.nodes.thrust_stand_source')
+            module = importlib.import_module('balance_calib.simulation.thrust_stand')
             simulator = module.ThrustStandSimulator(seed=int(self._settings['seed']))
         except (ImportError, AttributeError) as err:
-            raise StartupError(f'thrust_stand mode is not available: balance_calib.nodes.thrust_stand_source.'
+            raise StartupError(f'thrust_stand mode is not available: balance_calib.simulation.thrust_stand.'
                                f'ThrustStandSimulator cannot be loaded ({err})') from None
         self._frame_id = 'thrust_stand'
         self._publisher(tl.RAW, WrenchStamped, '/balance/raw', RAW_QOS)

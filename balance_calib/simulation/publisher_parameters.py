@@ -1,7 +1,7 @@
 """bridge_publisher's parameter table (parameter_table.Spec), without rclpy.
 
 The node reads every parameter once, at start-up, to build its timeline: all are read-only. The
-thrust stand of `mode` thrust_stand (nodes/thrust_stand_source.py) takes seed and the playing
+thrust stand of `mode` thrust_stand (simulation/thrust_stand.py) takes seed and the playing
 parameters (rate_hz, speed, loop, exit_when_done, wait_for_subscribers...); its physics has no
 parameters of its own on the node.
 """

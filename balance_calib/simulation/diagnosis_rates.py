@@ -29,11 +29,11 @@ from ..config import BalanceConfig, load_balance_config
 from ..model.tm663 import tm663_terms
 from ..fit.least_squares import fit_model
 from ..reduction import LoadPoints, Reduction, reduce_points, retare_with_model
-from ..simulation import effects as sim_effects
-from ..simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
-from .candidates import EFFECT_NAMES
-from .diagnose import Diagnosis, diagnose
-from .statistics import fit_columns
+from . import effects as sim_effects
+from .balance_sim import SimulationSettings, simulate_campaign, table17_noise
+from ..diagnosis.candidates import EFFECT_NAMES
+from ..diagnosis.diagnose import Diagnosis, diagnose
+from ..diagnosis.statistics import fit_columns
 
 BALANCES = ('lmc6522', 'b660h')
 TARGET_COMPONENT = 'FX'
