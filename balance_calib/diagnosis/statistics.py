@@ -103,11 +103,6 @@ def fit_columns(design: np.ndarray, target: np.ndarray) -> ComponentFit:
                         solution.rank)
 
 
-def sigma_pct_fs(residuals: np.ndarray, capacity: float) -> float:
-    """TM-663 eq. (44): RMS over all points (divided by N) in % of full scale."""
-    return float(np.sqrt(np.mean(np.asarray(residuals, float) ** 2)) / capacity * 100.0)
-
-
 def partial_f(rss_before: float, rss_after: float, added: int, dof_after: int) -> tuple[float, float]:
     """F statistic and p-value of `added` terms that took RSS from rss_before to rss_after."""
     if added <= 0 or dof_after <= 0 or rss_after <= 0:
