@@ -8,14 +8,11 @@ from typing import Any, Mapping
 import numpy as np
 import yaml
 
+from .errors import ConfigError
 from .model.balance_model import BalanceModel
 from .units import BRIDGE_OUTPUTS, COMPONENTS, STANDARD_GRAVITY_M_S2
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config'
-
-
-class ConfigError(ValueError):
-    """A balance or calibration file that cannot be used; the message names file and key."""
 
 
 @dataclass(frozen=True)

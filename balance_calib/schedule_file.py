@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import csv
 import io
-import math
 from pathlib import Path
 
 import numpy as np
 
 from .config import ConfigError, LoadSchedule
+from .csv_files import read_csv_text, require_finite_loads
 from .units import STANDARD_GRAVITY_M_S2
 
 LOAD_COLUMNS = ('FX_kgf', 'FY_kgf', 'FZ_kgf', 'MX_kgfm', 'MY_kgfm', 'MZ_kgfm')
@@ -31,12 +31,7 @@ def read_schedule_csv(path: str | Path) -> LoadSchedule:
     orientation I_g outside 1-8, no executed point at all.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding='utf-8-sig')
-    except (OSError, UnicodeDecodeError) as err:
-        reason = getattr(err, 'strerror', None) or err
-        raise ConfigError(f'{path}: cannot read the schedule: {reason}') from None
-    reader = csv.DictReader(io.StringIO(text))
+    reader = csv.DictReader(io.StringIO(read_csv_text(path, 'schedule', ConfigError)))
     header = [h.strip() for h in (reader.fieldnames or [])]
     missing = [c for c in REQUIRED if c not in header]
     if missing:
@@ -59,8 +54,7 @@ def read_schedule_csv(path: str | Path) -> LoadSchedule:
             bad = next(c for c in REQUIRED if not _is_number(record[c]))
             raise ConfigError(f'{path}: row {number}: column {bad} is {record[bad]!r}, '
                               f'not a number') from None
-        if not all(math.isfinite(v) for v in values):
-            raise ConfigError(f'{path}: row {number}: loads must be finite numbers')
+        require_finite_loads(values, path, number, ConfigError)
         if not 1 <= orientation <= 8:
             raise ConfigError(f'{path}: row {number}: I_g = {orientation}, expected 1-8 '
                               f'(TM-663\'s orientations)')

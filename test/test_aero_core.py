@@ -14,7 +14,7 @@ from balance_calib.aero.run import reduce_run
 from balance_calib.aero.weight_tare import WeightTareError, declared_tare, fit_weight_tare, weight_loads
 from balance_calib.calibration_file import load_calibration
 from balance_calib.config import ConfigError, load_balance_config
-from balance_calib.active_calibration import activate, six_axis_loads
+from balance_calib.model.active_calibration import activate, six_axis_loads
 from balance_calib.simulation.wind_on import aero_run_profile, wind_on_outputs
 from balance_calib.model.inverse import outputs_for_loads
 from balance_calib.simulation.balance_sim import noise_mv_for_load_sigma

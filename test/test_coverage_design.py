@@ -16,7 +16,7 @@ from balance_calib.coverage.design import (design_points, rig_loading, schedule_
                                            schedule_with)
 from balance_calib.coverage.run import run_coverage
 from balance_calib.coverage.support import ScheduleSupport, outside_support
-from balance_calib.active_calibration import activate
+from balance_calib.model.active_calibration import activate
 from balance_calib.live.stream import wrench_uncertainty
 from balance_calib.model.inverse import outputs_for_loads
 from balance_calib.refit.pipeline import calibrate_points, campaign_points

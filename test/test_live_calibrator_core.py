@@ -6,7 +6,7 @@ from hypothesis.extra.numpy import arrays
 
 from balance_calib.calibration_file import Calibration, load_calibration
 from balance_calib.config import CONFIG_DIR
-from balance_calib.active_calibration import activate
+from balance_calib.model.active_calibration import activate
 from balance_calib.live.calibrator_core import (OK, STALE, WARN, InputCounters, LiveState, LoadHistory, TareWindow, compute_wrench, describe_tare, describe_zero, diagnostics, tare_zero)
 from balance_calib.model.balance_model import BalanceModel
 from balance_calib.model.inverse import outputs_for_loads

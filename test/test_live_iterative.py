@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from balance_calib.calibration_file import load_calibration, save_calibration
-from balance_calib.active_calibration import activate
+from balance_calib.model.active_calibration import activate
 from balance_calib.live.calibrator_core import ERROR, LiveState, compute_wrench, diagnostics
 from balance_calib.live.stream import LiveCalibrator, LiveSettings
 from balance_calib.model.inverse import InverseDidNotConverge

@@ -9,7 +9,7 @@ import yaml
 from balance_calib.calibration_file import load_calibration
 from balance_calib.config import CONFIG_DIR, load_balance_config, resolve_config_path
 from balance_calib.launchless.campaign import graph_parameter
-from balance_calib.active_calibration import activate
+from balance_calib.model.active_calibration import activate
 from balance_calib.live.parameters import PARAMETERS
 from balance_calib.live.session import live_settings
 from balance_calib.live.stream import LiveCalibrator, OverloadMonitor

@@ -10,7 +10,7 @@ import pytest
 
 from balance_calib.calibration_file import load_calibration
 from balance_calib.cli import main
-from balance_calib.active_calibration import activate
+from balance_calib.model.active_calibration import activate
 from balance_calib.live.calibrator_core import OK, InputCounters, LiveState, diagnostics
 from balance_calib.live.raw_codec import WrenchEncoder
 from balance_calib.live.stream import LiveCalibrator, LiveSettings

@@ -8,7 +8,7 @@ import pytest
 
 from balance_calib.calibration_file import ConfigError, load_calibration
 from balance_calib.config import CONFIG_DIR
-from balance_calib.active_calibration import activate
+from balance_calib.model.active_calibration import activate
 from balance_calib.live.calibrator_core import ERROR, OK, STALE, check_steady, compute_wrench
 from balance_calib.live.parameters import PARAMETERS, check_parameter, load_calibration_checked
 from balance_calib.live.stream import InputMonitor, LiveCalibrator, LiveSettings, LowPass, OverloadMonitor

@@ -11,7 +11,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from balance_calib.calibration_file import load_calibration
 from balance_calib.config import CONFIG_DIR
 from balance_calib.live import _lone_kernel, lone_sample  # noqa: F401  (an import error must fail)
-from balance_calib.active_calibration import activate
+from balance_calib.model.active_calibration import activate
 from balance_calib.live.raw_codec import WrenchEncoder, decode_wrenches
 from balance_calib.live.stream import LiveCalibrator, LiveSettings
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT

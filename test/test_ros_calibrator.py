@@ -218,7 +218,7 @@ def test_tare_subtracts_the_wind_off_load_and_says_what_it_subtracted(probe, tmp
     source.stream(200.0)
     wait_for(reply.done, 10.0, 'the tare reply')
     # the load of the wind-off outputs with the cubic model on the full outputs, in tunnel axes (upright)
-    from balance_calib.active_calibration import activate
+    from balance_calib.model.active_calibration import activate
     from balance_calib.live.calibrator_core import compute_wrench
     expected = compute_wrench(activate(MEMO, 'adopted', 'upright'), [SAMPLE_MV]).wrench_tunnel[0]
     assert reply.result().success, reply.result().message

@@ -15,7 +15,7 @@ from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
 from balance_calib.calibration_file import ConfigError, save_calibration
-from balance_calib.active_calibration import activate
+from balance_calib.model.active_calibration import activate
 from balance_calib.live.calibrator_core import compute_wrench
 from balance_calib.model.inverse import outputs_for_loads
 from balance_calib.live.refit_process import RefitFailed, run_refit_in_process

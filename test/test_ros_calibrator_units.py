@@ -7,7 +7,7 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.parameter import Parameter
 
 from balance_calib.calibration_file import ConfigError
-from balance_calib.active_calibration import activate
+from balance_calib.model.active_calibration import activate
 from balance_calib.live.calibrator_core import compute_wrench
 from balance_calib.live.parameters import input_scale_mv
 from ros_harness import wait_for

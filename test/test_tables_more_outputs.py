@@ -9,7 +9,7 @@ import pytest
 
 from balance_calib.calibration_file import (Calibration, ConfigError, load_calibration,
                                             save_calibration)
-from balance_calib.active_calibration import activate
+from balance_calib.model.active_calibration import activate
 from balance_calib.model.balance_model import BalanceModel
 from balance_calib.model.terms import parse_terms
 from balance_calib.tables import synthetic as sy

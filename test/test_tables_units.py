@@ -8,7 +8,7 @@ import pytest
 
 from balance_calib.calibration_file import load_calibration
 from balance_calib.cli import main
-from balance_calib.active_calibration import activate
+from balance_calib.model.active_calibration import activate
 from balance_calib.live.calibrator_core import compute_wrench
 from balance_calib.live.stream import wrench_uncertainty
 from balance_calib.tables import synthetic as sy

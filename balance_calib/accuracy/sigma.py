@@ -13,13 +13,47 @@ def residuals_pct_fs(loads_measured, loads_fitted, full_scale) -> np.ndarray:
     return (np.asarray(loads_measured, float) - np.asarray(loads_fitted, float)) / np.asarray(full_scale, float) * 100.0
 
 
-def sigma_pct_fs(residual_loads, full_scale) -> np.ndarray:
-    """sqrt(mean(residual²)) / F.S. x 100 per component, eqs. (44)-(49).
+def sigma_pct_fs(residual_loads, full_scale) -> np.ndarray | float:
+    """The memo's σ, TM-663 eqs. (44)-(49): sqrt(Σ residual² / N_max) / F.S. x 100.
 
-    residual_loads (N, n_components) in N / N·m. The memo divides by N_max, not N - p.
+    The root mean square of the residuals about zero, divided by the number of points N_max
+    (not N - 1, not N - p); compare `sample_std_pct_fs`.
+
+    Parameters
+    ----------
+    residual_loads : array_like, shape (N, n_components) or (N,)
+        exp - th per point and component, N or N·m.
+    full_scale : array_like, shape (n_components,) or scalar
+        Full scale (capacity) of each component, in the residuals' units.
+
+    Returns
+    -------
+    ndarray, shape (n_components,), or float for a 1-D residual
+        σ in % of full scale.
     """
-    residual_loads = np.atleast_2d(np.asarray(residual_loads, dtype=float))
-    return np.sqrt(np.mean(residual_loads ** 2, axis=0)) / np.asarray(full_scale, float) * 100.0
+    residual_loads = np.asarray(residual_loads, dtype=float)
+    sigma = np.sqrt(np.mean(residual_loads ** 2, axis=0)) / np.asarray(full_scale, float) * 100.0
+    return float(sigma) if residual_loads.ndim == 1 else sigma
+
+
+def sample_std_pct_fs(residual_loads, full_scale) -> np.ndarray:
+    """Sample standard deviation of the residuals in % of full scale (about their mean, N - 1).
+
+    What a table calibration's report.json calls σ (interfaces.md, "Calibration data tables");
+    not the memo's σ of eq. (44) (`sigma_pct_fs`: about zero, divided by N_max).
+
+    Parameters
+    ----------
+    residual_loads : array_like, shape (N, n_components)
+        applied - predicted per point and component, N or N·m (N ≥ 2).
+    full_scale : array_like, shape (n_components,)
+        Capacity of each component, in the residuals' units.
+
+    Returns
+    -------
+    ndarray, shape (n_components,)
+    """
+    return np.std(residual_loads, axis=0, ddof=1) / np.asarray(full_scale, float) * 100.0
 
 
 def sigma_by_component(residual_loads, full_scale, components: Sequence[str] = COMPONENTS) -> dict[str, float]:

@@ -11,10 +11,11 @@ from typing import Sequence
 
 import numpy as np
 
-from ..calibration_file import Calibration, load_calibration
+from ..calibration_file import load_calibration
+from ..model.calibration import Calibration
 from ..coverage.run import RunCoverage, run_coverage
 from ..model.uncertainty import has_uncertainty
-from ..active_calibration import activate, six_axis_loads
+from ..model.active_calibration import activate, six_axis_loads
 from ..tunnel_axes import Installation, parse_installation
 from .bag_io import DEFAULT_MAX_INPUT_AGE_S, RunSamples, read_run
 from .held_points import HoldSettings

@@ -17,7 +17,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ..calibration_file import Calibration
+from ..model.calibration import Calibration
 from ..model.inverse import outputs_for_loads
 from ..model.uncertainty import (covariance_and_sigma, load_standard_uncertainty,
                                  require_covariance)

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import csv
 import io
-import math
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 from ..bags.reader import TopicNames, read_bags
+from ..csv_files import read_csv_text, require_finite_loads
 from ..tunnel_axes import Installation
 
 WRENCH_TOPIC = '/balance/wrench'
@@ -26,12 +26,7 @@ def read_loads_csv(path: str | Path, components: Sequence[str]) -> np.ndarray:
     Other columns are ignored. RunInputError for a missing column, a non-number or non-finite cell
     (row numbers count data rows from 1), or no rows at all."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding='utf-8-sig')
-    except (OSError, UnicodeDecodeError) as err:
-        reason = getattr(err, 'strerror', None) or err
-        raise RunInputError(f'{path}: cannot read the loads: {reason}') from None
-    reader = csv.reader(io.StringIO(text))
+    reader = csv.reader(io.StringIO(read_csv_text(path, 'loads', RunInputError)))
     header = [h.strip() for h in next(reader, [])]
     if not header:
         raise RunInputError(f'{path}: no loads (the file is empty)')
@@ -49,8 +44,7 @@ def read_loads_csv(path: str | Path, components: Sequence[str]) -> np.ndarray:
         except (ValueError, IndexError):
             raise RunInputError(f'{path}: row {number}: a load is missing or not a number') \
                 from None
-        if not all(math.isfinite(v) for v in values):
-            raise RunInputError(f'{path}: row {number}: loads must be finite numbers')
+        require_finite_loads(values, path, number, RunInputError)
         rows.append(values)
     if not rows:
         raise RunInputError(f'{path}: no loads (only a header)')

@@ -54,7 +54,8 @@ from .candidates import (EFFECT_NAMES, GENERIC_FAMILIES, NUISANCE_EFFECTS, STATI
                          own_terms_only, without_base_terms, hysteresis_family, temperature_family)
 from .loop_or_sign import components_to_drop, direction_pairs
 from .leftovers import Leftovers, examine_leftovers
-from .statistics import ComponentFit, ZeroPointWhitening, fit_columns, forward_select, partial_f, sigma_pct_fs
+from ..accuracy.sigma import sigma_pct_fs
+from .statistics import ComponentFit, ZeroPointWhitening, fit_columns, forward_select, partial_f
 from .tare_refit import refit_body
 
 

@@ -34,7 +34,8 @@ import numpy as np
 import scipy.stats
 
 from .candidates import STATIC_FAMILIES
-from .statistics import fit_columns, partial_f, sigma_pct_fs
+from ..accuracy.sigma import sigma_pct_fs
+from .statistics import fit_columns, partial_f
 
 # A component whose repeatability is this many times the median of the others is warned about.
 REPEATABILITY_WARNING_RATIO = 4.0   # LMC6522's own F_X (Table 17) is ~3x its other components

@@ -1,6 +1,7 @@
 """The statistics of the diagnosis, one load component at a time (BALFIT-style).
 
-- `fit_columns`: least squares by pivoted QR of norm-scaled columns, with the hat-matrix diagonal.
+- `fit_columns`: least squares by pivoted QR of norm-scaled columns, with the hat-matrix
+  diagonal (fit/least_squares.scaled_least_squares).
 - PRESS residuals e_i / (1 - h_ii): the leave-one-out residual in closed form, so a
   cross-validated σ costs one fit.
 - Partial F-test of added terms against the current fit.
@@ -14,6 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 import scipy.stats
+
+from ..fit.least_squares import scaled_least_squares
 
 # A column whose part not explained by the others is below this fraction of its own size (after
 # norm scaling) counts as dependent: fixed at zero, as fit_model does with unexcited terms.
@@ -87,29 +90,17 @@ class ComponentFit:
 
 
 def fit_columns(design: np.ndarray, target: np.ndarray) -> ComponentFit:
-    """Least squares target ≈ design · c; design (N, p), target (N,)."""
+    """Least squares target ≈ design · c, TM-663 eq. (19) for one component.
+
+    design (N, p) and target (N,) in any units; columns scaled to unit norm, a dependent column
+    fixed at zero (fit/least_squares.scaled_least_squares).
+    """
     design = np.asarray(design, dtype=float)
     target = np.asarray(target, dtype=float)
-    n, p = design.shape
-    norms = np.linalg.norm(design, axis=0)
-    norms[norms == 0] = 1.0
-    q, r, pivots = scipy.linalg.qr(design / norms, mode='economic', pivoting=True)
-    diagonal = np.abs(np.diag(r))
-    rank = int(np.sum(diagonal > DEPENDENT_TOLERANCE * max(diagonal[0], 1e-300))) if p else 0
-    basis = q[:, :rank]
-    projection = basis.T @ target
-    coefficients = np.zeros(p)
-    if rank:
-        solution = scipy.linalg.solve_triangular(r[:rank, :rank], projection)
-        coefficients[pivots[:rank]] = solution / norms[pivots[:rank]]
-    residuals = target - design @ coefficients
-    hat = np.sum(basis ** 2, axis=1)
-    return ComponentFit(coefficients, residuals, hat, basis, rank)
-
-
-def sigma_pct_fs(residuals: np.ndarray, capacity: float) -> float:
-    """TM-663 eq. (44): RMS over all points (divided by N) in % of full scale."""
-    return float(np.sqrt(np.mean(np.asarray(residuals, float) ** 2)) / capacity * 100.0)
+    solution = scaled_least_squares(design, target, tolerance=DEPENDENT_TOLERANCE)
+    residuals = target - design @ solution.coefficients
+    return ComponentFit(solution.coefficients, residuals, solution.leverage, solution.basis,
+                        solution.rank)
 
 
 def partial_f(rss_before: float, rss_after: float, added: int, dof_after: int) -> tuple[float, float]:

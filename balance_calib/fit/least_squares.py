@@ -2,13 +2,17 @@
 
 Eq. (19) sums the squared load errors of all six components; every component shares the same
 design matrix, so it separates into one least-squares problem per component with a common
-matrix. We solve it with column scaling, pivoted QR to find the terms the load schedule does not
-excite, and SVD for the solution and the coefficient covariance; never the normal equations that
-eq. (28) writes (they square the condition number).
+matrix. The memo reaches the minimum by the corrections of eqs. (20)-(27) and the normal
+equations of eq. (28), ∂F/∂C_k = 0; for a model linear in its coefficients that is one step, and
+we take it without forming the normal equations (they square the condition number): columns
+scaled, pivoted QR to find the terms the load schedule does not excite, the triangular factor
+for the solution and the coefficient covariance. `scaled_least_squares` is that primitive; the
+series-tare fits (series_tares.py) and the diagnosis (diagnosis/statistics.py) call it too.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -40,6 +44,117 @@ class TooFewPointsError(ValueError):
         super().__init__(
             f'{points} points cannot determine the {model_name} model\'s {terms} terms and {tares} '
             f'series tare(s) (it needs at least {terms + tares + 1} points); fit fewer terms')
+
+
+@dataclass(frozen=True)
+class ScaledSolution:
+    """The least-squares solution of ``design · coefficients ≈ targets``, eqs. (19) and (28).
+
+    Shapes: N points, p design columns, k targets (k absent for a 1-D target), r = rank.
+    Coefficients are in the units of targets / design column; a column the others already
+    explain (below the rank tolerance) is fixed at zero and left out of `basis` and
+    `covariance_unscaled`.
+    """
+
+    coefficients: np.ndarray    # (p,) or (p, k); 0 for dependent columns
+    pivots: np.ndarray          # (p,) column order of the pivoted QR: most new information first
+    pivot_diagonal: np.ndarray  # (p,) |R_ii| of the scaled columns in pivot order, 0-padded
+    r_factor: np.ndarray        # (r, r) upper triangular factor of the kept scaled columns
+    basis: np.ndarray           # (N, r) orthonormal basis of the kept columns' span (Q)
+    scales: np.ndarray          # (p,) the column scales used (design / scales was factored)
+
+    @property
+    def rank(self) -> int:
+        return self.basis.shape[1]
+
+    @cached_property
+    def kept(self) -> np.ndarray:
+        """(p,) bool: the columns solved for (the others are dependent, fixed at zero)."""
+        mask = np.zeros(self.pivots.size, dtype=bool)
+        mask[self.pivots[:self.rank]] = True
+        return mask
+
+    @cached_property
+    def dependent_columns(self) -> np.ndarray:
+        """Indices of the dependent columns, in pivot order (least new information last)."""
+        return self.pivots[self.rank:]
+
+    @cached_property
+    def leverage(self) -> np.ndarray:
+        """(N,) hat-matrix diagonal h_ii: the squared row norms of the basis."""
+        return np.sum(self.basis ** 2, axis=1)
+
+    @cached_property
+    def covariance_unscaled(self) -> np.ndarray:
+        """(p, p) (XᵀX)⁻¹ over the kept columns, in the design's units (zero rows and columns
+        for dependent ones): times σ² it is the coefficient covariance of eq. (28)'s solution."""
+        p = self.pivots.size
+        order = self.pivots[:self.rank]
+        inverse_r = scipy.linalg.solve_triangular(self.r_factor, np.eye(self.rank))
+        covariance = np.zeros((p, p))
+        covariance[np.ix_(order, order)] = (inverse_r @ inverse_r.T) / np.outer(
+            self.scales[order], self.scales[order])
+        return covariance
+
+    @cached_property
+    def condition_number(self) -> float:
+        """2-norm condition number of the kept scaled columns (inf when none is kept)."""
+        if not self.rank:
+            return float('inf')
+        singular = np.linalg.svd(self.r_factor, compute_uv=False)
+        return float(singular[0] / singular[-1])
+
+
+def column_norms(design: np.ndarray) -> np.ndarray:
+    """(p,) Euclidean norm of every column of design (N, p); 1 for an all-zero column."""
+    norms = np.linalg.norm(design, axis=0)
+    norms[norms == 0] = 1.0
+    return norms
+
+
+def scaled_least_squares(design, targets, *, scales: np.ndarray | None = None,
+                         tolerance: float = 1e-9, relative: bool = True) -> ScaledSolution:
+    """Minimise ``||targets - design · coefficients||²`` per target column, eqs. (19), (28).
+
+    Parameters
+    ----------
+    design : array_like, shape (N, p)
+        Design matrix, one column per term (any units).
+    targets : array_like, shape (N,) or (N, k)
+        Measured values (loads in N / N·m, or bridge outputs in mV).
+    scales : ndarray, shape (p,), optional
+        Column scales: design / scales is factored. Default: the column norms (unit columns).
+    tolerance : float
+        A column whose pivoted-QR diagonal |R_ii| (of the scaled design) is not above this is
+        dependent on the columns before it and fixed at zero.
+    relative : bool
+        True: the tolerance is a fraction of the largest |R_ii|; False: an absolute bound on the
+        scaled columns (meaningful when the scales make a fully excited column of norm ~1).
+
+    Returns
+    -------
+    ScaledSolution
+        Coefficients of shape (p,) or (p, k) in the design's units, with the factor, basis,
+        leverage, covariance and condition number of the kept columns.
+    """
+    design = np.asarray(design, dtype=float)
+    targets = np.asarray(targets, dtype=float)
+    n_columns = design.shape[1]
+    scales = column_norms(design) if scales is None else np.asarray(scales, dtype=float)
+    q_factor, r_factor, pivots = scipy.linalg.qr(design / scales, mode='economic', pivoting=True)
+    diagonal = np.zeros(n_columns)
+    diagonal[:min(r_factor.shape)] = np.abs(np.diag(r_factor))
+    threshold = tolerance * max(diagonal[0], 1e-300) if relative and n_columns else tolerance
+    rank = int(np.sum(diagonal > threshold))
+    basis = q_factor[:, :rank]
+    r_kept = r_factor[:rank, :rank]
+    coefficients = np.zeros((n_columns,) + targets.shape[1:])
+    if rank:
+        solution = scipy.linalg.solve_triangular(r_kept, basis.T @ targets)
+        order = pivots[:rank]
+        scale = scales[order] if targets.ndim == 1 else scales[order, None]
+        coefficients[order] = solution / scale
+    return ScaledSolution(coefficients, pivots, diagonal, r_kept, basis, scales)
 
 
 @dataclass(frozen=True)
@@ -97,16 +212,11 @@ def fit_model(terms: Sequence[Term], bridge_outputs_mv, loads, *, name: str = 'c
     design = design_matrix(terms, as_variables(tuple(inputs), outputs, extra), n_points)
 
     # Column scaling by the term's size at rated output, normalised so a fully excited column
-    # has norm about 1.
+    # has norm about 1: the absolute tolerance then means "not excited by the schedule".
     scales = term_scales(terms, rated_outputs, design) * np.sqrt(max(n_points, 1))
-    scaled = design / scales
-
-    # Pivoted QR: columns in order of how much new information each brings.
-    _, r_factor, pivots = scipy.linalg.qr(scaled, mode='economic', pivoting=True)
-    diagonal = np.abs(np.diag(r_factor)) if r_factor.size else np.zeros(0)
-    diagonal = np.concatenate([diagonal, np.zeros(n_terms - diagonal.size)])
-    excited_mask = np.zeros(n_terms, dtype=bool)
-    excited_mask[pivots[diagonal > UNEXCITED_TOLERANCE]] = True
+    solution = scaled_least_squares(design, targets, scales=scales,
+                                    tolerance=UNEXCITED_TOLERANCE, relative=False)
+    excited_mask = solution.kept
     unexcited = tuple(terms[j].name for j in range(n_terms) if not excited_mask[j])
     if unexcited and on_unexcited == 'raise':
         raise UnexcitedTermsError(unexcited, name)
@@ -116,19 +226,16 @@ def fit_model(terms: Sequence[Term], bridge_outputs_mv, loads, *, name: str = 'c
     kept = np.flatnonzero(excited_mask)
     if kept.size > n_points:
         raise UnexcitedTermsError([terms[j].name for j in kept[n_points:]], name)
-    u, singular, vt = np.linalg.svd(scaled[:, kept], full_matrices=False)
-    solution_scaled = vt.T @ ((u.T @ targets) / singular[:, None])        # (kept, n_components)
-    coefficients = np.zeros((targets.shape[1], n_terms))
-    coefficients[:, kept] = (solution_scaled / scales[kept, None]).T
+    coefficients = np.ascontiguousarray(solution.coefficients.T)        # (n_components, n_terms)
 
     fitted = design @ coefficients.T
     residuals = targets - fitted
     dof = n_points - kept.size
     variance = (residuals ** 2).sum(axis=0) / dof if dof > 0 else np.full(targets.shape[1], np.nan)
-    covariance_diag = ((vt.T / singular) ** 2).sum(axis=1)               # diag((Xs^T Xs)^-1)
+    covariance_diag = np.diag(solution.covariance_unscaled)[kept]       # diag((XᵀX)⁻¹)
     standard_errors = np.zeros_like(coefficients)
-    standard_errors[:, kept] = np.sqrt(np.outer(variance, covariance_diag)) / scales[kept]
-    condition = float(singular[0] / singular[-1]) if singular.size else float('inf')
+    standard_errors[:, kept] = np.sqrt(np.outer(variance, covariance_diag))
+    condition = solution.condition_number
     model = BalanceModel(name, terms, coefficients, tuple(components), tuple(inputs))
     return FitResult(model, int(kept.size), condition, unexcited, standard_errors, residuals, dof)
 

@@ -6,8 +6,9 @@ of one linear least-squares problem:
 
     applied_i = C · x(V_i) - T_{s(i)}          (x without the constant: T takes its role)
 
-solved with scaled columns by SVD (never the normal equations), giving coefficients, tares and their
-full covariance, from all points of each series rather than its zero-load point alone.
+solved with scaled columns by pivoted QR (fit/least_squares.scaled_least_squares; never the normal
+equations), giving coefficients, tares and their full covariance, from all points of each series
+rather than its zero-load point alone.
 """
 from __future__ import annotations
 
@@ -15,43 +16,27 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
-import scipy.linalg
 
 from ..model.balance_model import BalanceModel
 from ..model.terms import Term, as_variables, design_matrix
-from .least_squares import TooFewPointsError, UnexcitedTermsError
+from .least_squares import (ScaledSolution, TooFewPointsError, UnexcitedTermsError,
+                            scaled_least_squares)
 from .term_selection import TermStatistics, term_statistics
 
 RANK_TOLERANCE = 1e-9
 
 
-@dataclass(frozen=True)
-class LinearSolution:
-    coefficients: np.ndarray           # (q, k)
-    covariance_unscaled: np.ndarray    # (q, q) = (ZᵀZ)⁻¹
-    leverage: np.ndarray               # (N,)
-    basis: np.ndarray                  # (N, q) orthonormal basis of the design's columns
-    condition_number: float
-
-
 def solve_scaled(design: np.ndarray, targets: np.ndarray, column_names: Sequence[str],
-                 model_name: str = 'model') -> LinearSolution:
-    """Least squares with columns scaled to unit norm; raises UnexcitedTermsError naming dependent columns."""
-    scales = np.linalg.norm(design, axis=0)
-    scales[scales == 0] = 1.0
-    scaled = design / scales
-    _, r_factor, pivots = scipy.linalg.qr(scaled, mode='economic', pivoting=True)
-    diagonal = np.abs(np.diag(r_factor))
-    if diagonal.size < design.shape[1] or np.any(diagonal < RANK_TOLERANCE * diagonal[0]):
-        bad = [column_names[pivots[i]] for i in range(design.shape[1])
-               if i >= diagonal.size or diagonal[i] < RANK_TOLERANCE * diagonal[0]]
-        raise UnexcitedTermsError(bad, model_name)
-    u, singular, vt = np.linalg.svd(scaled, full_matrices=False)
-    v_scaled = vt.T / singular
-    coefficients = (v_scaled @ (u.T @ targets)) / scales[:, None]
-    covariance = (v_scaled @ v_scaled.T) / np.outer(scales, scales)
-    return LinearSolution(coefficients, covariance, np.sum(u ** 2, axis=1), u,
-                          float(singular[0] / singular[-1]))
+                 model_name: str = 'model') -> ScaledSolution:
+    """Least squares with columns scaled to unit norm, eq. (19) with the tares as columns.
+
+    design (N, q), targets (N, k); raises UnexcitedTermsError naming the dependent columns.
+    """
+    solution = scaled_least_squares(design, targets, tolerance=RANK_TOLERANCE)
+    if solution.rank < design.shape[1]:
+        raise UnexcitedTermsError([column_names[j] for j in solution.dependent_columns],
+                                  model_name)
+    return solution
 
 
 def series_indicator(series) -> tuple[tuple[int, ...], np.ndarray, np.ndarray]:

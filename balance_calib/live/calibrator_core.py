@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..active_calibration import ActiveCalibration, six_axis_loads
+from ..model.active_calibration import ActiveCalibration, six_axis_loads
 from ..calibration_file import ConfigError
 from ..model.balance_model import BalanceModel
 from ..model.inverse import InverseDidNotConverge

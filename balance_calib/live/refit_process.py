@@ -20,9 +20,10 @@ from pathlib import Path
 from typing import Callable
 
 
-from ..calibration_file import Calibration, calibration_from_dict, save_calibration, write_text_atomically
+from ..calibration_file import calibration_from_dict, save_calibration, write_text_atomically
+from ..model.calibration import Calibration
 from ..tunnel_axes import Installation
-from ..active_calibration import activate
+from ..model.active_calibration import activate
 from .parameters import check_regular_file
 
 

@@ -20,7 +20,7 @@ import numpy as np
 from ..calibration_file import ConfigError
 from ..config import resolve_config_path
 from . import lone_sample
-from ..active_calibration import ActiveCalibration, activate
+from ..model.active_calibration import ActiveCalibration, activate
 from .calibrator_core import parse_reliability
 from .parameters import (check_input_units, check_parameter, input_scale_mv,
                          load_calibration_checked)

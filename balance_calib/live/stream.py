@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..active_calibration import ActiveCalibration, six_axis_loads
+from ..model.active_calibration import ActiveCalibration, six_axis_loads
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
 from .calibrator_core import (InputCounters, LiveState, LoadHistory, StatusReport, TareResult,
                               TareWindow, WrenchBatch, _extra_variables, compute_wrench,

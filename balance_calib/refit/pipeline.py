@@ -19,7 +19,8 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from ..accuracy.sigma import sigma_by_component
-from ..calibration_file import Calibration, ConfigError, now_iso, save_calibration
+from ..calibration_file import ConfigError, now_iso, save_calibration
+from ..model.calibration import Calibration
 from ..config import BalanceConfig, LoadSchedule, load_balance_config
 from ..fit.crossval import press_residuals
 from ..fit.least_squares import FitResult, UnexcitedTermsError, fit_model

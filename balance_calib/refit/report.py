@@ -7,7 +7,8 @@ import numpy as np
 
 from ..accuracy.sigma import format_sigma_table
 from ..accuracy.tables import format_coefficient_tables
-from ..calibration_file import Calibration, now_iso
+from ..calibration_file import now_iso
+from ..model.calibration import Calibration
 
 
 def _round(values: Mapping[str, float], digits: int = 5) -> dict[str, float]:

@@ -25,6 +25,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..accuracy.sigma import sigma_pct_fs
 from ..config import BalanceConfig, load_balance_config
 from ..model.tm663 import tm663_terms
 from ..fit.least_squares import fit_model
@@ -181,7 +182,7 @@ def effect_size_pct_fs(config: BalanceConfig, name: str, parameter: float,
     # (both retared the same way, so the difference is the effect's alone)
     dirty = _cubic_residuals(config, simulate_reduction(config, effects, noise_scale=0.0,
                                                         estimate_body_weight=estimate))
-    return float(np.sqrt(np.mean((dirty[:, k] - clean[:, k]) ** 2)) / config.capacity[k] * 100.0)
+    return sigma_pct_fs(dirty[:, k] - clean[:, k], config.capacity[k])
 
 
 @lru_cache(maxsize=None)

@@ -12,7 +12,8 @@ from typing import Mapping
 import numpy as np
 import scipy.stats
 
-from ..calibration_file import Calibration, now_iso
+from ..calibration_file import now_iso
+from ..model.calibration import Calibration
 from ..fit.series_tares import SeriesTareFit
 from ..refit.gates import gates_report
 from .balfit_reader import CalibrationTable

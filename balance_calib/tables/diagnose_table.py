@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.stats
 
+from ..accuracy.sigma import sample_std_pct_fs
+
 ALPHA = 1e-3
 
 
@@ -69,7 +71,7 @@ def residual_structure(table, fit) -> dict:
                 evidence.append(f'{symbol} r = {r:+.2f} (p = {p:.1g})')
         if hits:
             tracks = {'point order': 'point order', 'load direction': 'load history'}.get(name, name)
-            sigma = np.std(residuals, axis=0, ddof=1) / capacity * 100
+            sigma = sample_std_pct_fs(residuals, capacity)
             unexplained.append({
                 'components': hits,
                 'evidence': f'residual follows {name}: ' + ', '.join(evidence)

@@ -20,7 +20,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..refit.gates import DEFAULT_OUTLIER_FLOOR_PCT_FS, DEFAULT_OUTLIER_ROBUST_SIGMAS, Gate, failed
+from ..refit.gates import (DEFAULT_OUTLIER_FLOOR_PCT_FS, DEFAULT_OUTLIER_ROBUST_SIGMAS, Gate,
+                           failed, robust_sigma, standardized_press, worst_first)
 
 OVERFIT_FACTOR = 2.0
 # a load predicted within this (% capacity) on left-out points passes whatever its ratio: a
@@ -117,20 +118,14 @@ def outlier_gate(point_ids: Sequence[str], symbols: Sequence[str], residuals: np
     drags along with it; a shape the model lacks (a low-load knee on every series of the load,
     against a MAD set by the points that never load it) moves many points alike, and is
     structure, named by odd_components.py, not refused here."""
-    press_pct = press / capacity * 100.0
-    with np.errstate(divide='ignore', invalid='ignore'):
-        scale = np.sqrt(np.clip(np.where(press != 0, residuals / press, 1.0), 0.0, 1.0))
-    standardized = press_pct * scale
+    press_pct, standardized = standardized_press(residuals, press, capacity)
     loaded = (np.ones(len(standardized), bool) if applied is None
               else np.any(np.abs(applied) > 1e-9 * np.abs(capacity), axis=1))
-    basis = standardized[loaded] if np.count_nonzero(loaded) >= 10 else standardized
-    spread = np.abs(basis - np.median(basis, axis=0))
     # σ from the median (MAD) and from the 90th percentile of |residual|, the larger: a table's
     # points mix load levels and zero brackets of unequal scatter, so its residuals have wider
     # tails than one Gaussian (the 90 % point at ~1.45 MAD-σ on simulated campaigns) and 7 MAD-σ
     # alone flags ordinary points; a typed weight is far beyond either and moves neither.
-    robust = np.maximum(1.4826 * np.median(spread, axis=0),
-                        np.quantile(spread, 0.9, axis=0) / 1.6449)
+    robust = robust_sigma(standardized, loaded, tail_quantile=True)
     threshold = np.maximum(DEFAULT_OUTLIER_ROBUST_SIGMAS * robust, DEFAULT_OUTLIER_FLOOR_PCT_FS)
     flagged = (np.abs(standardized) > threshold) | ~np.isfinite(standardized)
     structure = {}
@@ -141,13 +136,9 @@ def outlier_gate(point_ids: Sequence[str], symbols: Sequence[str], residuals: np
             alike = off & (size <= DOMINANCE * np.median(size[off]))
             structure[symbol] = [point_ids[i] for i in np.flatnonzero(alike)]
             flagged[alike, k] = False
-    rows = np.flatnonzero(np.any(flagged, axis=1))
-    excess = np.nan_to_num(np.abs(standardized) / threshold, nan=np.inf)
-    severity = np.max(np.where(flagged, excess, 0.0), axis=1)
-    rows = rows[np.argsort(-severity[rows], kind='stable')]
+    rows, worst = worst_first(flagged, standardized, threshold)
     entries = []
-    for i in rows[:20]:
-        k = int(np.nanargmax(np.where(flagged[i], np.abs(standardized[i]) / threshold, -np.inf)))
+    for i, k in zip(rows[:20], worst[:20]):
         entries.append({'point_id': point_ids[i], 'component': symbols[k],
                         'residual_pct_capacity': float(press_pct[i, k]),
                         'robust_sigmas': float(abs(standardized[i, k]) / max(robust[k], 1e-12))})

@@ -19,6 +19,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..accuracy.sigma import sigma_pct_fs
 from ..fit.iterative import IterationDidNotConverge, fit_iterative
 from ..fit.least_squares import TooFewPointsError, UnexcitedTermsError
 from ..fit.series_tares import SeriesTareFit, fit_direct, series_indicator
@@ -80,7 +81,7 @@ def terms_for(spec: str, method: str, table) -> tuple[Term, ...]:
 
 def crossval_pct(fit: SeriesTareFit, capacity: np.ndarray) -> np.ndarray:
     """(n_loads,) RMS of the leave-one-out load residuals, % of capacity."""
-    return np.sqrt(np.mean(fit.press_load_residuals ** 2, axis=0)) / capacity * 100.0
+    return sigma_pct_fs(fit.press_load_residuals, capacity)           # TM-663 eq. (44)
 
 
 def fit_form(method: str, terms: Sequence[Term], table, outputs: np.ndarray, *,

@@ -5,13 +5,18 @@ from __future__ import annotations
 import numpy as np
 import scipy.stats
 
+from ..accuracy.sigma import sample_std_pct_fs, sigma_pct_fs
 from ..calibration_file import now_iso
 
 
 def sigma_pct(residuals, capacity, symbols) -> dict[str, float]:
     """Sample standard deviation of (applied - predicted) x 100 / capacity (interfaces.md)."""
-    sigma = np.std(residuals, axis=0, ddof=1) / capacity * 100.0
-    return {s: round(float(v), 5) for s, v in zip(symbols, sigma)}
+    return {s: round(float(v), 5) for s, v in zip(symbols, sample_std_pct_fs(residuals, capacity))}
+
+
+def _rms_pct(residuals, capacity, symbols) -> dict[str, float]:
+    """TM-663 eq. (44)'s σ (root mean square) of residuals such as PRESS's, % of capacity."""
+    return {s: round(float(v), 5) for s, v in zip(symbols, sigma_pct_fs(residuals, capacity))}
 
 
 def normality(residuals, symbols) -> dict[str, float]:
@@ -48,16 +53,14 @@ def build_report(table, validation, fits, chosen, why, term_sets, validation_sig
     loads = table.load_symbols
     capacity = table.load_capacity_si
     sigma_cal = sigma_pct(fit.load_residuals, capacity, loads)
-    sigma_cv = {s: round(float(v), 5) for s, v in
-                zip(loads, np.sqrt(np.mean(fit.press_load_residuals ** 2, axis=0)) / capacity * 100)}
+    sigma_cv = _rms_pct(fit.press_load_residuals, capacity, loads)
     pi = np.sqrt(np.mean(fit.point_uncertainty ** 2, axis=0)) * t95 / capacity * 100
     tares = in_file_units(fit.tares, table)
     tare_sigma = in_file_units(fit.tare_sigma, table)
     compared = {}
     for m, f in fits.items():
         entry = {'calibration': sigma_pct(f.load_residuals, capacity, loads),
-                 'crossval': {s: round(float(v), 5) for s, v in
-                              zip(loads, np.sqrt(np.mean(f.press_load_residuals ** 2, axis=0)) / capacity * 100)},
+                 'crossval': _rms_pct(f.press_load_residuals, capacity, loads),
                  'terms': len(term_sets[m]), 'iterations': f.iterations,
                  'condition_number': float(f'{f.condition_number:.4g}'),
                  'residual_normality_p': normality(f.load_residuals, loads)}

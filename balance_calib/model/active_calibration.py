@@ -12,10 +12,11 @@ from functools import cached_property
 
 import numpy as np
 
-from .calibration_file import Calibration, ConfigError
-from .model.balance_model import BalanceModel
-from .tunnel_axes import Installation, parse_installation
-from .units import BRIDGE_OUTPUTS, COMPONENTS
+from ..errors import ConfigError
+from ..tunnel_axes import Installation, parse_installation
+from ..units import BRIDGE_OUTPUTS, COMPONENTS
+from .balance_model import BalanceModel
+from .calibration import Calibration
 
 MODEL_CHOICES = ('linear', 'quadratic', 'cubic', 'adopted')
 DEFAULT_ENVELOPE_MARGIN = 1.1
