@@ -2,9 +2,11 @@
 rows of numbers checked finite, each error one line naming the file and the row."""
 from __future__ import annotations
 
+import csv
 import math
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Sequence
+from typing import Iterator, Sequence
 
 
 def read_csv_text(path: Path, what: str, error: type[Exception]) -> str:
@@ -26,3 +28,13 @@ def require_finite_loads(values: Sequence[float], path: Path, row: int,
     (row: the data row, 1 = the first after the header)."""
     if not all(math.isfinite(v) for v in values):
         raise error(f'{path}: row {row}: loads must be finite numbers')
+
+
+@contextmanager
+def csv_errors(path: Path, error: type[Exception]) -> Iterator[None]:
+    """Turn the csv module's own complaint (a field over its size limit, a broken quote) into
+    `error` '<path>: not readable as CSV: <reason>'."""
+    try:
+        yield
+    except csv.Error as err:
+        raise error(f'{path}: not readable as CSV: {err}') from None

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .config import ConfigError, LoadSchedule
-from .csv_files import read_csv_text, require_finite_loads
+from .csv_files import csv_errors, read_csv_text, require_finite_loads
 from .units import STANDARD_GRAVITY_M_S2
 
 LOAD_COLUMNS = ('FX_kgf', 'FY_kgf', 'FZ_kgf', 'MX_kgfm', 'MY_kgfm', 'MZ_kgfm')
@@ -31,45 +31,46 @@ def read_schedule_csv(path: str | Path) -> LoadSchedule:
     orientation I_g outside 1-8, no executed point at all.
     """
     path = Path(path)
-    reader = csv.DictReader(io.StringIO(read_csv_text(path, 'schedule', ConfigError)))
-    header = [h.strip() for h in (reader.fieldnames or [])]
-    missing = [c for c in REQUIRED if c not in header]
-    if missing:
-        raise ConfigError(f'{path}: not a load schedule: missing column(s) {", ".join(missing)} '
-                          f'(expected {",".join(COLUMNS)})')
-    points, orientations, loads, byproducts = [], [], [], []
-    for number, raw in enumerate(reader, start=1):
-        record = {(k or '').strip(): v.strip() if isinstance(v, str) else ''
-                  for k, v in raw.items()}
-        if record.get('executed', '1') not in ('1', ''):
-            if record['executed'] != '0':
-                raise ConfigError(f'{path}: row {number}: executed must be 0 or 1, '
-                                  f'not {record["executed"]!r}')
-            continue
-        try:
-            point = int(record['point'])
-            orientation = int(record['Ig'])
-            values = [float(record[c]) for c in LOAD_COLUMNS]
-        except ValueError:
-            bad = next(c for c in REQUIRED if not _is_number(record[c]))
-            raise ConfigError(f'{path}: row {number}: column {bad} is {record[bad]!r}, '
-                              f'not a number') from None
-        require_finite_loads(values, path, number, ConfigError)
-        if not 1 <= orientation <= 8:
-            raise ConfigError(f'{path}: row {number}: I_g = {orientation}, expected 1-8 '
-                              f'(TM-663\'s orientations)')
-        points.append(point)
-        orientations.append(orientation)
-        loads.append(values)
-        byproducts.append(' '.join(c for c in record.get('paren_cols', '').split(';') if c))
-    if not points:
-        raise ConfigError(f'{path}: the schedule has no executed load point')
-    repeated = sorted({p for p in points if points.count(p) > 1})
-    if repeated:
-        raise ConfigError(f'{path}: point number(s) {", ".join(map(str, repeated[:5]))} '
-                          f'appear more than once')
-    return LoadSchedule(np.array(points), np.array(orientations),
-                        np.array(loads, dtype=float) * STANDARD_GRAVITY_M_S2, tuple(byproducts))
+    with csv_errors(path, ConfigError):
+        reader = csv.DictReader(io.StringIO(read_csv_text(path, 'schedule', ConfigError)))
+        header = [h.strip() for h in (reader.fieldnames or [])]
+        missing = [c for c in REQUIRED if c not in header]
+        if missing:
+            raise ConfigError(f'{path}: not a load schedule: missing column(s) {", ".join(missing)} '
+                              f'(expected {",".join(COLUMNS)})')
+        points, orientations, loads, byproducts = [], [], [], []
+        for number, raw in enumerate(reader, start=1):
+            record = {(k or '').strip(): v.strip() if isinstance(v, str) else ''
+                      for k, v in raw.items()}
+            if record.get('executed', '1') not in ('1', ''):
+                if record['executed'] != '0':
+                    raise ConfigError(f'{path}: row {number}: executed must be 0 or 1, '
+                                      f'not {record["executed"]!r}')
+                continue
+            try:
+                point = int(record['point'])
+                orientation = int(record['Ig'])
+                values = [float(record[c]) for c in LOAD_COLUMNS]
+            except ValueError:
+                bad = next(c for c in REQUIRED if not _is_number(record[c]))
+                raise ConfigError(f'{path}: row {number}: column {bad} is {record[bad]!r}, '
+                                  f'not a number') from None
+            require_finite_loads(values, path, number, ConfigError)
+            if not 1 <= orientation <= 8:
+                raise ConfigError(f'{path}: row {number}: I_g = {orientation}, expected 1-8 '
+                                  f'(TM-663\'s orientations)')
+            points.append(point)
+            orientations.append(orientation)
+            loads.append(values)
+            byproducts.append(' '.join(c for c in record.get('paren_cols', '').split(';') if c))
+        if not points:
+            raise ConfigError(f'{path}: the schedule has no executed load point')
+        repeated = sorted({p for p in points if points.count(p) > 1})
+        if repeated:
+            raise ConfigError(f'{path}: point number(s) {", ".join(map(str, repeated[:5]))} '
+                              f'appear more than once')
+        return LoadSchedule(np.array(points), np.array(orientations),
+                            np.array(loads, dtype=float) * STANDARD_GRAVITY_M_S2, tuple(byproducts))
 
 
 def _is_number(text: str) -> bool:

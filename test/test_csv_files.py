@@ -42,3 +42,14 @@ def test_a_non_finite_row_is_named_with_its_number(tmp_path):
     loads.write_text('FX,FY,FZ,MX,MY,MZ\n1,2,3,4,5,6\n1,2,3,4,5,6\n1,2,nan,4,5,6\n')
     with pytest.raises(RunInputError, match=re.escape(f'{loads}: row 3: loads must be finite')):
         read_loads_csv(loads, COMPONENTS)
+
+
+@pytest.mark.parametrize('reader, error, header', [(read_schedule, ConfigError, SCHEDULE_HEADER),
+                                                  (read_loads, RunInputError, 'FX,FY,FZ,MX,MY,MZ\n')])
+def test_what_the_csv_module_cannot_parse_is_one_line_naming_the_file(tmp_path, reader, error,
+                                                                     header):
+    huge = tmp_path / 'huge.csv'            # one quoted field beyond the csv module's 128 KiB limit
+    huge.write_text(header + '"' + 'a' * 200_000 + '",1,2,3,4,5\n')
+    with pytest.raises(error, match=re.escape(f'{huge}: not readable as CSV: ')) as caught:
+        reader(huge)
+    assert 'field larger than field limit' in str(caught.value)

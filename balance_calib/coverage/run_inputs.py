@@ -10,7 +10,7 @@ from typing import Sequence
 import numpy as np
 
 from ..bags.reader import TopicNames, read_bags
-from ..csv_files import read_csv_text, require_finite_loads
+from ..csv_files import csv_errors, read_csv_text, require_finite_loads
 from ..tunnel_axes import Installation
 
 WRENCH_TOPIC = '/balance/wrench'
@@ -26,29 +26,30 @@ def read_loads_csv(path: str | Path, components: Sequence[str]) -> np.ndarray:
     Other columns are ignored. RunInputError for a missing column, a non-number or non-finite cell
     (row numbers count data rows from 1), or no rows at all."""
     path = Path(path)
-    reader = csv.reader(io.StringIO(read_csv_text(path, 'loads', RunInputError)))
-    header = [h.strip() for h in next(reader, [])]
-    if not header:
-        raise RunInputError(f'{path}: no loads (the file is empty)')
-    missing = [c for c in components if c not in header]
-    if missing:
-        raise RunInputError(f'{path}: no column {", ".join(missing)} (the header must name '
-                            f'{",".join(components)}, loads in N and N·m)')
-    columns = [header.index(c) for c in components]
-    rows = []
-    for number, record in enumerate(reader, start=1):
-        if not any(cell.strip() for cell in record):
-            continue
-        try:
-            values = [float(record[i]) for i in columns]
-        except (ValueError, IndexError):
-            raise RunInputError(f'{path}: row {number}: a load is missing or not a number') \
-                from None
-        require_finite_loads(values, path, number, RunInputError)
-        rows.append(values)
-    if not rows:
-        raise RunInputError(f'{path}: no loads (only a header)')
-    return np.array(rows, dtype=float)
+    with csv_errors(path, RunInputError):
+        reader = csv.reader(io.StringIO(read_csv_text(path, 'loads', RunInputError)))
+        header = [h.strip() for h in next(reader, [])]
+        if not header:
+            raise RunInputError(f'{path}: no loads (the file is empty)')
+        missing = [c for c in components if c not in header]
+        if missing:
+            raise RunInputError(f'{path}: no column {", ".join(missing)} (the header must name '
+                                f'{",".join(components)}, loads in N and N·m)')
+        columns = [header.index(c) for c in components]
+        rows = []
+        for number, record in enumerate(reader, start=1):
+            if not any(cell.strip() for cell in record):
+                continue
+            try:
+                values = [float(record[i]) for i in columns]
+            except (ValueError, IndexError):
+                raise RunInputError(f'{path}: row {number}: a load is missing or not a number') \
+                    from None
+            require_finite_loads(values, path, number, RunInputError)
+            rows.append(values)
+        if not rows:
+            raise RunInputError(f'{path}: no loads (only a header)')
+        return np.array(rows, dtype=float)
 
 
 def read_wrench_bags(paths: Sequence[str | Path], installation: Installation,
