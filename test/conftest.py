@@ -23,3 +23,10 @@ def balance(request):
 @pytest.fixture
 def rng():
     return np.random.default_rng(20261124)
+
+
+@pytest.fixture
+def ros_domain():
+    """A ROS_DOMAIN_ID for this test alone (ros_harness.new_domain_id, the suite's one allocator)."""
+    from ros_harness import new_domain_id       # rclpy only for the tests that ask for a domain
+    return new_domain_id()
