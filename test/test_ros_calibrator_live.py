@@ -306,15 +306,11 @@ def test_uncertainty_is_computed_while_someone_subscribes_and_stops_when_they_le
 
 
 @pytest.mark.slow
-def test_refit_process_killed_with_sigkill_keeps_the_calibration_and_the_stream(probe, tmp_path, calibration_file):
+def test_refit_process_killed_with_sigkill_keeps_the_calibration_and_the_stream(probe, tmp_path, calibration_file,
+                                                                                campaigns):
     import multiprocessing
 
-    from balance_calib.config import load_balance_config
-    from balance_calib.simulation import campaign_bag
-    from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign
-    config = load_balance_config('lmc6522')
-    bag = campaign_bag.write_campaign_bag(simulate_campaign(config, settings=SimulationSettings(
-        samples_per_point=5, point_duration_s=0.1, transition_s=0.05, seed=5)), tmp_path / 'bag')
+    bag = campaigns.bag(seed=5, recipe='dds', noise=None)
     node = start_calibrator(probe, tmp_path, calibration_file, calibration_bags=[str(bag)])
     wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
     source = Stamped(probe)
