@@ -79,6 +79,15 @@ class Campaigns:
             points=points))
 
 
+def pytest_collection_modifyitems(config, items):
+    """The DDS tests (marker ros) form one pytest-xdist group: with --dist loadgroup (as
+    launchless_scripts/test runs them) one worker runs them one after another while the others
+    take the remaining tests, so that no two tests' nodes compete for discovery at once."""
+    for item in items:
+        if item.get_closest_marker('ros') is not None:
+            item.add_marker(pytest.mark.xdist_group('dds'))
+
+
 @pytest.fixture(scope='session')
 def campaigns(tmp_path_factory) -> Campaigns:
     return Campaigns(tmp_path_factory.mktemp('campaigns'))
