@@ -15,7 +15,8 @@ RECIPES = {
     # the memo's schedule at the simulation's own pace: one sample a point
     'memo': {},
     # recorded and refitted from a bag: 10 samples a point, 3 while the weights change
-    'bag': dict(samples_per_point=10, transition_samples=3, point_duration_s=1.0, transition_s=0.5),
+    'bag': dict(samples_per_point=10, transition_samples=3, point_duration_s=1.0,
+                transition_s=0.5),
     # short enough to play over DDS or refit inside a node: 5 samples a point, 0.1 s a point
     'dds': dict(samples_per_point=5, point_duration_s=0.1, transition_s=0.05),
 }
@@ -49,7 +50,7 @@ class Campaigns:
 
         def build():
             config = load_balance_config(balance)
-            sigma = table17_noise(config) if isinstance(noise, str) and noise == 'table17' else noise
+            sigma = table17_noise(config) if noise == 'table17' else noise
             settings = SimulationSettings(noise_sigma_pct_fs=sigma, seed=seed, **RECIPES[recipe])
             campaign = simulate_campaign(config, settings=settings,
                                          effects=parse_effects(effects) if effects else ())
@@ -61,13 +62,15 @@ class Campaigns:
 
     def points(self, balance: str = 'lmc6522', seed: int = 0, recipe: str = 'memo',
                noise: str | float | None = 'table17', effects: str = ''):
-        """The campaign reduced to load points (refit.pipeline.campaign_points), as a bag's cut gives."""
+        """The campaign reduced to load points (refit.pipeline.campaign_points)."""
         from balance_calib.refit.pipeline import campaign_points
+        campaign = self.campaign(balance, seed, recipe, noise, effects)
         return self._once(('points', balance, seed, recipe, noise, effects),
-                          lambda: campaign_points(self.campaign(balance, seed, recipe, noise, effects)))
+                          lambda: campaign_points(campaign))
 
     def bag(self, balance: str = 'lmc6522', seed: int = 0, recipe: str = 'memo',
-            noise: str | float | None = 'table17', effects: str = '', points: slice | None = None) -> Path:
+            noise: str | float | None = 'table17', effects: str = '',
+            points: slice | None = None) -> Path:
         """The campaign (or a slice of its points) written as a rosbag2 MCAP bag directory, once;
         tests read it and never write into it."""
         from balance_calib.simulation.campaign_bag import write_campaign_bag
@@ -115,6 +118,6 @@ def rng():
 
 @pytest.fixture
 def ros_domain():
-    """A ROS_DOMAIN_ID for this test alone (ros_harness.new_domain_id, the suite's one allocator)."""
+    """A ROS_DOMAIN_ID for this test alone (ros_harness.new_domain_id, the one allocator)."""
     from ros_harness import new_domain_id       # rclpy only for the tests that ask for a domain
     return new_domain_id()
