@@ -1,14 +1,18 @@
 """Helpers for the ROS tests (test_ros_*.py): real nodes over DDS on loopback.
 
-Each test gets its own ROS_DOMAIN_ID; node processes get it in their environment, the in-process
+Each test gets its own ROS_DOMAIN_ID from new_domain_id() (or the `ros_domain` fixture of
+conftest.py, which calls it); node processes get it in their environment, the in-process
 probe node in its own rclpy context. Waits are bounded polls, never sleeps as synchronisation.
 """
 from __future__ import annotations
 
 import itertools
 import os
+import socket
+import subprocess
 import threading
 import time
+from pathlib import Path
 
 import rclpy
 from rclpy.context import Context
@@ -19,6 +23,9 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from balance_calib.launchless.processes import NodeProcess, ros_args  # noqa: F401 (re-exported)
 
 _counter = itertools.count()
+DOMAIN_IDS = range(1, 102)
+DISCOVERY_PORT_0, DOMAIN_PORT_GAIN = 7410, 250      # RTPS default ports: PB + d1 = 7410, DG = 250
+SCRIPTS = Path(__file__).resolve().parent.parent / 'launchless_scripts'
 RELIABLE = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
 
 
@@ -28,9 +35,48 @@ def six(msg) -> list:
     return [w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z]
 
 
+def _xdist_worker() -> tuple[int, int]:
+    """(index, count) of this pytest-xdist worker ('gw3' of 4: (3, 4)); (0, 1) without xdist."""
+    name = os.environ.get('PYTEST_XDIST_WORKER', '')
+    count = int(os.environ.get('PYTEST_XDIST_WORKER_COUNT', '1') or 1)
+    return (int(name[2:]) if name.startswith('gw') else 0), max(count, 1)
+
+
+def _nobody_on(domain_id: int) -> bool:
+    """Fast DDS's first participant on a domain binds UDP port 7410 + 250 d (its metatraffic
+    unicast port): if that port can be bound, no participant of this machine is on the domain."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        try:
+            sock.bind(('0.0.0.0', DISCOVERY_PORT_0 + DOMAIN_PORT_GAIN * domain_id))
+        except OSError:
+            return False
+    return True
+
+
 def new_domain_id() -> int:
-    """A domain in 1..99 unlikely to be shared with another test running at the same time."""
-    return 1 + (os.getpid() * 13 + next(_counter) * 37) % 99
+    """A ROS_DOMAIN_ID for one test alone: the one allocator of the suite.
+
+    Drawn from 1..101 (0 is everyone's default; above 101 Fast DDS's ports reach Linux's
+    ephemeral range), each pytest-xdist worker from its own residue class, so two workers of a run
+    never share a domain; in turn within a process, starting from a place set by its pid so that
+    another run on this machine starts elsewhere; a domain on which a participant of this machine
+    is already present (another run's nodes, a node left by an earlier test) is passed over.
+    """
+    worker, workers = _xdist_worker()
+    own = [d for d in DOMAIN_IDS if d % workers == worker]
+    start = (os.getpid() * 13) % len(own)
+    for _ in own:
+        candidate = own[(start + next(_counter)) % len(own)]
+        if _nobody_on(candidate):
+            return candidate
+    raise RuntimeError(f'no free ROS domain among {own[0]}..{own[-1]} for this test: every one '
+                       'has a participant on this machine')
+
+
+def ros(domain_id: int, *args, timeout: float = 120):
+    """launchless_scripts/ros ARGS on a domain (the ros2 CLI habits), output captured."""
+    return subprocess.run([str(SCRIPTS / 'ros'), *map(str, args)], capture_output=True, text=True,
+                          timeout=timeout, env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
 
 
 def wait_for(predicate, timeout_s: float, what: str, poll_s: float = 0.02):

@@ -12,19 +12,13 @@ from balance_calib.aero.held_points import HoldSettings, HoldTracker, find_holds
 from balance_calib.aero.model_file import load_model, model_from_dict
 from balance_calib.aero.run import reduce_run
 from balance_calib.aero.weight_tare import WeightTareError, declared_tare, fit_weight_tare, weight_loads
-from balance_calib.calibration_file import load_calibration
-from balance_calib.config import ConfigError, load_balance_config
+from balance_calib.config import ConfigError
 from balance_calib.model.active_calibration import activate, six_axis_loads
-from balance_calib.simulation.wind_on import aero_run_profile, wind_on_outputs
 from balance_calib.model.inverse import outputs_for_loads
-from balance_calib.simulation.balance_sim import noise_mv_for_load_sigma
 from balance_calib.tunnel_axes import UPRIGHT
+from aero_cases import CALIBRATION, CONFIG, MODEL, TRUE_CG_M, TRUE_WEIGHT_N, readings, simulated_run
 
 angles = st.floats(min_value=-np.pi, max_value=np.pi, allow_nan=False)
-CONFIG = load_balance_config('lmc6522')
-CALIBRATION = load_calibration('lmc6522')
-MODEL = load_model('euler_replica_lmc6522')
-TRUE_WEIGHT_N, TRUE_CG_M = 250.0, np.array([0.015, 0.0, -0.004])
 
 
 # --- axes --------------------------------------------------------------------------------------
@@ -114,21 +108,6 @@ def test_a_sweep_in_alpha_alone_cannot_separate_the_weight_from_the_offsets_when
     attitudes = np.zeros((4, 3))          # four holds, all at the same attitude
     with pytest.raises(WeightTareError, match='does not determine'):
         fit_weight_tare(np.zeros((4, 6)), attitudes, sigma_loads=np.ones(6))
-
-
-def simulated_run(q_pa=50e3, noise_pct_fs=0.0, seed=0, model=MODEL, rate_hz=100.0, alphas=range(-2, 23, 2)):
-    profile = aero_run_profile(model, UPRIGHT, rate_hz, q_pa=q_pa, weight_n=TRUE_WEIGHT_N, cg_m=TRUE_CG_M,
-                               alphas_deg=tuple(alphas), hold_s=0.5, wind_off_hold_s=0.5)
-    truth = CONFIG.matrices['cubic']
-    samples_per_hold = round(0.5 * rate_hz)
-    noise_mv = noise_mv_for_load_sigma(truth.without_constant(), CONFIG.capacity, noise_pct_fs) * np.sqrt(samples_per_hold)
-    raw = wind_on_outputs(truth, profile.loads_balance, electrical_zero_mv=0.0, noise_mv=noise_mv, seed=seed)
-    return profile, raw
-
-
-def readings(raw, model_name='cubic'):
-    active = activate(CALIBRATION, model_name, UPRIGHT)
-    return UPRIGHT.to_tunnel(six_axis_loads(active.model, raw))
 
 
 def test_weight_tare_from_a_wind_off_sweep_recovers_weight_to_0_1_percent_and_cg_to_1_mm():

@@ -6,7 +6,7 @@ import pytest
 from balance_calib.aero.held_points import HoldSettings
 from balance_calib.aero.live import LiveReduction
 from balance_calib.aero.run import reduce_run
-from test_aero_core import CALIBRATION, MODEL, readings, simulated_run
+from aero_cases import CALIBRATION, MODEL, readings, simulated_run
 
 START_NS = 1_700_000_000 * 10 ** 9
 

@@ -9,20 +9,9 @@ import pytest
 from balance_calib.aero.bag_io import write_run_bag
 from balance_calib.cli import main
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
-from test_aero_core import CALIBRATION, simulated_run
+from aero_cases import CALIBRATION, CONFIG, START_NS, run_bag, simulated_run
 
-START_NS = 1_700_000_000 * 10 ** 9
 COEFFICIENTS = ['CAF', 'CY', 'CN', 'Cl', 'Cm', 'Cn', 'CD', 'CL']
-
-
-def run_bag(path, noise_pct_fs=0.0, seed=0, drop=None, with_q=True):
-    profile, raw = simulated_run(noise_pct_fs=noise_pct_fs, seed=seed)
-    stamps = START_NS + np.round(profile.times_s * 1e9).astype(np.int64)
-    keep = np.ones(len(stamps), bool) if drop is None else ~drop(profile)
-    write_run_bag(path, stamps[keep], raw[keep], profile.support_attitude[keep],
-                  profile.q_pa[keep] if with_q else np.full(keep.sum(), np.nan),
-                  truth_body=profile.body_coefficients[keep], truth_wind=profile.wind_coefficients[keep])
-    return profile
 
 
 def read_csv(path):
@@ -73,7 +62,6 @@ def test_noisy_run_with_estimated_weight_is_within_its_propagated_uncertainty(tm
     profile, raw = simulated_run(noise_pct_fs=sigma, seed=11)
     if installation is INVERTED:            # the same loads on a balance mounted rolled 180° in the model
         from balance_calib.simulation.wind_on import wind_on_outputs
-        from test_aero_core import CONFIG
         from balance_calib.simulation.balance_sim import noise_mv_for_load_sigma
         truth_model = CONFIG.matrices['cubic']
         noise_mv = noise_mv_for_load_sigma(truth_model.without_constant(), CONFIG.capacity, sigma) * np.sqrt(50)
@@ -140,7 +128,6 @@ def test_an_electrical_zero_is_taken_in_output_space_before_the_calibration(tmp_
     # 0.04 mV on every bridge with nothing on the balance: the load-space offsets of the wind-off sweep
     # absorb it only approximately for the cubic balance; given as --electrical-zero-mv it is exact again
     from balance_calib.simulation.wind_on import wind_on_outputs
-    from test_aero_core import CONFIG
     profile, _ = simulated_run()
     raw = wind_on_outputs(CONFIG.matrices['cubic'], profile.loads_balance, electrical_zero_mv=0.04)
     stamps = START_NS + np.round(profile.times_s * 1e9).astype(np.int64)
@@ -159,7 +146,6 @@ def test_an_electrical_zero_is_taken_in_output_space_before_the_calibration(tmp_
 
 def _zeroed_run_bag(path, electrical_zero_mv, **truth):
     from balance_calib.simulation.wind_on import wind_on_outputs
-    from test_aero_core import CONFIG
     profile, _ = simulated_run()
     raw = wind_on_outputs(CONFIG.matrices['cubic'], profile.loads_balance,
                           electrical_zero_mv=electrical_zero_mv)
@@ -176,7 +162,6 @@ def _reduce(bag, out, *extra):
 @pytest.mark.filterwarnings('error::RuntimeWarning')
 def test_offsets_beyond_one_percent_of_capacity_are_a_console_and_report_warning(tmp_path, capsys):
     from balance_calib.model.inverse import linear_part
-    from test_aero_core import CONFIG
     _zeroed_run_bag(tmp_path / 'run', 0.04)
     assert _reduce(tmp_path / 'run', tmp_path / 'out') == 0
     console = capsys.readouterr().out

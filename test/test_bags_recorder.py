@@ -5,10 +5,8 @@ publishes from this process on the same domain. Waits are bounded polls: the pub
 subscription counts (the recorder has subscribed), then wait_for_all_acked (it has every
 message), then the process exit.
 """
-import itertools
 import os
 import signal
-import socket
 import subprocess
 import time
 
@@ -24,36 +22,15 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from balance_calib.bags.reader import read_bags
 from balance_calib.nodes.balance_recorder import offered_qos_as_dict, subscription_qos
 
-_next_domain = itertools.count()
 SAMPLES = 200
 GRAVITY_VECTORS = [(0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (0.0, -0.7071067811865476,
                                                      0.7071067811865476)]
 
 
 @pytest.fixture
-def domain_id():
-    """A free domain for this test alone, searched from this pytest process's pid.
-
-    Other test runs on this machine use the same topic names, so a shared domain would mix
-    their messages into the bag. Fast DDS's first participant on domain d binds UDP port
-    7410 + 250 d; if that port can be bound, nobody is on d.
-    """
-    start = os.getpid() + 41 * next(_next_domain)
-    for offset in range(100):
-        candidate = 1 + (start + offset) % 100
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-            try:
-                probe.bind(('0.0.0.0', 7410 + 250 * candidate))
-            except OSError:
-                continue
-        return candidate
-    pytest.skip('no free ROS domain in 1..100')
-
-
-@pytest.fixture
-def test_node(domain_id):
+def test_node(ros_domain):
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
+    rclpy.init(context=context, domain_id=ros_domain)
     node = rclpy.create_node('bag_recorder_test_publisher', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -63,11 +40,11 @@ def test_node(domain_id):
     rclpy.try_shutdown(context=context)
 
 
-def start_recorder(bag, domain_id):
+def start_recorder(bag, ros_domain):
     return subprocess.Popen(
         ['balance_recorder', '--ros-args', '-p', f'output:={bag}',
          '-p', 'topics:=[/balance/raw, /calibration/gravity]'],
-        env={**os.environ, 'ROS_DOMAIN_ID': str(domain_id)},
+        env={**os.environ, 'ROS_DOMAIN_ID': str(ros_domain)},
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
@@ -82,13 +59,13 @@ def wait_until(condition, executor, recorder, timeout_s=30.0):
         executor.spin_once(timeout_sec=0.05)
 
 
-def record_and_stop(tmp_path, domain_id, test_node, stop_signal):
+def record_and_stop(tmp_path, ros_domain, test_node, stop_signal):
     node, executor = test_node
     reliable = QoSProfile(depth=SAMPLES, reliability=ReliabilityPolicy.RELIABLE)
     raw_publisher = node.create_publisher(WrenchStamped, '/balance/raw', reliable)
     gravity_publisher = node.create_publisher(Vector3Stamped, '/calibration/gravity', reliable)
     bag = tmp_path / 'campaign'
-    recorder = start_recorder(bag, domain_id)
+    recorder = start_recorder(bag, ros_domain)
     try:
         wait_until(lambda: raw_publisher.get_subscription_count() > 0
                    and gravity_publisher.get_subscription_count() > 0, executor, recorder)
@@ -121,9 +98,9 @@ def record_and_stop(tmp_path, domain_id, test_node, stop_signal):
 @pytest.mark.ros
 @pytest.mark.parametrize('stop_signal', [signal.SIGINT, signal.SIGTERM],
                          ids=['SIGINT', 'SIGTERM'])
-def test_recorder_keeps_every_message_in_order_and_closes_the_bag_on(tmp_path, domain_id,
+def test_recorder_keeps_every_message_in_order_and_closes_the_bag_on(tmp_path, ros_domain,
                                                                      test_node, stop_signal):
-    bag, sent, output = record_and_stop(tmp_path, domain_id, test_node, stop_signal)
+    bag, sent, output = record_and_stop(tmp_path, ros_domain, test_node, stop_signal)
     data = read_bags(bag, required=('raw', 'gravity'))
     np.testing.assert_array_equal(data.raw.values, sent)
     assert data.raw.stamps_ns.tolist() == [1_700_000_000 * 10**9 + i for i in range(SAMPLES)]
@@ -145,7 +122,7 @@ def assert_identical_through_rosbags_and_mcap(bag):
     from mcap_ros2.decoder import DecoderFactory
     from rosbags.highlevel import AnyReader
 
-    from test_bags_writer import fields_of
+    from message_fields import fields_of
     with AnyReader([bag]) as reader:
         by_rosbags = [(c.topic, t, fields_of(reader.deserialize(raw, c.msgtype))) for c, t, raw in reader.messages()]
     mcap_file = next(bag.glob('*.mcap'))
@@ -158,14 +135,14 @@ def assert_identical_through_rosbags_and_mcap(bag):
 
 
 @pytest.mark.ros
-def test_a_bag_being_recorded_is_read_up_to_the_last_flush(tmp_path, domain_id, test_node):
+def test_a_bag_being_recorded_is_read_up_to_the_last_flush(tmp_path, ros_domain, test_node):
     """Issue 21: ~/refit of the recorder's bag while it still records (no metadata.yaml yet)."""
     from balance_calib.nodes.balance_recorder import FLUSH_PERIOD_S
     node, executor = test_node
     reliable = QoSProfile(depth=SAMPLES, reliability=ReliabilityPolicy.RELIABLE)
     raw_publisher = node.create_publisher(WrenchStamped, '/balance/raw', reliable)
     bag = tmp_path / 'live'
-    recorder = start_recorder(bag, domain_id)
+    recorder = start_recorder(bag, ros_domain)
     try:
         wait_until(lambda: raw_publisher.get_subscription_count() > 0, executor, recorder)
         sent = []
@@ -193,11 +170,11 @@ def test_a_bag_being_recorded_is_read_up_to_the_last_flush(tmp_path, domain_id, 
 
 
 @pytest.mark.ros
-def test_recorder_refuses_an_existing_output(tmp_path, domain_id):
+def test_recorder_refuses_an_existing_output(tmp_path, ros_domain):
     (tmp_path / 'campaign').mkdir()
     result = subprocess.run(
         ['balance_recorder', '--ros-args', '-p', f'output:={tmp_path / "campaign"}'],
-        env={**os.environ, 'ROS_DOMAIN_ID': str(domain_id)}, capture_output=True, text=True,
+        env={**os.environ, 'ROS_DOMAIN_ID': str(ros_domain)}, capture_output=True, text=True,
         timeout=30)
     assert result.returncode == 1
     assert 'exists already' in result.stderr + result.stdout

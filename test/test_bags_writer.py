@@ -4,8 +4,6 @@ Each message is checked through two independent readers (rosbags' AnyReader, and
 package with mcap_ros2's decoder), and the file layout against what rosbag2 (Jazzy) writes:
 metadata version 9 with offered QoS, ros2msg schemas, cdr channels, compressed chunks.
 """
-import dataclasses
-import math
 
 import numpy as np
 import pytest
@@ -17,6 +15,7 @@ from rosbags.typesys import get_typestore, Stores
 
 from balance_calib.bags.errors import BagError
 from balance_calib.bags.writer import BagWriter, qos_profiles_yaml
+from message_fields import fields_of
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 T = TYPESTORE.types
@@ -74,21 +73,6 @@ def write_campaign(path, compression='zstd', chunk_size_bytes=4096):
         for topic, time_ns, message in messages:
             writer.write(topic, time_ns, TYPESTORE.serialize_cdr(message, message.__msgtype__))
     return messages
-
-
-def fields_of(message):
-    """A message as nested plain values, comparable across rosbags and mcap_ros2 objects."""
-    if isinstance(message, (list, tuple)):
-        return [fields_of(item) for item in message]
-    if dataclasses.is_dataclass(message) or hasattr(message, '__slots__'):
-        names = ([f.name for f in dataclasses.fields(message)]
-                 if dataclasses.is_dataclass(message) else message.__slots__)
-        # ROS 2 field names are lower case; rosbags also lists the UPPER_CASE constants
-        return {name: fields_of(getattr(message, name)) for name in names
-                if not name.startswith('_') and not name.isupper()}
-    if isinstance(message, float) and math.isnan(message):
-        return 'nan'
-    return message
 
 
 def expected_in_log_time_order(messages):

@@ -335,7 +335,7 @@ def test_coverage_refuses_a_calibration_without_covariance(tmp_path, capsys):
 
 def test_reduce_report_carries_the_coverage_of_its_run(tmp_path):
     from balance_calib.calibration_file import save_calibration
-    from test_aero_reduce import run_bag
+    from aero_cases import run_bag
     run_bag(tmp_path / 'run')
     save_calibration(tmp_path / 'cal.yaml', refit(None, 7, table17_noise(LMC)))
     out = tmp_path / 'out'

@@ -5,8 +5,7 @@ import pytest
 from balance_calib.accuracy.sigma import sigma_pct_fs
 from balance_calib.fit.least_squares import fit_model
 from balance_calib.model.tm663 import tm663_terms
-from balance_calib.reduction import LoadPoints, reduce_points, retare_with_model
-from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
+from balance_calib.reduction import reduce_points, retare_with_model
 from balance_calib.tare.calibration_body import body_loads_from_rotation, tare_loads
 
 
@@ -58,12 +57,8 @@ def test_matrices_hold_the_printed_coefficients(lmc6522, b660h):
     assert b660h.matrices['cubic'].coefficient_number('MZ', 'MZV^3') == 204
 
 
-def _reduced_campaign(config, seed, noise=True):
-    settings = SimulationSettings(noise_sigma_pct_fs=table17_noise(config) if noise else None, seed=seed)
-    campaign = simulate_campaign(config, settings=settings)
-    means, times, temps = campaign.point_means()
-    points = LoadPoints(campaign.point, means, times, temps, campaign.orientation, campaign.gravity,
-                        campaign.applied_loads)
+def _reduced_campaign(campaigns, name, config, seed):
+    points = campaigns.points(name, seed=seed)          # Table 17's cubic row as the noise
     reduction = reduce_points(points, config, estimate_body_weight=False)
     first = fit_model(tm663_terms('cubic'), reduction.corrected.bridge_outputs_mv, reduction.corrected.loads,
                       rated_outputs=config.rated_outputs_by_name)
@@ -71,10 +66,10 @@ def _reduced_campaign(config, seed, noise=True):
 
 
 @pytest.mark.parametrize('name', ['lmc6522', 'b660h'])
-def test_linear_fit_sigma_matches_table17_and_nonlinear_fits_reach_the_noise_floor(name, request):
+def test_linear_fit_sigma_matches_table17_and_nonlinear_fits_reach_the_noise_floor(name, request, campaigns):
     """Cubic matrix as truth, Appendix schedule in SI, Table 9/13 tare, Table 17 cubic row as noise."""
     config = request.getfixturevalue(name)
-    reduction = _reduced_campaign(config, seed=7)
+    reduction = _reduced_campaign(campaigns, name, config, seed=7)
     data = reduction.corrected
     noise = np.array([config.table17_sigma_pct_fs['cubic'][c] for c in config.components])
     sigma = {}

@@ -62,16 +62,12 @@ def test_too_few_points_and_nothing_determinable_say_so_in_one_line(tmp_path):
     assert len(message.splitlines()) == 1
 
 
-def test_export_table_fitted_with_defaults_equals_the_refit_cubic(tmp_path, capsys):
+def test_export_table_fitted_with_defaults_equals_the_refit_cubic(tmp_path, capsys, campaigns):
     from balance_calib.calibration_file import load_calibration
     from balance_calib.config import load_balance_config
     from balance_calib.refit.pipeline import run_refit
-    from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
-    from balance_calib.simulation.campaign_bag import write_campaign_bag
     config = load_balance_config('lmc6522')
-    settings = SimulationSettings(samples_per_point=10, transition_samples=3, point_duration_s=1.0,
-                                  transition_s=0.5, noise_sigma_pct_fs=table17_noise(config), seed=29)
-    bag = write_campaign_bag(simulate_campaign(config, settings=settings), tmp_path / 'campaign')
+    bag = campaigns.bag(seed=29, recipe='bag')
     cubic = run_refit([bag], 'lmc6522', tmp_path / 'refit', diagnose=False, plots=False).calibration.models['cubic']
     table_path = tmp_path / 'campaign.csv'
     assert main(['export-table', str(bag), '--balance', 'lmc6522', '--out', str(table_path)]) == 0

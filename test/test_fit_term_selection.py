@@ -49,6 +49,7 @@ def test_newton_inverse_recovers_loads_and_names_the_sample_it_cannot_invert():
     np.testing.assert_allclose(folding.outputs(folding.loads(outputs[:2])), outputs[:2], atol=1e-12)
 
 
+@pytest.mark.slow      # ~17 s on 2 cores: two iterative fits of 21 series, one selecting terms
 def test_select_drops_the_terms_the_truth_lacks_and_validates_no_worse():
     from dataclasses import replace
 

@@ -4,14 +4,13 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from hypothesis.extra.numpy import arrays
 
-from balance_calib.calibration_file import Calibration, load_calibration
+from balance_calib.calibration_file import load_calibration
 from balance_calib.config import CONFIG_DIR
 from balance_calib.model.active_calibration import activate
 from balance_calib.live.calibrator_core import (OK, STALE, WARN, InputCounters, LiveState, LoadHistory, TareWindow, compute_wrench, describe_tare, describe_zero, diagnostics, tare_zero)
-from balance_calib.model.balance_model import BalanceModel
 from balance_calib.model.inverse import outputs_for_loads
-from balance_calib.model.terms import parse_terms
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
+from live_cases import temperature_calibration
 
 MEMO = load_calibration(CONFIG_DIR / 'lmc6522.yaml')
 CAPACITY = MEMO.capacity
@@ -112,17 +111,6 @@ def test_zero_and_tare_descriptions_give_units_per_component():
     # a tare load is stated in tunnel axes: upright F_Z = -F_Z(balance) (§10.2.1)
     text = describe_tare(np.array([0, 0, 2940.0, 0, 39.2, 0]), activate(MEMO, 'cubic', 'upright'))
     assert 'FZ=-2940.000 N' in text and 'MY=+39.200 N·m' in text
-
-
-def temperature_calibration() -> Calibration:
-    """The memo's linear model plus a dT term on F_Z (10 N/K), base model linear."""
-    linear = MEMO.model('linear')
-    terms = linear.terms + parse_terms(['dT'])
-    coefficients = np.hstack([linear.coefficients, np.zeros((6, 1))])
-    coefficients[2, -1] = 10.0
-    augmented = BalanceModel('linear+temperature', terms, coefficients)
-    return Calibration('LMC6522', {'linear': linear, 'linear+temperature': augmented}, 'linear+temperature',
-                       'linear', MEMO.capacity, MEMO.rated_output_mv, reference_temperature_c=20.0)
 
 
 def test_temperature_model_uses_dT_and_falls_back_to_the_base_model_without_temperature():

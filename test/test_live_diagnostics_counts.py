@@ -9,7 +9,7 @@ from balance_calib.model.active_calibration import activate
 from balance_calib.live.calibrator_core import WARN
 from balance_calib.live.stream import LiveCalibrator
 from balance_calib.tunnel_axes import UPRIGHT
-from test_live_stream import MEMO
+from live_cases import MEMO
 
 INTERVAL_NS = 1_000_000             # 1 kHz
 

@@ -10,7 +10,7 @@ from balance_calib.config import CONFIG_DIR
 from balance_calib.live import refit_process
 from balance_calib.live.refit_process import make_refit_job, run_refit_job
 from balance_calib.tunnel_axes import UPRIGHT
-from test_live_stream import MEMO
+from live_cases import MEMO
 
 
 def _job(tmp_path, calibration_file):

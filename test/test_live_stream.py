@@ -13,47 +13,9 @@ from balance_calib.live.calibrator_core import ERROR, OK, STALE, check_steady, c
 from balance_calib.live.parameters import PARAMETERS, check_parameter, load_calibration_checked
 from balance_calib.live.stream import InputMonitor, LiveCalibrator, LiveSettings, LowPass, OverloadMonitor
 from balance_calib.live.tare_store import TareState, load_tare, save_tare, tare_file_for
-from balance_calib.simulation.wind_on import aoa_sweep_profile, wind_on_outputs
-from balance_calib.simulation.balance_sim import noise_mv_for_load_sigma
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
-
-MEMO = load_calibration(CONFIG_DIR / 'lmc6522.yaml')
-CAPACITY = MEMO.capacity
-TRUTH = MEMO.model('cubic')
-ELECTRICAL_ZERO_MV = np.array([0.04, -0.03, 0.05, 0.02, -0.01, 0.03])
-NOISE_MV = noise_mv_for_load_sigma(TRUTH.without_constant(), CAPACITY, 0.03)   # 0.03 % FS per sample
-
-
-def model_weight_tunnel() -> np.ndarray:
-    """The Show case: a model whose weight puts 0.3 FS on F_Z and 0.05 FS on M_Y (tunnel axes)."""
-    weight = np.zeros(6)
-    weight[2], weight[4] = -0.3 * CAPACITY[2], 0.05 * CAPACITY[4]
-    return weight
-
-
-def show_run(installation, samples_per_condition=50, seed=0):
-    """Raw outputs of a run on the memo's cubic balance as the truth: nothing on the balance (for
-    ~/zero), the model wind-off (for ~/tare), then the wind-on conditions of an α sweep whose loads
-    stay within the schedule's support (≤ 0.5 FS). Returns (zero, wind_off, wind_on (C, S, 6),
-    aerodynamic loads (C, 6) tunnel axes)."""
-    rng = np.random.default_rng(seed)
-    profile = aoa_sweep_profile(CAPACITY, installation, 100.0, hold_s=0.01, wind_off_s=0.0)
-    aero = profile.aero_tunnel[np.unique(profile.condition, return_index=True)[1]][1:]
-    weight = model_weight_tunnel()
-
-    def outputs(loads_tunnel, n):
-        clean = wind_on_outputs(TRUTH, installation.from_tunnel(np.atleast_2d(loads_tunnel)),
-                                electrical_zero_mv=ELECTRICAL_ZERO_MV)
-        return clean[:, None, :] + rng.normal(0.0, NOISE_MV, (len(clean), n, 6))
-    return (outputs(np.zeros(6), 100)[0], outputs(weight, 100)[0], outputs(aero + weight, samples_per_condition),
-            aero)
-
-
-def take(live, kind, outputs, stamp0=0):
-    live.start_window(kind, len(outputs))
-    live.process(outputs, stamp0 + np.arange(1, len(outputs) + 1) * 1_000_000, now_s=0.0)
-    return live.finish_window()
-
+from live_cases import (CAPACITY, ELECTRICAL_ZERO_MV, MEMO, NOISE_MV, calibration_with_covariance,
+                        model_weight_tunnel, show_run, take)
 
 @pytest.mark.parametrize('installation', [UPRIGHT, INVERTED])
 def test_tare_in_load_space_reads_wind_on_loads_within_0_1_pct_fs_and_an_output_space_tare_does_not(installation):
@@ -285,18 +247,6 @@ def test_fast_path_bytes_carry_exactly_the_pure_cores_wrench():
     np.testing.assert_allclose(wrench, core, rtol=1e-12, atol=1e-12)
     assert back[3].header.stamp.nanosec == 999_999_000 - 3 and back[0].header.frame_id == 'tunnel'
     assert len(encoded[0]) == len(serialize_message(back[0]))
-
-
-def calibration_with_covariance():
-    """The memo's cubic model with a coefficient covariance and residual σ from 300 synthetic points."""
-    from dataclasses import replace
-
-    from balance_calib.model.uncertainty import with_fitted_covariance
-    rng = np.random.default_rng(11)
-    outputs = rng.uniform(-1.0, 1.0, (300, 6)) * MEMO.rated_output_mv
-    residuals = rng.normal(0.0, 1e-4, (300, 6)) * CAPACITY
-    cubic = with_fitted_covariance(MEMO.model('cubic'), outputs, residuals)
-    return replace(MEMO, models={**MEMO.models, 'cubic': cubic})
 
 
 def test_published_uncertainty_is_the_calibrations_own_with_the_tare_scatter_added():

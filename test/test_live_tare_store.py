@@ -15,7 +15,7 @@ from balance_calib.live.session import CalibratorSession
 from balance_calib.live.tare_store import TareOwner, calibration_sha256, restore_refusal
 from balance_calib.simulation.wind_on import wind_on_outputs
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
-from test_live_stream import CAPACITY, MEMO, NOISE_MV, TRUTH
+from live_cases import CAPACITY, MEMO, NOISE_MV, TRUTH
 
 # what the balance carries with the model on, balance axes: 0.3 FS on F_Z, 0.05 FS on M_Y
 WEIGHT_BALANCE = np.array([0.0, 0.0, 0.3, 0.0, 0.05, 0.0]) * CAPACITY

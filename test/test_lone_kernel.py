@@ -5,8 +5,6 @@ input monitor and overload must be the pure core's, to 1e-12, with a zero, a tar
 an inverted installation and ratiometric inputs; what the kernel declines goes to the pure core."""
 import numpy as np
 import pytest
-from geometry_msgs.msg import WrenchStamped
-from rclpy.serialization import deserialize_message, serialize_message
 
 from balance_calib.calibration_file import load_calibration
 from balance_calib.config import CONFIG_DIR
@@ -15,55 +13,11 @@ from balance_calib.model.active_calibration import activate
 from balance_calib.live.raw_codec import WrenchEncoder, decode_wrenches
 from balance_calib.live.stream import LiveCalibrator, LiveSettings
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
-from ros_harness import six as wrench_six
-from test_live_stream import calibration_with_covariance, show_run, take
+from live_cases import calibration_with_covariance, show_run, take
+from lone_messages import lone_through_kernel, serialized, six, through_kernel
 
 MEMO = load_calibration(CONFIG_DIR / 'lmc6522.yaml')
 CAPACITY = MEMO.capacity
-
-
-def serialized(values, stamps_ns, frame='LMC6522'):
-    messages = []
-    for row, stamp in zip(values, stamps_ns):
-        msg = WrenchStamped()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp), 10**9)
-        msg.header.frame_id = frame
-        (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
-         msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = [float(v) for v in row]
-        messages.append(serialize_message(msg))
-    return messages
-
-
-def six(data: bytes) -> np.ndarray:
-    return np.array(wrench_six(deserialize_message(data, WrenchStamped)))
-
-
-def through_kernel(live, data, now_s, encoder, scale=1.0):
-    """One message through LiveCalibrator.process_messages (the live path's one call) ->
-    (wrench bytes, uncertainty bytes or None) when the C kernel took it, else None (the pure
-    core took it in the same call)."""
-    out = live.process_messages([data], now_s=now_s, decode=decode_wrenches, input_scale=scale,
-                                encoder=encoder, uncertainty_wanted=True)
-    if not out.accelerated:
-        return None
-    uncertainty = out.uncertainty()
-    return out.wrench[0], uncertainty[0] if uncertainty else None
-
-
-def lone_through_kernel(live, messages, scale, encoder):
-    """Each message alone through process_messages, 0.1 s apart; wrench/uncertainty per message
-    (None: not published), and which ones the kernel took."""
-    wrench, uncertainty, by_kernel = [], [], []
-    for k, data in enumerate(messages):
-        out = live.process_messages([data], now_s=0.1 * k, decode=decode_wrenches,
-                                    input_scale=scale, encoder=encoder, uncertainty_wanted=True)
-        by_kernel.append(out.accelerated == 1)
-        values = out.uncertainty()
-        wrench.append(six(out.wrench[0]) if out.wrench else None)
-        uncertainty.append(six(values[0]) if values else None)
-        if out.wrench:
-            assert deserialize_message(out.wrench[0], WrenchStamped).header.frame_id == 'tunnel'
-    return wrench, uncertainty, by_kernel
 
 
 @pytest.mark.parametrize('installation, scale', [(INVERTED, 1.0), (UPRIGHT, 2.5)])

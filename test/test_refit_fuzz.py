@@ -17,6 +17,7 @@ KINDS = {'clean', 'truncate', 'flip_crc', 'flip_nocrc', 'drop_raw', 'drop_marker
          'flip_summary', 'raw_clock_jump', 'lz4_flip_nocrc', 'clock_back', 'zero_stamps'}
 
 
+@pytest.mark.slow      # ~45 s on 2 cores: a refit of each of 240 mutant bags
 def test_hundreds_of_mutants_give_no_traceback_and_no_wrong_calibration(tmp_path):
     summary = run_mutants(240, 0, tmp_path, seeds=(0, 1, 2))
     counts = summary['counts']

@@ -172,12 +172,9 @@ def test_loads_beyond_capacity_are_refused(clean, tmp_path):
         _refit(tmp_path, events)
 
 
-def test_scatter_beyond_the_sigma_limit_is_refused(tmp_path):
-    config = load_balance_config('b660h')
-    from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign
+def test_scatter_beyond_the_sigma_limit_is_refused(tmp_path, campaigns):
     # 0.5 % FS of point noise: σ after the zero points ≈ 0.5 × 1.11 (zero_point_noise_factor) > 0.25
-    campaign = simulate_campaign(config, settings=SimulationSettings(noise_sigma_pct_fs=0.5, seed=2))
-    events = campaign_events(campaign)
+    events = campaign_events(campaigns.campaign('b660h', seed=2, noise=0.5))
     with pytest.raises(RefitError, match=r'acceptance gate sigma: σ of the base model beyond its limit'):
         run_refit([write_mcap(events, tmp_path / 'noisy.mcap', frame='B660H')], 'b660h', tmp_path / 'out',
                   diagnose=False, plots=False)

@@ -11,21 +11,14 @@ from balance_calib.calibration_file import load_calibration
 from balance_calib.config import load_balance_config
 from balance_calib.model.inverse import outputs_for_loads
 from balance_calib.refit.pipeline import RefitError, run_refit
-from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
-from balance_calib.simulation.campaign_bag import write_campaign_bag
 
 REPORT_KEYS = {'balance', 'points', 'base_model', 'calibration_body', 'sigma_pct_fs', 'sigma_pct_fs_crossval',
                'effects', 'adopted'}
 
 
 @pytest.fixture(scope='module')
-def campaign_bag(tmp_path_factory):
-    config = load_balance_config('lmc6522')
-    settings = SimulationSettings(samples_per_point=10, transition_samples=3, point_duration_s=1.0,
-                                  transition_s=0.5, noise_sigma_pct_fs=table17_noise(config), seed=11)
-    campaign = simulate_campaign(config, settings=settings)
-    path = tmp_path_factory.mktemp('bags') / 'campaign'
-    return write_campaign_bag(campaign, path), campaign
+def campaign_bag(campaigns):
+    return campaigns.bag(seed=11, recipe='bag'), campaigns.campaign(seed=11, recipe='bag')
 
 
 def _run_cli(*args):
@@ -85,20 +78,16 @@ def test_bad_inputs_fail_with_one_line_naming_the_problem_and_write_nothing(camp
     assert wrong_balance.returncode == 2 and 'none.yaml' in wrong_balance.stderr
 
 
-def test_a_schedule_that_cannot_determine_the_cubic_terms_is_refused_by_name(tmp_path):
-    config = load_balance_config('lmc6522')
-    campaign = simulate_campaign(config, settings=SimulationSettings(noise_sigma_pct_fs=table17_noise(config)))
-    bag = write_campaign_bag(campaign, tmp_path / 'components_only', points=slice(0, 160))
+def test_a_schedule_that_cannot_determine_the_cubic_terms_is_refused_by_name(tmp_path, campaigns):
+    bag = campaigns.bag(points=slice(0, 160))           # the single-component points alone
     with pytest.raises(RefitError, match=r'does not excite \d+ term\(s\) of the (quadratic|cubic) model: .*MYV\*MZV'):
         run_refit([bag], 'lmc6522', tmp_path / 'out', diagnose=False)
     assert not (tmp_path / 'out' / 'calibration.yaml').exists()
 
 
-def test_a_campaign_split_over_two_bags_refits_as_one(tmp_path):
-    config = load_balance_config('b660h')
-    campaign = simulate_campaign(config, settings=SimulationSettings(noise_sigma_pct_fs=table17_noise(config), seed=4))
-    first = write_campaign_bag(campaign, tmp_path / 'part1', points=slice(0, 200))
-    second = write_campaign_bag(campaign, tmp_path / 'part2', points=slice(200, None))
+def test_a_campaign_split_over_two_bags_refits_as_one(tmp_path, campaigns):
+    first = campaigns.bag('b660h', seed=4, points=slice(0, 200))
+    second = campaigns.bag('b660h', seed=4, points=slice(200, None))
     bare = next(second.glob('*.mcap'))
     result = run_refit([first, bare], 'b660h', tmp_path / 'out', diagnose=False, plots=False)
     assert result.report['points'] == 332

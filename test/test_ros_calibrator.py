@@ -18,13 +18,11 @@ from sensor_msgs.msg import Temperature
 from std_srvs.srv import Trigger
 
 from balance_calib.calibration_file import load_calibration, save_calibration
-from balance_calib.config import CONFIG_DIR
-from balance_calib.nodes.balance_calibrator import BalanceCalibrator
-from ros_harness import RELIABLE, NodeProcess, Probe, new_domain_id, wait_for
+from calibrator_harness import (MEMO, SAMPLE_MV, RawSource, calibration_file, connected,  # noqa: F401
+                                probe, start_calibrator, wrench_values)                  # (fixtures)
+from ros_harness import RELIABLE, NodeProcess, new_domain_id, wait_for
 
 pytestmark = pytest.mark.ros
-MEMO = load_calibration(CONFIG_DIR / 'lmc6522.yaml')
-SAMPLE_MV = (0.3, -0.2, 0.5, 0.1, -0.4, 0.2)
 
 
 class FakeResult:
@@ -52,67 +50,6 @@ class BlockingRefit:
         if self.error is not None:
             raise self.error
         return FakeResult(self.calibration, out_dir)
-
-
-@pytest.fixture
-def probe():
-    probe = Probe(new_domain_id())
-    yield probe
-    probe.close()
-
-
-@pytest.fixture
-def calibration_file(tmp_path):
-    path = tmp_path / 'calibration.yaml'
-    save_calibration(path, MEMO)
-    return path
-
-
-def start_calibrator(probe, tmp_path, calibration_file, refit=None, **parameters):
-    bag = tmp_path / 'campaign'
-    bag.mkdir(exist_ok=True)
-    overrides = {'calibration_file': str(calibration_file), 'report_dir': str(tmp_path / 'reports'),
-                 'calibration_bags': [str(bag)], 'diagnostics_period_s': 0.2, **parameters}
-    node = BalanceCalibrator(refit_function=refit, context=probe.context,
-                             parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()])
-    probe.add_node(node)
-    return node
-
-
-class RawSource:
-    """Publishes /balance/raw from the probe: one sample per call to send(), or a steady stream."""
-
-    def __init__(self, probe):
-        self.probe = probe
-        self.publisher = probe.node.create_publisher(WrenchStamped, '/balance/raw', RELIABLE)
-        self.sent = 0
-        self.timer = None
-
-    def send(self, outputs=SAMPLE_MV):
-        msg = WrenchStamped()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = 1000 + self.sent // 1000, (self.sent % 1000) * 1000
-        msg.header.frame_id = 'LMC6522'
-        (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
-         msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = (float(v) for v in outputs)
-        self.publisher.publish(msg)
-        self.sent += 1
-
-    def stream(self, rate_hz=200.0):
-        self.timer = self.probe.node.create_timer(1.0 / rate_hz, self.send)
-
-    def stop(self):
-        self.timer.cancel()
-
-
-def wrench_values(messages):
-    return np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
-                      m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z] for m in messages])
-
-
-def connected(node, source):
-    """Both links matched on the writer side, so that no sample of a volatile topic is lost."""
-    wait_for(lambda: source.publisher.get_subscription_count() >= 1, 10.0, 'the calibrator to subscribe')
-    wait_for(lambda: node._wrench_pub.get_subscription_count() >= 1, 10.0, '/balance/wrench to connect')
 
 
 def test_stream_keeps_flowing_through_a_refit_and_the_new_calibration_takes_over_between_samples(
@@ -272,7 +209,7 @@ def test_bad_parameters_are_rejected_with_a_reason_and_good_ones_applied(probe, 
 
 
 def test_temperature_model_falls_back_to_its_base_when_temperature_is_missing(probe, tmp_path):
-    from test_live_calibrator_core import temperature_calibration
+    from live_cases import temperature_calibration
     path = tmp_path / 'calibration.yaml'
     save_calibration(path, temperature_calibration())
     node = start_calibrator(probe, tmp_path, path, installation='balance', stale_after_s=0.5)

@@ -21,42 +21,13 @@ from balance_calib.model.inverse import outputs_for_loads
 from balance_calib.live.refit_process import RefitFailed, run_refit_in_process
 from balance_calib.nodes.balance_calibrator import BalanceCalibrator
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
-from ros_harness import RELIABLE, NodeProcess, Probe, new_domain_id, wait_for
-from test_live_stream import CAPACITY, MEMO, model_weight_tunnel, show_run
-from test_ros_calibrator import (RawSource, calibration_file, connected, probe,  # noqa: F401 (fixtures)
-                                 start_calibrator, wrench_values)
+from ros_harness import RELIABLE, NodeProcess, wait_for
+from live_cases import CAPACITY, MEMO, model_weight_tunnel, show_run
+from calibrator_harness import (Stamped, calibration_file, connected, probe,  # noqa: F401 (fixtures)
+                                start_calibrator, window, wrench_values)
 
 pytestmark = pytest.mark.ros
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-class Stamped(RawSource):
-    """RawSource with sample stamps of our choosing (1 kHz by default) and a frame id."""
-
-    def __init__(self, probe, topic='/balance/raw'):
-        self.probe = probe
-        self.publisher = probe.node.create_publisher(WrenchStamped, topic, RELIABLE)
-        self.sent = 0
-
-    def send(self, outputs=(0.1, 0.0, 0.1, 0.0, 0.0, 0.0), stamp_ns=None, frame_id='LMC6522'):
-        stamp_ns = (10**9 + self.sent * 10**6) if stamp_ns is None else stamp_ns
-        msg = WrenchStamped()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 10**9)
-        msg.header.frame_id = frame_id
-        (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
-         msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = (float(v) for v in outputs)
-        self.publisher.publish(msg)
-        self.sent += 1
-
-
-def window(probe, node, source, service, outputs):
-    """Call ~/tare or ~/zero, wait for its window to open, feed it, return the reply."""
-    reply = probe.call_async(Trigger, f'/balance_calibrator/{service}')
-    wait_for(lambda: node.session.live.window is not None, 10.0, f'the {service} window to open')
-    for row in outputs:
-        source.send(row)
-    wait_for(reply.done, 20.0, f'the {service} reply')
-    return reply.result()
 
 
 @pytest.mark.parametrize('installation', [UPRIGHT, INVERTED])
@@ -279,7 +250,7 @@ def test_input_qos_is_set_through_rclpys_standard_qos_overrides(probe, tmp_path,
 
 
 def test_wrench_uncertainty_is_published_beside_each_wrench(probe, tmp_path):
-    from test_live_stream import calibration_with_covariance
+    from live_cases import calibration_with_covariance
 
     from balance_calib.live.stream import wrench_uncertainty
     path = tmp_path / 'calibration.yaml'
@@ -304,7 +275,7 @@ def test_wrench_uncertainty_is_published_beside_each_wrench(probe, tmp_path):
 def test_uncertainty_is_computed_while_someone_subscribes_and_stops_when_they_leave(probe, tmp_path):
     """The node keeps the count of uncertainty readers from the publisher's matched events (no rmw
     query per batch once one matched); a reader arriving or leaving mid-stream is heard."""
-    from test_live_stream import calibration_with_covariance
+    from live_cases import calibration_with_covariance
     path = tmp_path / 'calibration.yaml'
     save_calibration(path, calibration_with_covariance())
     node = start_calibrator(probe, tmp_path, path, model='cubic')
@@ -335,15 +306,11 @@ def test_uncertainty_is_computed_while_someone_subscribes_and_stops_when_they_le
 
 
 @pytest.mark.slow
-def test_refit_process_killed_with_sigkill_keeps_the_calibration_and_the_stream(probe, tmp_path, calibration_file):
+def test_refit_process_killed_with_sigkill_keeps_the_calibration_and_the_stream(probe, tmp_path, calibration_file,
+                                                                                campaigns):
     import multiprocessing
 
-    from balance_calib.config import load_balance_config
-    from balance_calib.simulation import campaign_bag
-    from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign
-    config = load_balance_config('lmc6522')
-    bag = campaign_bag.write_campaign_bag(simulate_campaign(config, settings=SimulationSettings(
-        samples_per_point=5, point_duration_s=0.1, transition_s=0.05, seed=5)), tmp_path / 'bag')
+    bag = campaigns.bag(seed=5, recipe='dds', noise=None)
     node = start_calibrator(probe, tmp_path, calibration_file, calibration_bags=[str(bag)])
     wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
     source = Stamped(probe)

@@ -15,8 +15,6 @@ from balance_calib.calibration_file import load_calibration, save_calibration
 from balance_calib.config import CONFIG_DIR, load_balance_config
 from balance_calib.launchless.processes import ros_args
 from balance_calib.simulation.wind_on import aoa_sweep_profile
-from balance_calib.simulation import campaign_bag
-from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign
 from balance_calib.tunnel_axes import UPRIGHT
 from ros_harness import new_domain_id
 
@@ -121,10 +119,9 @@ print(json.dumps({'raw': len(stamps['raw']), 'wrench': len(stamps['wrench']),
 '''
 
 
-def test_three_hosts_over_a_bridge_lose_nothing_at_1_khz_and_refit_through_the_service(tmp_path):
+def test_three_hosts_over_a_bridge_lose_nothing_at_1_khz_and_refit_through_the_service(tmp_path, campaigns):
     config = load_balance_config('lmc6522')
-    bag = campaign_bag.write_campaign_bag(simulate_campaign(config, settings=SimulationSettings(
-        samples_per_point=5, point_duration_s=0.1, transition_s=0.05, seed=5)), tmp_path / 'campaign')
+    bag = campaigns.bag(seed=5, recipe='dds', noise=None)
     calibration_file = tmp_path / 'calibration.yaml'
     save_calibration(calibration_file, load_calibration(CONFIG_DIR / 'lmc6522.yaml'))
     rate, hold_s, wind_off_s, alphas = 1000.0, 0.3, 0.5, (-2.0, 6.0, 14.0, 22.0)

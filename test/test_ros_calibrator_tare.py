@@ -11,10 +11,9 @@ from geometry_msgs.msg import WrenchStamped
 
 from balance_calib.simulation.wind_on import wind_on_outputs
 from ros_harness import wait_for
-from test_live_stream import CAPACITY, NOISE_MV, TRUTH
-from test_ros_calibrator import (calibration_file, connected, probe,  # noqa: F401 (fixtures)
-                                 start_calibrator, wrench_values)
-from test_ros_calibrator_live import Stamped, window
+from live_cases import CAPACITY, NOISE_MV, TRUTH
+from calibrator_harness import (Stamped, calibration_file, connected, probe,  # noqa: F401 (fixtures)
+                                start_calibrator, window, wrench_values)
 
 pytestmark = pytest.mark.ros
 WARN = b'\x01'

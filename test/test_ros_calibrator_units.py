@@ -11,9 +11,9 @@ from balance_calib.model.active_calibration import activate
 from balance_calib.live.calibrator_core import compute_wrench
 from balance_calib.live.parameters import input_scale_mv
 from ros_harness import wait_for
-from test_live_stream import MEMO
-from test_ros_calibrator import (SAMPLE_MV, RawSource, calibration_file, connected, probe,  # noqa: F401
-                                 start_calibrator, wrench_values)
+from live_cases import MEMO
+from calibrator_harness import (SAMPLE_MV, RawSource, calibration_file, connected, probe,  # noqa: F401
+                                start_calibrator, wrench_values)
 
 
 def test_input_scale_is_the_excitation_for_mv_per_v_and_a_thousandth_of_it_for_microv_per_v():

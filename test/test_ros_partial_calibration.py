@@ -11,7 +11,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 
 from ros_harness import RELIABLE, NodeProcess, Probe, new_domain_id, six, wait_for
-from test_live_partial_calibration import CAPACITY, SIGMA_LOAD, SLOTS, fit_cell, raw_samples
+from partial_cells import CAPACITY, SIGMA_LOAD, SLOTS, fit_cell, raw_samples
 
 pytestmark = pytest.mark.ros
 ABSENT_SLOTS = [0, 1, 5]
@@ -95,7 +95,7 @@ def test_a_three_component_calibration_runs_in_the_node(tmp_path):
 
 
 def test_a_calibration_of_eight_outputs_stops_the_node_with_one_line(tmp_path):
-    from test_tables_more_outputs import eight_output_calibration
+    from live_cases import eight_output_calibration
 
     from balance_calib.calibration_file import save_calibration
     path = tmp_path / 'sensor8.yaml'

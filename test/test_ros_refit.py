@@ -9,9 +9,7 @@ from rclpy.parameter_client import AsyncParameterClient
 from std_srvs.srv import Trigger
 
 from balance_calib.calibration_file import load_calibration, save_calibration
-from balance_calib.config import CONFIG_DIR, load_balance_config
-from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
-from balance_calib.simulation import campaign_bag
+from balance_calib.config import CONFIG_DIR
 from ros_harness import RELIABLE, NodeProcess, Probe, new_domain_id, wait_for
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -19,12 +17,8 @@ SAMPLE_MV = np.array([0.3, -0.2, 0.5, 0.1, -0.4, 0.2])
 
 
 @pytest.fixture(scope='module')
-def bag(tmp_path_factory):
-    config = load_balance_config('lmc6522')
-    settings = SimulationSettings(samples_per_point=5, point_duration_s=0.1, transition_s=0.05,
-                                  noise_sigma_pct_fs=table17_noise(config), seed=5)
-    return campaign_bag.write_campaign_bag(simulate_campaign(config, settings=settings),
-                                           tmp_path_factory.mktemp('bags') / 'campaign')
+def bag(campaigns):
+    return campaigns.bag(seed=5, recipe='dds')
 
 
 @pytest.fixture

@@ -6,17 +6,13 @@ import numpy as np
 from balance_calib.cli import main
 from balance_calib.config import load_balance_config
 from balance_calib.refit.pipeline import run_refit
-from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
-from balance_calib.simulation.campaign_bag import write_campaign_bag
 from balance_calib.tables.balfit_reader import read_table
 from balance_calib.tables.calibrate import calibrate_table
 
 
-def test_bag_to_table_to_fit_equals_bag_to_refit(tmp_path, capsys):
+def test_bag_to_table_to_fit_equals_bag_to_refit(tmp_path, capsys, campaigns):
     config = load_balance_config('lmc6522')
-    settings = SimulationSettings(samples_per_point=10, transition_samples=3, point_duration_s=1.0,
-                                  transition_s=0.5, noise_sigma_pct_fs=table17_noise(config), seed=23)
-    bag = write_campaign_bag(simulate_campaign(config, settings=settings), tmp_path / 'campaign')
+    bag = campaigns.bag(seed=23, recipe='bag')
     refit = run_refit([bag], 'lmc6522', tmp_path / 'refit', diagnose=False, plots=False)
     cubic = refit.calibration.models['cubic']
 
@@ -42,13 +38,11 @@ def test_bag_to_table_to_fit_equals_bag_to_refit(tmp_path, capsys):
                                atol=1e-9 * config.capacity.max())
 
 
-def test_refit_calibration_carries_the_covariance_the_live_uncertainty_needs(tmp_path):
+def test_refit_calibration_carries_the_covariance_the_live_uncertainty_needs(tmp_path, campaigns):
     from balance_calib.calibration_file import load_calibration
     from balance_calib.model.uncertainty import load_standard_uncertainty
     config = load_balance_config('lmc6522')
-    settings = SimulationSettings(samples_per_point=10, transition_samples=3, point_duration_s=1.0,
-                                  transition_s=0.5, noise_sigma_pct_fs=table17_noise(config), seed=24)
-    bag = write_campaign_bag(simulate_campaign(config, settings=settings), tmp_path / 'campaign')
+    bag = campaigns.bag(seed=24, recipe='bag')
     run_refit([bag], 'lmc6522', tmp_path / 'refit', diagnose=False, plots=False)
     calibration = load_calibration(tmp_path / 'refit' / 'calibration.yaml')
     outputs = np.diag(config.rated_output_mv) * 0.5                # one bridge at half its rated output

@@ -15,8 +15,7 @@ from balance_calib.model.terms import parse_terms
 from balance_calib.tables import synthetic as sy
 from balance_calib.tables.balfit_reader import CalibrationTable, TableError, read_table
 from balance_calib.tables.balfit_writer import table_text, write_table
-
-CHANNELS = tuple(f'E{i}' for i in range(1, 9))
+from live_cases import CHANNELS, eight_output_calibration
 
 
 def eight_channel_table(rng, *, natural_zeros: bool, output_capacity: bool) -> CalibrationTable:
@@ -67,14 +66,6 @@ def test_units_that_do_not_tell_loads_from_outputs_fall_back_to_half_the_symbols
     path = write_table(tmp_path / 'odd.csv', odd)
     with pytest.raises(TableError, match=r"load E1 has unit 'mV/V', not a force or moment unit"):
         read_table(path)
-
-
-def eight_output_calibration() -> Calibration:
-    """A linear calibration of six components from the 8 channels (coefficients arbitrary)."""
-    model = BalanceModel('linear', parse_terms(list(CHANNELS)), np.arange(48.0).reshape(6, 8),
-                         sy.LOADS, CHANNELS)
-    return Calibration('sensor-8', {'linear': model}, 'linear', 'linear', sy.capacity_si(),
-                       np.full(8, 2.5), sy.LOADS, CHANNELS)
 
 
 def test_a_calibration_of_eight_outputs_is_carried_and_refused_live_in_one_line(tmp_path):

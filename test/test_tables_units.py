@@ -140,7 +140,7 @@ def test_a_table_in_lab_units_fits_the_same_calibration_as_in_si(campaign, load_
 
     # the zero's reply states the outputs in the calibration's unit, not in mV
     from balance_calib.live.stream import LiveCalibrator
-    from test_live_stream import take
+    from live_cases import take
     zero = take(LiveCalibrator(live_lab), 'zero', np.tile(raw_mv[0] * per_mv, (10, 1)))
     assert zero.ok, zero.message
     assert f' {output_unit}' in zero.message and ' mV' not in zero.message, zero.message

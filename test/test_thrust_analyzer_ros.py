@@ -25,15 +25,9 @@ AMBIENT_PA = 101325.0
 TIMEOUT_S = 20.0
 
 
-def domain_id() -> int:
-    # 215 ... 232: the other ROS tests draw from 1 ... 99 (test/ros_harness.py), so a concurrent
-    # run of those cannot cross-talk with this one
-    return 215 + os.getpid() % 18
-
-
 @pytest.fixture
-def analyzer(tmp_path):
-    env = {**os.environ, 'ROS_DOMAIN_ID': str(domain_id()),
+def analyzer(tmp_path, ros_domain):
+    env = {**os.environ, 'ROS_DOMAIN_ID': str(ros_domain),
            'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
     log = (tmp_path / 'analyzer.log').open('w')
     process = subprocess.Popen(
@@ -53,9 +47,9 @@ def analyzer(tmp_path):
 
 
 @pytest.fixture
-def ros_node():
+def ros_node(ros_domain):
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id())
+    rclpy.init(context=context, domain_id=ros_domain)
     node = rclpy.create_node('thrust_analyzer_test', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)

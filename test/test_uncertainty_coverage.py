@@ -121,18 +121,15 @@ def test_memo_balance_six_loads_at_once_the_uncertainty_says_the_fit_errs_there(
     assert np.all(result['six'][2] > 5 * result['single'][2])             # ... and u says so
 
 
-def test_an_adopted_temperature_model_carries_its_own_covariance():
+def test_an_adopted_temperature_model_carries_its_own_covariance(campaigns):
     """refit adopts cubic+temperature for an undeclared F_X temperature sensitivity: the live model it
     writes has a covariance too, and its u on F_X is its own (smaller) scatter, not the base model's."""
     from balance_calib.config import load_balance_config
     from balance_calib.model.uncertainty import has_uncertainty
-    from balance_calib.refit.pipeline import calibrate_points, campaign_points
-    from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
-    from balance_calib.simulation.effects import parse_effects
+    from balance_calib.refit.pipeline import calibrate_points
     config = load_balance_config('lmc6522')
-    campaign = simulate_campaign(config, settings=SimulationSettings(noise_sigma_pct_fs=table17_noise(config), seed=2),
-                                 effects=parse_effects('temperature:sensitivity_per_k=0.0045|0|0|0|0|0'))
-    calibration = calibrate_points(campaign_points(campaign), config).calibration
+    points = campaigns.points(seed=2, effects='temperature:sensitivity_per_k=0.0045|0|0|0|0|0')
+    calibration = calibrate_points(points, config).calibration
     assert calibration.model().extra_variables == ('dT',) and has_uncertainty(calibration)
     outputs = np.diag(config.rated_output_mv) * 0.5
     adopted = load_standard_uncertainty(calibration, outputs, {'dT': np.full(6, 2.0)})

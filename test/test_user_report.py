@@ -11,11 +11,10 @@ import pytest
 from PIL import Image
 
 from balance_calib.config import load_balance_config
-from balance_calib.refit.pipeline import calibrate_points, campaign_points, write_outputs
+from balance_calib.refit.pipeline import calibrate_points, write_outputs
 from balance_calib.refit.plots import CLIP_PCT, describe_variable, point_categories
 from balance_calib.refit.report_sections import add_lab_units_to_report
 from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
-from balance_calib.simulation.effects import parse_effects
 from balance_calib.units import (NEWTON_METRE_PER_INCH_LBF, NEWTON_PER_LBF, implied_excitation_v,
                                  loads_to_display, ratiometric_to_mv)
 
@@ -30,12 +29,9 @@ TABLE2 = [('single-component', 1, 160), ('longitudinal three-component combined'
 
 
 @pytest.fixture(scope='module')
-def refit(tmp_path_factory):
+def refit(tmp_path_factory, campaigns):
     config = load_balance_config('lmc6522')
-    settings = SimulationSettings(seed=3, noise_sigma_pct_fs=table17_noise(config))
-    campaign = simulate_campaign(config, settings=settings, effects=parse_effects(DEMO_EFFECTS))
-    points = campaign_points(campaign)
-    result = calibrate_points(points, config)
+    result = calibrate_points(campaigns.points(seed=3, effects=DEMO_EFFECTS), config)
     out = tmp_path_factory.mktemp('refit')
     write_outputs(result, out)
     return result, out, (out / 'report.md').read_text()
@@ -145,10 +141,9 @@ def test_one_figure_per_model_at_most_two_panels_wide_and_readable(refit):
     assert len(sizes) == 1            # the adopted model's figure has the layout of the other three
 
 
-def test_single_and_combined_points_are_told_apart():
+def test_single_and_combined_points_are_told_apart(campaigns):
     config = load_balance_config('lmc6522')
-    campaign = simulate_campaign(config, settings=SimulationSettings(seed=1))
-    points = campaign_points(campaign)
+    points = campaigns.points(seed=1, noise=None)
     categories = point_categories(points, config)
     single = (points.label <= 160) & ~points.is_zero_point
     assert set(categories[single]) == {'single'}

@@ -8,8 +8,7 @@ from rcl_interfaces.msg import ParameterType
 
 from balance_calib.launchless.ros_tools import ToolError, python_to_parameter_value
 from balance_calib.live.parameters import PARAMETERS
-from ros_harness import NodeProcess, new_domain_id
-from test_user_ros_tools import ros
+from ros_harness import NodeProcess, new_domain_id, ros
 
 DOUBLE = ParameterType.PARAMETER_DOUBLE
 

@@ -14,15 +14,7 @@ from balance_calib.config import load_balance_config
 from balance_calib.launchless.ros_tools import format_bag_info
 from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign
 from balance_calib.simulation.campaign_bag import write_campaign_bag
-from ros_harness import NodeProcess, new_domain_id
-
-SCRIPTS = Path(__file__).resolve().parent.parent / 'launchless_scripts'
-
-
-def ros(domain, *args, timeout=120):
-    return subprocess.run([str(SCRIPTS / 'ros'), *map(str, args)], capture_output=True, text=True, timeout=timeout,
-                          env=dict(os.environ, ROS_DOMAIN_ID=str(domain)))
-
+from ros_harness import SCRIPTS, NodeProcess, new_domain_id, ros
 
 @pytest.mark.ros
 def test_param_topic_and_service_verbs_on_a_running_calibrator(tmp_path):
