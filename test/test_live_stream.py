@@ -56,7 +56,7 @@ def take(live, kind, outputs, stamp0=0):
 
 
 @pytest.mark.parametrize('installation', [UPRIGHT, INVERTED])
-def test_tare_in_load_space_reads_wind_on_loads_within_0_1_pct_fs_and_an_output_space_tare_does_not(installation):
+def test_a_load_space_tare_reads_wind_on_loads_within_0_1_pct_fs_an_output_space_one_not(installation):
     zero, wind_off, wind_on, aero = show_run(installation)
     live = LiveCalibrator(activate(MEMO, 'cubic', installation))
     assert take(live, 'zero', zero).ok
