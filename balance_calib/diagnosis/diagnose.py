@@ -1,4 +1,4 @@
-"""Residual diagnosis: which physical effect does the base model of TM-663 lack? (issues 4, 11)
+"""Residual diagnosis (issues 4, 11): which physical effect does the base model of TM-663 lack?
 
 After the base fit (cubic, §2.3) of the corrected data (§5(4) zero points, §6-7 tare), the residuals
 of every component are examined against each candidate family of shapes (candidates.py,
