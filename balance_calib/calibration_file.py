@@ -135,7 +135,7 @@ def _with_line_number(message: str, where: str, text: str) -> str:
     rest = message[len(where) + 2:] if message.startswith(f'{where}: ') else message
     key = _KEY_PATH.match(rest)
     line = _line_of_key(text, key.group(1).split('.')) if key else None
-    if line is None:
+    if line is None or key is None:
         return f'{where}: {rest}'
     quoted = _QUOTED.search(rest[key.end():])
     if quoted:

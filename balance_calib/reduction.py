@@ -55,7 +55,7 @@ def opposite_zero_pairs(points: LoadPoints, zeroed_reference=None):
     """
     zero = points.is_zero_point
     pairs = []
-    keys = {}
+    keys: dict[tuple[float, ...], list[np.ndarray]] = {}
     for g, v in zip(points.gravity[zero], points.outputs_mv[zero]):
         key = tuple(np.round(g, 6))
         keys.setdefault(key, []).append(v)

@@ -33,7 +33,8 @@ _balance_calib_setup_venv() (
     *) echo "[balance_calib] BALANCE_CALIB_REQUIREMENTS=$wanted: expected run or test" >&2; exit 1 ;;
   esac
   hash="$(cat "$BALANCE_CALIB_ROOT/requirements-run.txt" "$BALANCE_CALIB_ROOT/requirements-test.txt" \
-               "$BALANCE_CALIB_ROOT/setup.py" "$BALANCE_CALIB_ROOT/balance_calib/live/_lone_kernel.c" | sha256sum | cut -d' ' -f1)"
+               "$BALANCE_CALIB_ROOT/setup.py" "$BALANCE_CALIB_ROOT/pyproject.toml" \
+               "$BALANCE_CALIB_ROOT/balance_calib/live/_lone_kernel.c" | sha256sum | cut -d' ' -f1)"
   have="$(cat "$stamp" 2>/dev/null || true)"
   if [ ! -x "$venv/bin/python" ] || { [ "$have" != "$wanted:$hash" ] && [ "$have" != "test:$hash" ]; }; then
     echo "[balance_calib] setting up $venv from requirements-$wanted.txt (first use or requirements changed)..." >&2
@@ -60,7 +61,8 @@ if [ "$_balance_calib_status" != 0 ]; then
   esac
 fi
 unset -f _balance_calib_setup_venv; unset _balance_calib_status
-# setup.cfg puts the executables where ros2 run looks for them: lib/balance_calib
+# The executables: .venv/bin (pip installs the package editable, PEP 660, as pyproject.toml is
+# there); .venv/lib/balance_calib is where setup.cfg puts them for `setup.py develop` and colcon.
 case ":$PATH:" in
   *":$BALANCE_CALIB_ROOT/.venv/bin:"*) ;;
   *) export PATH="$BALANCE_CALIB_ROOT/.venv/bin:$BALANCE_CALIB_ROOT/.venv/lib/balance_calib:$BALANCE_CALIB_ROOT/launchless_scripts:$PATH" ;;

@@ -104,7 +104,7 @@ def test_a_single_wind_off_point_cannot_give_weight_and_cg():
         fit_weight_tare(np.zeros((1, 6)), np.zeros((1, 3)), sigma_loads=np.ones(6))
 
 
-def test_a_sweep_in_alpha_alone_cannot_separate_the_weight_from_the_offsets_when_alpha_is_constant():
+def test_a_sweep_in_alpha_alone_cannot_separate_the_weight_from_offsets_at_constant_alpha():
     attitudes = np.zeros((4, 3))          # four holds, all at the same attitude
     with pytest.raises(WeightTareError, match='does not determine'):
         fit_weight_tare(np.zeros((4, 6)), attitudes, sigma_loads=np.ones(6))

@@ -13,7 +13,7 @@ def step(rate, received=None, uncertainty=0, achieved=None, cpu=100.0, p99=0.5, 
             'source_us_per_sample': source, 'sink_us_per_sample': sink}
 
 
-def test_zero_loss_is_the_highest_rate_whose_every_trial_came_back_whole_and_first_loss_the_lowest_that_did_not():
+def test_zero_loss_is_the_top_rate_with_every_trial_whole_and_first_loss_the_lowest_not():
     results = [step(1000), step(1000), step(4000), step(4000, received=11999),   # one trial of 4 kHz lost one
                step(8000), step(8000), step(12000), step(12000, received=0)]   # 12 kHz: one whole, one not
     assert zero_loss_rate(results) == 8000.0       # 8 kHz whole twice, above a lossy 4 kHz: reported as run
@@ -40,7 +40,7 @@ def test_the_1khz_figures_are_medians_over_the_trials():
     assert medians_at_1k([step(2000)]) is None
 
 
-def test_the_cpu_budget_is_taken_at_the_highest_rate_every_row_came_back_whole_as_medians_of_its_trials():
+def test_the_cpu_budget_is_at_the_top_rate_with_every_row_whole_as_medians_of_its_trials():
     summary = {
         'a': [step(8000, cpu=30.0), step(8000, cpu=34.0), step(8000, cpu=32.0),
               step(12000, cpu=1.0), step(12000, cpu=1.0)],

@@ -18,7 +18,7 @@ from live_cases import (CAPACITY, ELECTRICAL_ZERO_MV, MEMO, NOISE_MV, calibratio
                         model_weight_tunnel, show_run, take)
 
 @pytest.mark.parametrize('installation', [UPRIGHT, INVERTED])
-def test_tare_in_load_space_reads_wind_on_loads_within_0_1_pct_fs_and_an_output_space_tare_does_not(installation):
+def test_a_load_space_tare_reads_wind_on_loads_within_0_1_pct_fs_an_output_space_one_not(installation):
     zero, wind_off, wind_on, aero = show_run(installation)
     live = LiveCalibrator(activate(MEMO, 'cubic', installation))
     assert take(live, 'zero', zero).ok

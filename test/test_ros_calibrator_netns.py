@@ -40,7 +40,8 @@ class Network:
         try:
             ip('netns', 'add', bridge)
         except (OSError, subprocess.CalledProcessError) as err:
-            pytest.skip(f'cannot create network namespaces here: {getattr(err, "stderr", "") or err}'.strip())
+            reason = getattr(err, "stderr", "") or err
+            pytest.skip(f'cannot create network namespaces here: {reason}'.strip())
         self.made.append(bridge)
         ip('link', 'add', 'br0', 'type', 'bridge', namespace=bridge)
         for link in ('br0', 'lo'):
@@ -104,7 +105,8 @@ def keep(kind):
 wrench = node.create_subscription(WrenchStamped, '/balance/wrench', keep('wrench'), qos)
 while wrench.get_publisher_count() < 1 and time.monotonic() < deadline:     # the calibrator, first
     rclpy.spin_once(node, timeout_sec=0.05)
-node.create_subscription(WrenchStamped, '/balance/raw', keep('raw'), qos)   # then the publisher may start
+# then the publisher may start
+node.create_subscription(WrenchStamped, '/balance/raw', keep('raw'), qos)
 while min(len(s) for s in stamps.values()) < expected and time.monotonic() < deadline:
     rclpy.spin_once(node, timeout_sec=0.05)
 client = node.create_client(Trigger, '/balance_calibrator/refit')

@@ -91,7 +91,7 @@ def _number(data: Mapping, key: str, where: str, default=None) -> float:
 
 
 def _vector3(data: Mapping, key: str, where: str, allow_estimate: bool = False):
-    value = data.get(key)
+    value: Any = data.get(key)     # what the YAML holds: checked below
     if allow_estimate and value == ESTIMATE:
         return None
     try:

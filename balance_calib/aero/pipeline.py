@@ -131,7 +131,7 @@ def reduce_bags(bags: Sequence[str | Path], calibration_path: str, model_path: s
     if len(samples.q_pa) == 0:
         raise ReduceError(f'{", ".join(map(str, bags))}: {implausible[0]}; no sample left')
     sigma, sigma_source = calibration_sigma(calibration, parsed)
-    runs = []
+    runs: list[ModelRun] = []
     raw = samples.raw_mv if electrical_zero_mv is None \
         else samples.raw_mv - np.asarray(electrical_zero_mv, float)
     coverage = run_coverage(calibration, outputs_mv=raw, model=main_name) \

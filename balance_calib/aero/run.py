@@ -159,7 +159,8 @@ def reduce_run(readings, support_attitude, q_pa, model: ModelDescription, settin
     readings, support, q = (np.asarray(a, float) for a in (readings, support_attitude, q_pa))
     holds = find_holds(support, q, settings)
     tracker = TareTracker(model, sigma_loads)
-    points, tares = [], []
+    points = []
+    tares: list[WeightTare] = []
     for index, (start, stop) in enumerate(holds):
         chosen = settings.point_range(int(start), int(stop))
         if chosen is None:

@@ -67,8 +67,10 @@ def main(argv=None) -> None:
     auto = calibrate_table(table, force=True)
     one = _best_of(lambda: direct(True), args.repeat)
     whole = _best_of(lambda: calibrate_table(table, force=True), args.repeat)
-    print(f'\n--method auto --terms auto: {len(auto.report["model_selection"]["candidates"])} candidates '
-          f'(both forms x {", ".join(sorted({c["term_set"] for c in auto.report["model_selection"]["candidates"]}))}), '
+    candidates = auto.report["model_selection"]["candidates"]
+    term_sets = ", ".join(sorted({c["term_set"] for c in candidates}))
+    print(f'\n--method auto --terms auto: {len(candidates)} candidates '
+          f'(both forms x {term_sets}), '
           f'PRESS pruning, gates; adopted {auto.method} {auto.report["term_set"]} '
           f'({len(auto.report["terms"])} terms)')
     print(f'{"auto, the whole calibrate_table (s)":72}  {whole:8.3f}')

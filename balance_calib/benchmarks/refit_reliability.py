@@ -436,7 +436,8 @@ def peak_mb():
         pass
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 print(json.dumps({'peak_rss_mb': peak_mb(),
-                  'seconds': time.monotonic() - started, 'sigma': result.report['sigma_pct_fs']['after'],
+                  'seconds': time.monotonic() - started,
+                  'sigma': result.report['sigma_pct_fs']['after'],
                   'sessions': result.report.get('sessions')}))
 '''
 

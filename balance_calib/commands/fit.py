@@ -231,8 +231,9 @@ def report_markdown(report) -> str:
                   f'{len(weak)} insignificant everywhere (p ≥ 0.01) whose removal lowers PRESS: '
                   f'{", ".join(weak[:20]) or "none"}{" ..." if len(weak) > 20 else ""}']
     for method, selection in report.get('term_selection', {}).items():
-        lines += [f'- {method}, --select: kept {selection["kept"]} terms, removed {len(selection["removed"])}: '
-                  f'{", ".join(selection["removed"][:30]) or "none"}{" ..." if len(selection["removed"]) > 30 else ""}']
+        removed = selection['removed']
+        lines += [f'- {method}, --select: kept {selection["kept"]} terms, removed {len(removed)}: '
+                  f'{", ".join(removed[:30]) or "none"}{" ..." if len(removed) > 30 else ""}']
     lines += ['', 'Per term and load in report.json (`term_statistics`): VIF, p-value of the coefficient, '
               'PRESS without the term / PRESS with it.', '', '## Uncertainty of each point', '',
               f'k = 1 standard uncertainty from the coefficient covariance, the residual scatter and the series '

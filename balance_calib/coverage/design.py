@@ -94,6 +94,13 @@ def schedule_total_loads(config: BalanceConfig, schedule: LoadSchedule) -> np.nd
     return np.asarray(schedule.loads, float) + tare_loads(config.calibration_body, gravity)
 
 
+def _schedule(config: BalanceConfig) -> LoadSchedule:
+    """The config's load schedule; DesignError naming the config if it has none."""
+    if config.schedule is None:
+        raise DesignError(f'{config.path or config.name}: the balance config has no load schedule')
+    return config.schedule
+
+
 def rig_loading(config: BalanceConfig, total_loads,
                 combined_limit: float = DEFAULT_COMBINED_LIMIT):
     """How the rig applies each total load (C, n), N / N·m: (feasible (C,) bool, orientation (C,)
@@ -102,7 +109,7 @@ def rig_loading(config: BalanceConfig, total_loads,
     the total load are within capacity and ‖total / capacity‖₂ ≤ combined_limit."""
     loads = np.atleast_2d(np.asarray(total_loads, dtype=float))
     capacity = np.asarray(config.capacity, float)
-    orientations = np.array(sorted(set(int(i) for i in config.schedule.orientation)
+    orientations = np.array(sorted(set(int(i) for i in _schedule(config).orientation)
                                    & set(config.gravity_directions)))
     applied = np.stack([loads - tare_loads(config.calibration_body, config.gravity(i))
                         for i in orientations])                              # (O, C, n)
@@ -125,7 +132,7 @@ def schedule_with(config: BalanceConfig, total_loads,
                           f'within capacity and the combined-loading limit {combined_limit}')
     step = ROUND_KGF * STANDARD_GRAVITY_M_S2
     hung = np.round(applied / step) * step
-    base = config.schedule
+    base = _schedule(config)
     number = int(np.max(base.point)) + 1
     points, orientation_rows, load_rows = [], [], []
     zero = np.zeros(hung.shape[1])
@@ -161,7 +168,8 @@ def _exchange(candidate_rows: np.ndarray, base_inverse: np.ndarray, weight: np.n
         v = inverse @ row
         return inverse + np.outer(v, v) / (1.0 - row @ v)
 
-    inverse, chosen = base_inverse.copy(), []
+    inverse = base_inverse.copy()
+    chosen: list[int] = []
     for _ in range(count):
         gain = gains(inverse)
         gain[chosen] = -np.inf
@@ -213,8 +221,7 @@ def design_points(config: BalanceConfig, envelope_loads, points: int, *,
     """
     if not isinstance(points, (int, np.integer)) or points < 1:
         raise DesignError(f'--points {points}: add at least 1 point')
-    if config.schedule is None:
-        raise DesignError(f'{config.path or config.name}: the balance config has no load schedule')
+    _schedule(config)       # DesignError without one
     if not combined_limit > 0:
         raise DesignError(f'combined-loading limit {combined_limit}: must be positive')
     capacity = np.asarray(config.capacity, float)
@@ -237,7 +244,7 @@ def design_points(config: BalanceConfig, envelope_loads, points: int, *,
     if len(candidates) == 0:
         raise DesignError(f'{where}: no load of the envelope can be applied by the rig within '
                           f'capacity and the combined-loading limit {combined_limit}')
-    base_rows = _rows(model, schedule_total_loads(config, config.schedule))
+    base_rows = _rows(model, schedule_total_loads(config, _schedule(config)))
     envelope_rows = _rows(model, envelope)
     scales = np.linalg.norm(base_rows, axis=0)
     scales[scales == 0] = 1.0
@@ -246,7 +253,7 @@ def design_points(config: BalanceConfig, envelope_loads, points: int, *,
     chosen = _exchange(_rows(model, candidates) / scales, base_inverse, weight, int(points))
 
     schedule = schedule_with(config, candidates[chosen], combined_limit)
-    base_points = len(config.schedule)
+    base_points = len(_schedule(config))
     total = schedule_total_loads(config, schedule)
     loaded = ~np.all(schedule.loads[base_points:] == 0.0, axis=1)
     before = predicted_uncertainty(model, base_rows, sigma, envelope)

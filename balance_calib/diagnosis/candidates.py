@@ -118,8 +118,10 @@ def own_terms_only(family: CandidateFamily, component: str, output: str, compone
     return family.groups
 
 
-def creep_family(outputs: Sequence[str], time_constants_s: Sequence[float], max_groups: int = 2) -> CandidateFamily:
-    groups, labels = [], {}
+def creep_family(outputs: Sequence[str], time_constants_s: Sequence[float] | np.ndarray,
+                 max_groups: int = 2) -> CandidateFamily:
+    groups: list[tuple[str, ...]] = []
+    labels: dict[tuple[str, ...], str] = {}
     for v in outputs:
         for m, tau in enumerate(time_constants_s, start=1):
             group = (f'creep_{v}_{m}',)
@@ -149,7 +151,8 @@ def cross_terms_family(outputs: Sequence[str], base_terms: Sequence[str], max_gr
 
 
 def drift_family(frequencies_hz: np.ndarray, max_groups: int = 8) -> CandidateFamily:
-    groups, labels = [], {}
+    groups: list[tuple[str, ...]] = []
+    labels: dict[tuple[str, ...], str] = {}
     for m, f in enumerate(frequencies_hz, start=1):
         group = (f'drift_sin_{m}', f'drift_cos_{m}')
         groups.append(group)
@@ -233,13 +236,13 @@ def turning_distances(loads, times_s, direction, capacity) -> np.ndarray:
     point (Preisach / Madelung) follows it; turn·|turn| is Rayleigh's law."""
     loads = np.atleast_2d(np.asarray(loads, dtype=float))
     order = np.argsort(np.asarray(times_s, dtype=float), kind='stable')
-    l, d = loads[order], np.asarray(direction, float)[order]
-    turn = np.empty_like(l)
-    at_turn = l[0].copy()
-    for i in range(len(l)):
+    load, d = loads[order], np.asarray(direction, float)[order]
+    turn = np.empty_like(load)
+    at_turn = load[0].copy()
+    for i in range(len(load)):
         if i > 0:
-            at_turn = np.where(d[i] != d[i - 1], l[i - 1], at_turn)
-        turn[i] = l[i] - at_turn
+            at_turn = np.where(d[i] != d[i - 1], load[i - 1], at_turn)
+        turn[i] = load[i] - at_turn
     out = np.empty_like(turn)
     out[order] = turn
     return out / np.asarray(capacity, float)

@@ -1,4 +1,4 @@
-"""Residual diagnosis: which physical effect does the base model of TM-663 lack? (issues 4, 11)
+"""Residual diagnosis (issues 4, 11): which physical effect does the base model of TM-663 lack?
 
 After the base fit (cubic, §2.3) of the corrected data (§5(4) zero points, §6-7 tare), the residuals
 of every component are examined against each candidate family of shapes (candidates.py,
@@ -35,7 +35,7 @@ outputs, dT and the load directions.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Mapping, Sequence, cast
 
 import numpy as np
 
@@ -56,7 +56,7 @@ from .loop_or_sign import components_to_drop, direction_pairs
 from .leftovers import Leftovers, examine_leftovers
 from ..accuracy.sigma import sigma_pct_fs
 from .statistics import ComponentFit, ZeroPointWhitening, fit_columns, forward_select, partial_f
-from .tare_refit import refit_body
+from .tare_refit import BodyRefit, refit_body
 
 
 @dataclass(frozen=True)
@@ -261,7 +261,7 @@ class _Candidate:
     family: str
     components: dict                 # component index -> dict of statistics
     score: float
-    body_refit: object = None
+    body_refit: BodyRefit | None = None
     components_fits: list | None = None      # tare: every component refitted with the new body
 
 
@@ -342,7 +342,6 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
     tare_available = 'tare' in wanted and len(np.unique(np.round(points.gravity, 6), axis=0)) >= 2
     if 'tare' in wanted and not tare_available:
         skipped['tare'] = 'a single orientation: the body weight cannot be told from the constant'
-    n_searches = len(families) + int(tare_available)
 
     whitening = ZeroPointWhitening.for_points(points.times_s, points.is_zero_point, points.orientation)
     problem = _Problem(outputs_names, corrected, variables, whitening, components, times, points.gravity)
@@ -394,10 +393,10 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
         adopted_families.add(winner.family)
         before = {k: fits[k] for k in winner.components}
         if winner.family == 'tare':
-            refit = winner.body_refit
+            refit = cast(BodyRefit, winner.body_refit)        # a tare candidate carries both
             problem.set_corrected(refit.corrected)
             body, body_source = refit.body, 'fitted'
-            fits = list(winner.components_fits)
+            fits = list(cast(list, winner.components_fits))
         else:
             for k, stats in winner.components.items():
                 comp_terms[k] = comp_terms[k] + list(stats['added'])
@@ -726,7 +725,7 @@ def _effect_found(entry, final_fits, comp_terms, components, problem, points, ti
             explaining_variable[c], explaining_values[c] = added[0], problem.columns(added[:1])[:, 0]
     parameters = {}
     if name == 'tare':
-        body = candidate.body_refit.body
+        body = cast(BodyRefit, candidate.body_refit).body
         parameters = {'weight_n': body.weight_n, 'cg_x_m': body.cg_m[0], 'cg_y_m': body.cg_m[1], 'cg_z_m': body.cg_m[2]}
     return EffectFound(
         name=name, components=tuple(c for c in components if c in per), evidence=evidence, terms=tuple(terms),

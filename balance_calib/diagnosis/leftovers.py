@@ -109,12 +109,12 @@ def body_roll_deg(points, fits, comp_terms, outputs_names) -> float | None:
     the pairs, and the fitted model (its nonlinear terms included: the linear part alone is off by
     0.2-0.4° at the body's weight) gives the force at each."""
     zero = np.asarray(points.is_zero_point)
-    means = {}
+    means: dict[tuple[float, ...], list[np.ndarray]] = {}
     for g, v in zip(np.asarray(points.gravity)[zero], np.asarray(points.outputs_mv)[zero]):
         means.setdefault(tuple(np.round(g, 6)), []).append(v)
-    means = {key: np.mean(v, axis=0) for key, v in means.items()}
-    pairs = [(np.array(key), means[key], means[tuple(np.round(-np.array(key), 6) + 0.0)]) for key in means
-             if tuple(np.round(-np.array(key), 6) + 0.0) in means and key > tuple(np.round(-np.array(key), 6) + 0.0)]
+    mean_of = {key: np.mean(v, axis=0) for key, v in means.items()}
+    pairs = [(np.array(key), mean_of[key], mean_of[tuple(np.round(-np.array(key), 6) + 0.0)]) for key in mean_of
+             if tuple(np.round(-np.array(key), 6) + 0.0) in mean_of and key > tuple(np.round(-np.array(key), 6) + 0.0)]
     if not pairs:
         return None
     electrical = np.mean([(a + b) / 2.0 for _, a, b in pairs], axis=0)

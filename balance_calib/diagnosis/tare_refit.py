@@ -37,7 +37,7 @@ def body_from_unknowns(declared: CalibrationBody, parameters: Sequence[str], unk
             weight = declared.weight_n * (1.0 + x)
         else:
             cg['xyz'.index(name[3])] += CG_SCALE_M * x
-    return replace(declared, weight_n=float(weight), cg_m=tuple(float(c) for c in cg))
+    return replace(declared, weight_n=float(weight), cg_m=(float(cg[0]), float(cg[1]), float(cg[2])))
 
 
 class TareOutputChange:

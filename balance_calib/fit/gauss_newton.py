@@ -35,6 +35,6 @@ def gauss_newton(residual: Callable[[np.ndarray], np.ndarray],
         error = residual(parameters)
         step, *_ = np.linalg.lstsq(jacobian(parameters), error, rcond=None)   # ΔC of eq. (28)
         parameters = parameters + step                                         # eq. (20)
-        if np.linalg.norm(step) <= relative_step * max(np.linalg.norm(parameters), 1e-300):
+        if np.linalg.norm(step) <= relative_step * max(float(np.linalg.norm(parameters)), 1e-300):
             return GaussNewtonResult(parameters, iteration, True, float(np.sum(residual(parameters) ** 2)))
     return GaussNewtonResult(parameters, max_iterations, False, float(np.sum(residual(parameters) ** 2)))

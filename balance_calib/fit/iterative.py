@@ -12,7 +12,7 @@ bridge does not dominate. Start: output intercepts per series mapped through the
 """
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Sequence, cast
 
 import numpy as np
 
@@ -134,5 +134,5 @@ def iterative_point_uncertainty(fit: SeriesTareFit, outputs, series) -> np.ndarr
     totals = model.loads(outputs)
     _, out_jac = model.output_jacobian(totals)
     z = np.hstack([model.design(totals), series_rows(fit, series)])
-    h = np.einsum('ij,jk,ik->i', z, fit.full_covariance_unscaled, z)
+    h = np.einsum('ij,jk,ik->i', z, cast(np.ndarray, fit.full_covariance_unscaled), z)  # fitted with it
     return _load_sigma(np.linalg.inv(out_jac), fit.residual_sigma[None, :] ** 2 * (1.0 + h)[:, None])

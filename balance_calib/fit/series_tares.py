@@ -13,7 +13,7 @@ rather than its zero-load point alone.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Any, Sequence, cast
 
 import numpy as np
 
@@ -53,7 +53,7 @@ class SeriesTareFit:
     """A model fitted with its series tares, in SI, with what the report needs."""
 
     method: str                        # 'direct' | 'iterative'
-    model: object                      # BalanceModel (direct) or IterativeModel (iterative)
+    model: Any                         # BalanceModel (direct) or IterativeModel (iterative)
     series_labels: tuple[int, ...]
     tares: np.ndarray                  # (n_series, n_loads) N / N·m, total = applied + tare
     tare_sigma: np.ndarray             # (n_series, n_loads) standard errors
@@ -130,5 +130,5 @@ def direct_point_uncertainty(fit: SeriesTareFit, outputs, series) -> np.ndarray:
     their correlation, plus the residual scatter."""
     outputs = np.atleast_2d(np.asarray(outputs, float))
     z = np.hstack([fit.model.design(outputs), -series_rows(fit, series)])
-    h = np.einsum('ij,jk,ik->i', z, fit.full_covariance_unscaled, z)
+    h = np.einsum('ij,jk,ik->i', z, cast(np.ndarray, fit.full_covariance_unscaled), z)  # fitted with it
     return fit.residual_sigma[None, :] * np.sqrt(1.0 + h)[:, None]

@@ -57,7 +57,9 @@ def make_plan(active, tare, input_scale: float, middle: bytes):
     if tare.tare_sigma is not None:
         tare2[positions] = np.asarray(tare.tare_sigma, dtype=float)[positions] ** 2
     permutation, signs = active.installation.permutation, active.installation.signs
-    six = lambda values: np.ascontiguousarray(np.zeros(6) if values is None else values, dtype=float)  # noqa: E731
+    def six(values):
+        return np.ascontiguousarray(np.zeros(6) if values is None else values, dtype=float)
+
     return _lone_kernel.plan(
         float(input_scale), six(tare.zero_mv), six(active.output_range_mv), six(active.envelope),
         six(active.capacity), six(tare.tare_load), np.ascontiguousarray(permutation, dtype=np.int64), six(signs),

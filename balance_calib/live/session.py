@@ -232,10 +232,11 @@ class CalibratorSession:
                                 'take ~/zero and ~/tare again')
             return
         self.live.tare = state
+        to_tunnel = self.live.active.installation.to_tunnel
         self.log('info', f'restored from {self.tare_file}: zero ' + (
             'none' if state.zero_mv is None else f'taken {state.zero_taken_at or "at an unknown time"}')
             + '; tare load ' + ('none' if state.tare_load is None else
-                                f'{self.live.active.installation.to_tunnel(state.tare_load).round(3).tolist()} '
+                                f'{to_tunnel(state.tare_load).round(3).tolist()} '
                                 f'N, N·m (tunnel axes) taken {state.tare_taken_at or "at an unknown time"}'))
 
     def _persist_tare(self) -> str:
@@ -308,7 +309,9 @@ class CalibratorSession:
             check_parameter(name, item)
         if 'balance' in changes:
             resolve_config_path(changes['balance'])
-        value = (lambda n: changes.get(n, self.value(n)))
+        def value(name):
+            return changes.get(name, self.value(name))
+
         if {'input_units', 'excitation_v'} & set(changes):
             input_scale_mv(value('input_units'), value('excitation_v'))
             if not CALIBRATION_PARAMETERS & set(changes):    # else activate_file checks the new

@@ -94,7 +94,8 @@ class BalanceModel:
         if missing:
             raise KeyError(f'the model needs variable(s) {", ".join(missing)} that the data does not have')
         columns = [outputs[:, self.inputs.index(v)] for v in names[:len(names) - len(extra_names)]]
-        columns += [np.broadcast_to(np.asarray(extra[v], dtype=float), (outputs.shape[0],)) for v in extra_names]
+        given = extra or {}      # every extra name is in `extra` (checked above)
+        columns += [np.broadcast_to(np.asarray(given[v], dtype=float), (outputs.shape[0],)) for v in extra_names]
         values = np.column_stack(columns) if columns else np.zeros((outputs.shape[0], 0))
         return power_products(values, plain, absolute if has_absolute else None)
 

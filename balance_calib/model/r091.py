@@ -16,7 +16,7 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from itertools import combinations
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Sequence, cast
 
 import numpy as np
 
@@ -106,7 +106,7 @@ class TermEvaluator:
         self.index = np.zeros((self.k, len(terms)), dtype=int)            # 0 = the column of ones
         for j, factors in enumerate(per_term):
             self.index[:len(factors), j] = factors
-        keys = sorted(factor_index, key=factor_index.get)
+        keys = sorted(factor_index, key=lambda key: factor_index[key])
         self.factor_variable = np.array([-1] + [key[0] for key in keys])
         self.factor_plain = np.array([0] + [key[1] for key in keys])
         self.factor_absolute = np.array([0] + [key[2] for key in keys])
@@ -337,7 +337,8 @@ class IterativeModel:
                 if done.any():
                     loads[todo[done]], converged[todo[done]] = current[done], True
                     keep = ~done
-                    todo, current, target, inverse = todo[keep], current[keep], target[keep], inverse[keep]
+                    todo, current, target = todo[keep], current[keep], target[keep]
+                    inverse = cast(np.ndarray, inverse)[keep]       # set at iteration 0
         if todo.size:
             loads[todo] = np.nan
         if finite.all():

@@ -14,7 +14,7 @@ import shutil
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Callable, Mapping, Sequence, cast
 
 import numpy as np
 
@@ -30,6 +30,9 @@ from ..schedule_file import schedule_for
 from ..reduction import LoadPoints, Reduction, reduce_points, retare_with_model
 from ..zero_points import ZeroPointError
 from .load_points import CutSummary, LoadPointError, cut_load_points
+
+if TYPE_CHECKING:
+    from ..diagnosis.diagnose import Diagnosis
 
 Progress = Callable[[str], None]
 
@@ -54,7 +57,7 @@ class CalibrationResult:
     reduction: Reduction
     fits: Mapping[str, ModelFit]           # linear, quadratic, cubic
     base_model: str
-    diagnosis: object | None               # balance_calib.diagnosis result, if run
+    diagnosis: Diagnosis | None            # balance_calib.diagnosis result, if run
     calibration: Calibration
     report: dict
     cut: CutSummary | None = None
@@ -155,7 +158,7 @@ def calibrate_points(points: LoadPoints, config: BalanceConfig, *, base_model: s
         report['sessions'] = {'count': len(cut.pauses_s) + 1, 'pauses_s': [round(p, 1) for p in cut.pauses_s]}
     bad = failed(gates)
     if bad:
-        calibration.extra['acceptance'] = {'forced': True, 'failed': [g.name for g in bad]}
+        cast(dict, calibration.extra)['acceptance'] = {'forced': True, 'failed': [g.name for g in bad]}
     return CalibrationResult(config, points, reduction, fits, base_model, diagnosis, calibration, report, cut,
                              tuple(gates))
 

@@ -114,7 +114,8 @@ def describe_variable(name: str) -> tuple[str, str]:
         return 'time since the first point', 'h'
     if name.startswith('orientation'):
         return 'calibration body orientation I_g', ''
-    words, powers = [], {}
+    words: list[str] = []
+    powers: dict[str, int] = {}
     for factor in name.split('*'):
         base, _, power = factor.partition('^')
         text, unit = base, ''

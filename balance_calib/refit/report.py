@@ -1,7 +1,7 @@
 """report.json, report.md and calibration.yaml contents of a refit (keys per interfaces.md)."""
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from typing import Mapping, Sequence, cast
 
 import numpy as np
 
@@ -93,7 +93,7 @@ def _support(config, reduction, base) -> dict:
     calibration.yaml."""
     from ..coverage.support import support_of_points
     from ..model.uncertainty import covariance_and_sigma
-    covariance, _ = covariance_and_sigma(base)
+    covariance, _ = cast(tuple, covariance_and_sigma(base))    # a fitted model carries it
     corrected = reduction.corrected
     return support_of_points(corrected.loads, base.design(corrected.bridge_outputs_mv), covariance,
                              config.capacity, config.components, base.name).to_dict()

@@ -89,7 +89,7 @@ def calibration_record(config, points, reduction, fits, diagnosis, body) -> dict
     temperature = np.asarray(points.temperature_c, dtype=float)
     finite = temperature[np.isfinite(temperature)]
     times = np.asarray(points.times_s, dtype=float)
-    campaign = {'first_point_s': float(times.min()), 'last_point_s': float(times.max()),
+    campaign: dict[str, float | str] = {'first_point_s': float(times.min()), 'last_point_s': float(times.max()),
                 'duration_h': round(float(times.max() - times.min()) / 3600.0, 3)}
     if times.min() > 1e9:        # a wall-clock stamp (after 2001), not a simulation's clock from zero
         campaign['first_point_utc'] = _iso(times.min())
@@ -115,7 +115,7 @@ def calibration_record(config, points, reduction, fits, diagnosis, body) -> dict
                                  'body_loads': {c: round(float(v), 4) for c, v in zip(components, loads)}})
 
     residuals = {order: _residual_stats(f.fit.residuals, capacity, labels, components) for order, f in fits.items()}
-    if diagnosis is not None and getattr(diagnosis, 'effects', ()):
+    if diagnosis is not None and getattr(diagnosis, 'effects', None):
         residuals['adopted'] = _residual_stats(diagnosis.residuals_after, capacity,
                                                np.asarray(diagnosis.point_labels), components)
     return {

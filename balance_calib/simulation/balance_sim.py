@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..config import BalanceConfig, CalibrationBody, LoadSchedule
 from ..model.balance_model import BalanceModel
@@ -79,10 +80,10 @@ class SimulationSettings:
     point_duration_s: float = 60.0        # weights hang still for this long before the next change
     transition_s: float = 30.0            # weights being changed (samples belong to no point)
     transition_samples: int = 0           # samples taken while weights change (outputs ramp between points)
-    noise_mv: Sequence[float] | float | None = None   # per-sample σ per bridge; None -> noise_sigma_pct_fs
-    noise_sigma_pct_fs: Sequence[float] | float | None = None  # point noise as load σ in % FS
-    electrical_zero_mv: Sequence[float] | float = 0.04
-    slow_drift_mv_per_hour: Sequence[float] | float = 0.002
+    noise_mv: ArrayLike | None = None   # per-sample σ per bridge; None -> noise_sigma_pct_fs
+    noise_sigma_pct_fs: ArrayLike | None = None  # point noise as load σ in % FS
+    electrical_zero_mv: ArrayLike = 0.04
+    slow_drift_mv_per_hour: ArrayLike = 0.002
     temperature_mean_c: float = 20.0
     temperature_swing_c: float = 2.5      # diurnal swing amplitude
     reference_temperature_c: float = 20.0

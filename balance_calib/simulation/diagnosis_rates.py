@@ -63,7 +63,7 @@ FIRST_GUESS.update({'temperature_dt2': 2e-4, 'temperature_lagged': 1e-3, 'hyster
                     'outside_gravity_time': 1e-3})
 
 
-def shape_family(shape: str) -> str | None:
+def shape_family(shape: str | None) -> str | None:
     """The family a shape belongs to (None: outside every family)."""
     for family, shapes in ALTERNATIVE_SHAPES.items():
         if shape in shapes or shape == family:

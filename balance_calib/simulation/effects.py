@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..model.balance_model import BalanceModel
 from ..model.terms import parse_terms
@@ -59,8 +60,8 @@ class Temperature(Effect):
     removed by the zero points of §5(4); the sensitivity part is what they cannot remove.
     """
 
-    zero_mv_per_k: Sequence[float] | float = 0.0
-    sensitivity_per_k: Sequence[float] | float = 0.0
+    zero_mv_per_k: ArrayLike = 0.0
+    sensitivity_per_k: ArrayLike = 0.0
     name = 'temperature'
 
     def outputs(self, outputs_mv, ctx):
@@ -72,7 +73,7 @@ class Temperature(Effect):
 class ZeroDrift(Effect):
     """Zero wandering faster than the bracketing zero points follow: a sum of sines, mV per bridge."""
 
-    amplitude_mv: Sequence[float] | float = 0.0
+    amplitude_mv: ArrayLike = 0.0
     period_s: float = 900.0
     phase: float = 0.3
     name = 'zero_drift'
@@ -87,7 +88,7 @@ class ZeroDrift(Effect):
 class Hysteresis(Effect):
     """Output depends on whether the load on that bridge was rising or falling: ±h of rated output."""
 
-    fraction_of_rated: Sequence[float] | float = 0.0
+    fraction_of_rated: ArrayLike = 0.0
     name = 'hysteresis'
 
     def outputs(self, outputs_mv, ctx):
@@ -98,7 +99,7 @@ class Hysteresis(Effect):
 class Bidirectional(Effect):
     """Different sensitivity for positive and negative load: V += b·|V| (b per bridge)."""
 
-    asymmetry: Sequence[float] | float = 0.0
+    asymmetry: ArrayLike = 0.0
     name = 'bidirectional'
 
     def outputs(self, outputs_mv, ctx):
@@ -165,7 +166,7 @@ class PlayHysteresis(Effect):
     once the load has moved 2 x width past it. Small load reversals give small loops.
     """
 
-    fraction_of_rated: Sequence[float] | float = 0.0
+    fraction_of_rated: ArrayLike = 0.0
     width_fraction: float = 0.25
     name = 'hysteresis'
 
@@ -180,7 +181,7 @@ class TurningPointHysteresis(Effect):
     """Loop offset growing with the distance the load travelled since its last turning point:
     ±h x rated x (1 - exp(-|V - V_turn| / (scale x rated))), sign of the direction of travel."""
 
-    fraction_of_rated: Sequence[float] | float = 0.0
+    fraction_of_rated: ArrayLike = 0.0
     scale_fraction: float = 0.3
     name = 'hysteresis'
 
@@ -213,9 +214,9 @@ class TemperatureShapes(Effect):
     V += z2·dT'² and V *= 1 + s·dT' + s2·dT'², dT' the gauge temperature lagging the measured one
     by a first-order lag of lag_s (0: no lag). The refit only sees the measured temperature."""
 
-    sensitivity_per_k: Sequence[float] | float = 0.0
-    sensitivity_per_k2: Sequence[float] | float = 0.0
-    zero_mv_per_k2: Sequence[float] | float = 0.0
+    sensitivity_per_k: ArrayLike = 0.0
+    sensitivity_per_k2: ArrayLike = 0.0
+    zero_mv_per_k2: ArrayLike = 0.0
     lag_s: float = 0.0
     name = 'temperature'
 
@@ -242,7 +243,7 @@ class Creep(Effect):
     """Output relaxing after each load change with two time constants:
     V(t) = V - c Σ_i ΔV_i Σ_j w_j exp(-(t - t_i)/τ_j) over the load steps i before t."""
 
-    fraction: Sequence[float] | float = 0.0
+    fraction: ArrayLike = 0.0
     time_constants_s: Sequence[float] = (40.0, 400.0)
     weights: Sequence[float] = (0.6, 0.4)
     name = 'creep'
@@ -279,7 +280,7 @@ class LoadSignBidirectional(Effect):
     """Sensitivity different for positive and negative *load* on a component (not output):
     V_k += b_k x rated output_k x |L_k| / capacity_k."""
 
-    asymmetry: Sequence[float] | float = 0.0
+    asymmetry: ArrayLike = 0.0
     name = 'bidirectional'
 
     def outputs(self, outputs_mv, ctx):
@@ -312,7 +313,7 @@ class GravityTimeNonlinearity(Effect):
     """A bridge curvature that grows in time and flips with the gravity direction:
     V_k += a x g_z x (t / campaign) x V_k |V_k| / rated_k (a mounting that settles under its own weight)."""
 
-    fraction_of_rated: Sequence[float] | float = 0.0
+    fraction_of_rated: ArrayLike = 0.0
     name = 'gravity_time'
 
     def outputs(self, outputs_mv, ctx):

@@ -19,7 +19,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .units import is_load_unit, is_output_unit, known_units, unit_factor
+from .units import is_load_unit, is_output_unit, known_unit, known_units, unit_factor
 
 KEYWORDS = ('FILE_TYPE', 'BALANCE_NAME', 'DESCRIPTION')
 FILE_TYPE = 'DATA_FOR_ITERATIVE_REGRESSION_ANALYSIS'
@@ -71,15 +71,15 @@ class CalibrationTable:
     @cached_property
     def load_factor(self) -> np.ndarray:
         """(n_loads,) factor file unit -> N or N·m."""
-        return np.array([unit_factor(u)[0] for u in self.load_units])
+        return np.array([known_unit(u)[0] for u in self.load_units])
 
     @cached_property
     def output_factor(self) -> np.ndarray:
-        return np.array([unit_factor(u)[0] for u in self.output_units])
+        return np.array([known_unit(u)[0] for u in self.output_units])
 
     @property
     def load_si_units(self) -> tuple[str, ...]:
-        return tuple(unit_factor(u)[1] for u in self.load_units)
+        return tuple(known_unit(u)[1] for u in self.load_units)
 
     @cached_property
     def bridge_columns(self) -> tuple[int, ...]:
@@ -92,7 +92,7 @@ class CalibrationTable:
 
     @property
     def output_internal_unit(self) -> str:
-        units = {unit_factor(self.output_units[i])[1] for i in self.bridge_columns}
+        units = {known_unit(self.output_units[i])[1] for i in self.bridge_columns}
         return units.pop() if len(units) == 1 else 'mixed'
 
     @property

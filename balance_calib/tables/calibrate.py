@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Mapping, cast
 
 import numpy as np
 import scipy.stats
@@ -121,9 +121,10 @@ def calibrate_table(table: CalibrationTable, *, method: str = 'auto', terms: str
     term_sets = {m: c.candidate.terms for m, c in choices.items()}
     selections = {}
     try:
+        chosen_fits = {m: cast(SeriesTareFit, c.candidate.fit) for m, c in choices.items()}  # fitted ones
         fits: dict[str, SeriesTareFit] = {
-            m: with_statistics(m, c.candidate.fit, term_sets[m], table, outputs) if statistics
-            else c.candidate.fit for m, c in choices.items()}
+            m: with_statistics(m, chosen_fits[m], term_sets[m], table, outputs) if statistics
+            else chosen_fits[m] for m in choices}
         if select:
             for m in list(fits):
                 term_sets[m], selections[m] = select_terms(m, term_sets[m], fits[m], table, outputs,

@@ -134,7 +134,7 @@ def outlier_gate(point_ids: Sequence[str], symbols: Sequence[str], residuals: np
         if np.count_nonzero(off) > STRUCTURE_MIN_POINTS:
             size = np.abs(standardized[:, k])
             alike = off & (size <= DOMINANCE * np.median(size[off]))
-            structure[symbol] = [point_ids[i] for i in np.flatnonzero(alike)]
+            structure[symbol] = [point_ids[int(i)] for i in np.flatnonzero(alike)]
             flagged[alike, k] = False
     rows, worst = worst_first(flagged, standardized, threshold)
     entries = []

@@ -15,7 +15,7 @@ forms `choose_form` decides (calibrate.py's rule, unchanged).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Mapping, Sequence, cast
 
 import numpy as np
 
@@ -207,17 +207,18 @@ def choose_within_form(method: str, specs: Sequence[str], table, outputs: np.nda
     linear = next((c for c in fitted if c.term_set == 'linear'), None)
     reference = linear.crossval if linear is not None else None
     eligible = [c for c in fitted
-                if reference is None or _no_worse(c.crossval, reference, table.points)]
+                if reference is None or _no_worse(cast(np.ndarray, c.crossval), reference, table.points)]
     best = min(eligible or fitted, key=lambda c: c.score)
     default = next((c for c in eligible if c.term_set == DEFAULT_SETS[method]), None)
     if default is not None and not best.score < (1 - SELECTION_MARGIN) * default.score:
         best = default
+    best_fit = cast(SeriesTareFit, best.fit)        # a fitted candidate
     why = (f'{best.term_set} ({len(best.terms)} terms, '
-           f'{table.points / (len(best.terms) + len(best.fit.series_labels)):.1f} points per '
+           f'{table.points / (len(best.terms) + len(best_fit.series_labels)):.1f} points per '
            f'coefficient): mean cross-validated σ {best.score:.4g} % capacity')
     if len(specs) == 1 or not prune:
         return FormChoice(best, (), tuple(compared), why)
-    terms, removed = prune_by_press(method, best.fit, best.terms, table, outputs)
+    terms, removed = prune_by_press(method, best_fit, best.terms, table, outputs)
     if removed:
         try:
             pruned_fit = fit_form(method, terms, table, outputs)
@@ -252,7 +253,7 @@ def compared_entry(c: Candidate, symbols: Sequence[str]) -> dict:
     if c.fit is None:
         entry['error'] = c.error
     else:
-        entry['crossval'] = {s: round(float(v), 5) for s, v in zip(symbols, c.crossval)}
+        entry['crossval'] = {s: round(float(v), 5) for s, v in zip(symbols, cast(np.ndarray, c.crossval))}
         entry['crossval_mean'] = round(c.score, 5)
     return entry
 
@@ -269,7 +270,7 @@ def choose_form(fits: Mapping[str, SeriesTareFit], capacity, symbols) -> tuple[s
         odd_count[method] = len(odd)
         if odd:
             structure.append(f'{method} residuals non-normal on {", ".join(odd)}')
-    chosen = min(score, key=score.get)
+    chosen = min(score, key=lambda m: score[m])
     other = [m for m in fits if m != chosen][0]
     tie_break = ''
     # within 2 % on σ the residual structure decides: a form that leaves non-normal (structured)

@@ -18,7 +18,7 @@ from ..model.balance_model import BalanceModel
 from ..model.inverse import outputs_for_loads
 from ..model.r091 import IterativeModel, r091_terms, tm663_cubic_terms
 from .balfit_reader import CalibrationTable
-from .units import unit_factor
+from .units import known_unit
 
 LOADS = ('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ')
 OUTPUTS = ('FXV', 'FYV', 'FZV', 'MXV', 'MYV', 'MZV')
@@ -34,7 +34,7 @@ class Schedule:
 
 
 def capacity_si() -> np.ndarray:
-    return CAPACITY_FILE * np.array([unit_factor(u)[0] for u in UNITS])
+    return CAPACITY_FILE * np.array([known_unit(u)[0] for u in UNITS])
 
 
 def support_schedule(rng, points_single: int = 21, points_pair: int = 40, first_series: int = 1,
@@ -108,7 +108,7 @@ def tares_for(rng, series_labels, fraction: float = 0.03) -> dict[int, np.ndarra
 def make_table(applied_si, outputs_mv, series, *, name: str = 'synthetic', natural_zero_mv=None,
                zero_set: str = 'Z1', point_prefix: str = 'P') -> CalibrationTable:
     """A CalibrationTable in lbs / in-lbs and mV; outputs get the natural zero added back."""
-    factor = np.array([unit_factor(u)[0] for u in UNITS])
+    factor = np.array([known_unit(u)[0] for u in UNITS])
     zero = np.zeros(6) if natural_zero_mv is None else np.asarray(natural_zero_mv, float)
     roll = np.array([0.0, 90.0, 180.0, 270.0])
     gravity_pattern = np.outer(np.cos(np.radians(roll)).round(12), np.full(6, 0.01)) \

@@ -144,7 +144,7 @@ def signing_sections(table, fit, method: str, outputs: np.ndarray, residuals_set
     from .. import __version__
     from .term_screen import linear_response
     capacity = table.load_capacity_si
-    largest = {}
+    largest: dict[str, dict] = {}
     for name, (source, residuals) in residuals_sets.items():
         pct = residuals / capacity * 100.0
         largest[name] = {}

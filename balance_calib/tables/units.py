@@ -74,6 +74,14 @@ def unit_factor(unit: str) -> tuple[float, str, str] | None:
     return _UNITS.get(unit.strip().replace(' ', '').lower())
 
 
+def known_unit(unit: str) -> tuple[float, str, str]:
+    """unit_factor() of a unit already checked (the table reader refuses unknown ones)."""
+    found = unit_factor(unit)
+    if found is None:
+        raise ValueError(f'unknown unit {unit!r}')
+    return found
+
+
 def is_load_unit(unit: str) -> bool:
     found = unit_factor(unit)
     return found is not None and found[2] in ('force', 'moment')

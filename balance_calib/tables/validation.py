@@ -13,7 +13,7 @@ a sign the calibration never applied, and a coverage of ±1.96 u below 90 %.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Mapping, cast
 
 import numpy as np
 
@@ -79,7 +79,7 @@ def validate_form(method: str, fit: SeriesTareFit, validation,
 def _model_only_uncertainty(method: str, fit: SeriesTareFit, outputs: np.ndarray) -> np.ndarray:
     """k = 1 uncertainty of a predicted total load without any series tare (zero series row)."""
     p = len(fit.model.terms)
-    covariance = fit.full_covariance_unscaled[:p, :p]
+    covariance = cast(np.ndarray, fit.full_covariance_unscaled)[:p, :p]   # a table fit has it
     if method == 'direct':
         z = fit.model.design(outputs)
         h = np.einsum('ij,jk,ik->i', z, covariance, z)

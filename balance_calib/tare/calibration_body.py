@@ -84,7 +84,7 @@ def estimate_body(linear_model: BalanceModel, gravity_units: Sequence, output_di
     target = moments.reshape(-1)
     cg, *_ = np.linalg.lstsq(system, target, rcond=1e-10)   # min-norm: unobservable axes stay 0
     residual = float(np.sqrt(np.mean((system @ cg - target) ** 2))) if target.size else 0.0
-    return BodyEstimate(weight, tuple(float(x) for x in cg), len(gravity), residual)
+    return BodyEstimate(weight, (float(cg[0]), float(cg[1]), float(cg[2])), len(gravity), residual)
 
 
 def fit_inverse_linear(bridge_outputs_mv, loads, components=COMPONENTS, outputs=BRIDGE_OUTPUTS) -> BalanceModel:

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.stats
 
-from ..diagnosis.statistics import fit_columns
+from ..diagnosis.statistics import ComponentFit, fit_columns
 
 FAMILIES = ('hysteresis', 'nonlinearity', 'zero_drift')
 
@@ -126,7 +126,8 @@ def _sigma(residuals, full_scale) -> float:
 
 def _select(columns: dict, design: np.ndarray, y, max_columns: int, alpha: float):
     """Forward selection within one family; (names, fit) or ([], None)."""
-    names, current = [], fit_columns(design, y)
+    names: list[str] = []
+    current = fit_columns(design, y)
     available = dict(columns)
     while available and design.shape[1] + len(names) < max_columns:
         trials = []
@@ -165,7 +166,7 @@ def examine_line(x, y, direction=None, sigma_x=None, sigma_y=None,
     base = fit_columns(design, y)
     current = base
     max_columns = max(2, int(n * settings.terms_per_point))
-    effects: list[tuple[str, list[str], object, object]] = []
+    effects: list[tuple[str, list[str], ComponentFit, ComponentFit]] = []
     warnings: list[str] = []
     close: list = []
     adopted: set[str] = set()
@@ -222,8 +223,9 @@ def _evidence(family, names, before, after, full_scale) -> str:
     q = after.rank - before.rank
     f = (before.rss - after.rss) / q / max(after.rss / after.dof, 1e-300)
     p = float(scipy.stats.f.sf(f, q, after.dof))
+    removed_pct_fs = np.sqrt(max(before.rss - after.rss, 0.0) / len(after.residuals)) / full_scale * 100
     return (f'residual follows {" + ".join(names)}: F = {f:.3g} (p = {p:.1g}), removes '
-            f'{np.sqrt(max(before.rss - after.rss, 0.0) / len(after.residuals)) / full_scale * 100:.3f} % FS '
+            f'{removed_pct_fs:.3f} % FS '
             f'(σ {_sigma(before.residuals, full_scale):.3f} → {_sigma(after.residuals, full_scale):.3f}, '
             f'PRESS σ {_sigma(before.press_residuals, full_scale):.3f} → {_sigma(after.press_residuals, full_scale):.3f})')
 

@@ -43,7 +43,7 @@ def propagate(value: float, partials: Mapping[str, float], sigmas: Mapping[str, 
         raise KeyError(f'uncertainty given for unknown input(s) {", ".join(unknown)}')
     contributions = {name: abs(float(partials[name]) * float(sigmas.get(name, 0.0))) for name in partials}
     terms = np.array(list(contributions.values()))
-    dominant_input = max(contributions, key=contributions.get) if contributions else ''
+    dominant_input = max(contributions, key=lambda name: contributions[name]) if contributions else ''
     return PropagatedUncertainty(
         value=float(value),
         sigma=float(np.sqrt(np.sum(terms ** 2))),        # lab manual eq. (20)
