@@ -1,4 +1,5 @@
 """ament_python build of balance_calib (colcon build, or pip install -e .)."""
+
 from glob import glob
 
 from setuptools import Extension, find_packages, setup
@@ -19,9 +20,14 @@ setup(
     # the live calibrator's lone sample in C (live/lone_sample.py), the pure core's only
     # accelerator, warning-free (-Wall -Werror); optional: without a C compiler the package
     # installs and every sample takes the pure core's path (the node says so at start-up)
-    ext_modules=[Extension('balance_calib.live._lone_kernel', ['balance_calib/live/_lone_kernel.c'],
-                           extra_compile_args=['-O2', '-std=c99', '-Wall', '-Werror'],
-                           optional=True)],
+    ext_modules=[
+        Extension(
+            'balance_calib.live._lone_kernel',
+            ['balance_calib/live/_lone_kernel.c'],
+            extra_compile_args=['-O2', '-std=c99', '-Wall', '-Werror'],
+            optional=True,
+        )
+    ],
     install_requires=['setuptools'],
     zip_safe=False,
     maintainer='balance_calib maintainers',

@@ -6,20 +6,21 @@ A balance config (config/lmc6522.yaml) is accepted as a calibration too: its mem
 Files are replaced atomically (write to a temporary file in the same directory, fsync, rename),
 so a reader never sees half a calibration and a failed write leaves the old one in place.
 """
+
 from __future__ import annotations
 
 import datetime as _dt
 import os
+from pathlib import Path
 import re
 import stat
 import tempfile
-from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 import yaml
 
-from .config import ConfigError, balance_config_from_dict
+from .config import balance_config_from_dict, ConfigError
 from .model.balance_model import BalanceModel
 from .model.calibration import Calibration
 from .units import BRIDGE_OUTPUTS, COMPONENTS
@@ -30,57 +31,84 @@ MAX_CALIBRATION_BYTES = 16 << 20
 def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -> Calibration:
     if not isinstance(data, Mapping):
         raise ConfigError(f'{where}: not a calibration file (expected a mapping at the top level)')
-    if 'matrices' in data and 'models' not in data:           # a balance config with the memo's matrices
+    if 'matrices' in data and 'models' not in data:  # a balance config with the memo's matrices
         config = balance_config_from_dict(data, Path(where))
         if not config.matrices:
             raise ConfigError(f'{where}: balance config has no matrices')
         adopted = 'cubic' if 'cubic' in config.matrices else list(config.matrices)[-1]
-        return Calibration(config.name, dict(config.matrices), adopted, adopted, config.capacity,
-                           config.rated_output_mv, config.components, config.bridge_outputs,
-                           {k: float(v) for k, v in (config.table17_sigma_pct_fs.get(adopted) or {}).items()},
-                           '', None, {'source': 'memo matrices (TM-663 Tables 10-16)'})
+        return Calibration(
+            config.name,
+            dict(config.matrices),
+            adopted,
+            adopted,
+            config.capacity,
+            config.rated_output_mv,
+            config.components,
+            config.bridge_outputs,
+            {k: float(v) for k, v in (config.table17_sigma_pct_fs.get(adopted) or {}).items()},
+            '',
+            None,
+            {'source': 'memo matrices (TM-663 Tables 10-16)'},
+        )
     try:
         components = tuple(data.get('components', COMPONENTS))
         outputs = tuple(data.get('bridge_outputs', BRIDGE_OUTPUTS))
         given = data['models'] or {}
         if not isinstance(given, Mapping):
-            raise ConfigError(f'{where}: models: expected a mapping of model names, '
-                              f'not {type(given).__name__}')
+            raise ConfigError(
+                f'{where}: models: expected a mapping of model names, not {type(given).__name__}'
+            )
         models = {}
         for name, m in given.items():
             if not isinstance(m, Mapping):
-                raise ConfigError(f'{where}: models.{name}: expected a mapping (form, terms, '
-                                  f'coefficients), not {type(m).__name__} {m!r:.40}')
+                raise ConfigError(
+                    f'{where}: models.{name}: expected a mapping (form, terms, '
+                    f'coefficients), not {type(m).__name__} {m!r:.40}'
+                )
             models[name] = _model_from_dict(
                 {'name': name, 'components': components, 'inputs': outputs, **m},
-                where=f'{where}: models.{name}')
+                where=f'{where}: models.{name}',
+            )
         if not models:
             raise ConfigError(f'{where}: no models')
         capacity = np.array([float(data['capacity'][c]) for c in components])
         rated = np.array([float(data['rated_output_mv'][c]) for c in outputs])
         adopted = str(data.get('adopted_model') or next(iter(models)))
         if adopted not in models:
-            raise ConfigError(f'{where}: adopted_model {adopted!r} is not among the models ({", ".join(models)})')
+            raise ConfigError(
+                f'{where}: adopted_model {adopted!r} is not among the models ({", ".join(models)})'
+            )
         ref = data.get('reference_temperature_c')
-        return Calibration(str(data.get('balance', 'balance')), models, adopted, str(data.get('base_model', adopted)),
-                           capacity, rated, components, outputs,
-                           {str(k): float(v) for k, v in (data.get('sigma_pct_fs') or {}).items()},
-                           str(data.get('fitted_at', '')), None if ref is None else float(ref),
-                           dict(data.get('extra') or {}))
+        return Calibration(
+            str(data.get('balance', 'balance')),
+            models,
+            adopted,
+            str(data.get('base_model', adopted)),
+            capacity,
+            rated,
+            components,
+            outputs,
+            {str(k): float(v) for k, v in (data.get('sigma_pct_fs') or {}).items()},
+            str(data.get('fitted_at', '')),
+            None if ref is None else float(ref),
+            dict(data.get('extra') or {}),
+        )
     except ConfigError:
         raise
     except KeyError as err:
         raise ConfigError(f'{where}: missing key {err.args[0]!r}') from None
     except (TypeError, ValueError, AttributeError) as err:
-        text = ' '.join(str(err).split())      # the model's errors name the file already
+        text = ' '.join(str(err).split())  # the model's errors name the file already
         raise ConfigError(text if text.startswith(f'{where}: ') else f'{where}: {text}') from None
 
 
 def _model_from_dict(data: Mapping[str, Any], where: str):
     """A direct (TM-663) model, or with `form: iterative` an AIAA R-091 model (outputs from loads,
-    inverted per sample by Newton iteration; same `loads(outputs, extra)` interface)."""
+    inverted per sample by Newton iteration; same `loads(outputs, extra)` interface).
+    """
     if data.get('form', 'direct') == 'iterative':
         from .model.r091 import IterativeModel
+
         return IterativeModel.from_dict(data, where=where)
     return BalanceModel.from_dict(data, where=where)
 
@@ -93,6 +121,7 @@ def load_calibration(path: str | Path) -> Calibration:
     path = Path(path)
     if not path.exists() and path.suffix == '' and '/' not in str(path):
         from .config import resolve_config_path
+
         try:
             path = resolve_config_path(str(path))
         except ConfigError:
@@ -101,8 +130,10 @@ def load_calibration(path: str | Path) -> Calibration:
         info = os.stat(path)
         if not stat.S_ISREG(info.st_mode) or info.st_size > MAX_CALIBRATION_BYTES:
             # a FIFO would block the reader, /dev/zero never ends
-            raise ConfigError(f'{path}: not a calibration file (not a regular file of at most '
-                              f'{MAX_CALIBRATION_BYTES >> 20} MB)')
+            raise ConfigError(
+                f'{path}: not a calibration file (not a regular file of at most '
+                f'{MAX_CALIBRATION_BYTES >> 20} MB)'
+            )
         text = path.read_text()
     except OSError as err:
         raise ConfigError(f'{path}: cannot read calibration file: {err.strerror or err}') from None
@@ -131,17 +162,19 @@ _QUOTED = re.compile(r"'([^']{1,80})'")
 
 def _with_line_number(message: str, where: str, text: str) -> str:
     """'FILE, line N: key: what' for 'FILE: key: what': N is the line of the offending value when
-    the message quotes it, else of the key."""
-    rest = message[len(where) + 2:] if message.startswith(f'{where}: ') else message
+    the message quotes it, else of the key.
+    """
+    rest = message[len(where) + 2 :] if message.startswith(f'{where}: ') else message
     key = _KEY_PATH.match(rest)
     line = _line_of_key(text, key.group(1).split('.')) if key else None
     if line is None or key is None:
         return f'{where}: {rest}'
-    quoted = _QUOTED.search(rest[key.end():])
+    quoted = _QUOTED.search(rest[key.end() :])
     if quoted:
         lines = text.splitlines()
-        line = next((i + 1 for i in range(line - 1, len(lines)) if quoted.group(1) in lines[i]),
-                    line)
+        line = next(
+            (i + 1 for i in range(line - 1, len(lines)) if quoted.group(1) in lines[i]), line
+        )
     return f'{where}, line {line}: {rest}'
 
 
@@ -156,8 +189,9 @@ def _line_of_key(text: str, keys: list[str]) -> int | None:
         if not isinstance(node, yaml.MappingNode):
             return line
         # the last of repeated keys: the one the loader keeps
-        match = next(((k, v) for k, v in reversed(node.value) if getattr(k, 'value', None) == key),
-                     None)
+        match = next(
+            ((k, v) for k, v in reversed(node.value) if getattr(k, 'value', None) == key), None
+        )
         if match is None:
             return line
         line, node = match[0].start_mark.line + 1, match[1]
@@ -166,12 +200,13 @@ def _line_of_key(text: str, keys: list[str]) -> int | None:
 
 def write_text_atomically(path: str | Path, text: str, mode: int = 0o644) -> None:
     """Write a file so that readers see the old or the new content, never a mix; `mode` 0644
-    (as refit's outputs, whichever command writes the file)."""
+    (as refit's outputs, whichever command writes the file).
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
     try:
-        os.fchmod(fd, mode)       # mkstemp makes 0600; a calibration is read by other users' nodes
+        os.fchmod(fd, mode)  # mkstemp makes 0600; a calibration is read by other users' nodes
         with os.fdopen(fd, 'w') as f:
             f.write(text)
             f.flush()
@@ -186,9 +221,13 @@ def write_text_atomically(path: str | Path, text: str, mode: int = 0o644) -> Non
 
 
 def save_calibration(path: str | Path, calibration: Calibration) -> None:
-    header = (f'# {calibration.balance} calibration written by balance_calib; loads in N, N·m from '
-              f'outputs in {calibration.output_unit}.\n')
-    write_text_atomically(path, header + yaml.safe_dump(calibration.to_dict(), sort_keys=False, width=160))
+    header = (
+        f'# {calibration.balance} calibration written by balance_calib; loads in N, N·m from '
+        f'outputs in {calibration.output_unit}.\n'
+    )
+    write_text_atomically(
+        path, header + yaml.safe_dump(calibration.to_dict(), sort_keys=False, width=160)
+    )
 
 
 def now_iso() -> str:

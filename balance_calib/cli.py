@@ -2,6 +2,7 @@
 `register(subparsers)`; this file only lists them. Exit 0 on success; on bad input one line on
 stderr naming what is wrong and a non-zero status.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -22,23 +23,26 @@ COMMAND_MODULES = (
 )
 
 
-
-
-DESCRIPTION = ('Calibrate six-component wind-tunnel strain-gauge balances after NAL TM-663 '
-               '(linear, quadratic and cubic models, calibration-body tare, zero points, σ in % of full '
-               'scale) and the one-axis thrust stand. Loads are N and N·m, bridge outputs mV.')
-EPILOG = ('Run "balance-calib COMMAND --help" for the options of one command. Exit status 0 on success; '
-          'on bad input one line on stderr saying what is wrong with which file, and status 2. '
-          'The ROS 2 nodes (bridge_publisher, balance_calibrator, balance_recorder, thrust_analyzer) '
-          'are separate executables; see launchless_scripts/ and the README.')
+DESCRIPTION = (
+    'Calibrate six-component wind-tunnel strain-gauge balances after NAL TM-663 '
+    '(linear, quadratic and cubic models, calibration-body tare, zero points, σ in % of full '
+    'scale) and the one-axis thrust stand. Loads are N and N·m, bridge outputs mV.'
+)
+EPILOG = (
+    'Run "balance-calib COMMAND --help" for the options of one command. Exit status 0 on success; '
+    'on bad input one line on stderr saying what is wrong with which file, and status 2. '
+    'The ROS 2 nodes (bridge_publisher, balance_calibrator, balance_recorder, thrust_analyzer) '
+    'are separate executables; see launchless_scripts/ and the README.'
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog='balance-calib', description=DESCRIPTION, epilog=EPILOG)
-    subparsers = parser.add_subparsers(dest='command', required=True, metavar='COMMAND',
-                                       title='commands')
+    subparsers = parser.add_subparsers(
+        dest='command', required=True, metavar='COMMAND', title='commands'
+    )
     for module_name in COMMAND_MODULES:
-        importlib.import_module(module_name).register(subparsers)   # an import error must show
+        importlib.import_module(module_name).register(subparsers)  # an import error must show
     return parser
 
 
@@ -52,8 +56,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f'balance-calib {args.command}: interrupted', file=sys.stderr)
         return 130
-    except BrokenPipeError:         # `balance-calib ... | head`: the reader is gone
+    except BrokenPipeError:  # `balance-calib ... | head`: the reader is gone
         from .closed_pipe import stdout_closed
+
         stdout_closed()
         return 0
 
@@ -62,4 +67,5 @@ if __name__ == '__main__':
     # `python -m balance_calib.cli`: run the imported module's main, whose CommandError is the one
     # the sub-commands raise (this file runs as __main__, a second copy of the class)
     from balance_calib.cli import main as _main
+
     sys.exit(_main())

@@ -3,6 +3,7 @@
 Python raises BrokenPipeError at the next write, and again when it flushes stdout at exit; the
 second one prints a traceback. Pointing stdout at /dev/null lets the process end without it.
 """
+
 from __future__ import annotations
 
 import os

@@ -1,10 +1,12 @@
 """What the CSV readers share (schedule_file.py, coverage/run_inputs.py): the file's text, and
-rows of numbers checked finite, each error one line naming the file and the row."""
+rows of numbers checked finite, each error one line naming the file and the row.
+"""
+
 from __future__ import annotations
 
+from contextlib import contextmanager
 import csv
 import math
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Iterator, Sequence
 
@@ -22,10 +24,12 @@ def read_csv_text(path: Path, what: str, error: type[Exception]) -> str:
         raise error(f'{path}: cannot read the {what}: {reason}') from None
 
 
-def require_finite_loads(values: Sequence[float], path: Path, row: int,
-                         error: type[Exception]) -> None:
+def require_finite_loads(
+    values: Sequence[float], path: Path, row: int, error: type[Exception]
+) -> None:
     """Raise `error` '<path>: row <row>: loads must be finite numbers' for a NaN or infinity
-    (row: the data row, 1 = the first after the header)."""
+    (row: the data row, 1 = the first after the header).
+    """
     if not all(math.isfinite(v) for v in values):
         raise error(f'{path}: row {row}: loads must be finite numbers')
 
@@ -33,7 +37,8 @@ def require_finite_loads(values: Sequence[float], path: Path, row: int,
 @contextmanager
 def csv_errors(path: Path, error: type[Exception]) -> Iterator[None]:
     """Turn the csv module's own complaint (a field over its size limit, a broken quote) into
-    `error` '<path>: not readable as CSV: <reason>'."""
+    `error` '<path>: not readable as CSV: <reason>'.
+    """
     try:
         yield
     except csv.Error as err:

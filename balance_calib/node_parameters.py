@@ -4,6 +4,7 @@ docs/parameters.md is this module's output (test/test_parameter_tables.py checks
 
     python -m balance_calib.node_parameters > docs/parameters.md
 """
+
 from __future__ import annotations
 
 import sys
@@ -48,13 +49,17 @@ def _cell(text: str) -> str:
 
 def markdown_table(table: Mapping[str, Spec]) -> list[str]:
     """The lines of one node's table: name, type, default, range, read-only, description."""
-    lines = ['| name | type | default | range | read-only | description |',
-             '|---|---|---|---|---|---|']
+    lines = [
+        '| name | type | default | range | read-only | description |',
+        '|---|---|---|---|---|---|',
+    ]
     for name, spec in table.items():
         span = range_text(spec)
-        lines.append(f'| `{name}` | {spec.kind} | `{_cell(show_default(spec))}` | '
-                     f'{_cell(span)} | {"yes" if spec.read_only else ""} | '
-                     f'{_cell(spec.description)} |')
+        lines.append(
+            f'| `{name}` | {spec.kind} | `{_cell(show_default(spec))}` | '
+            f'{_cell(span)} | {"yes" if spec.read_only else ""} | '
+            f'{_cell(spec.description)} |'
+        )
     return lines
 
 

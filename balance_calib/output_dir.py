@@ -14,13 +14,14 @@ a calibration and the report beside it is never older than it. Only names this t
 balance config) is refused with `--overwrite` rather than emptied, and the directory of the shipped
 balance configs is refused always.
 """
+
 from __future__ import annotations
 
 import fnmatch
 import os
+from pathlib import Path
 import shutil
 import tempfile
-from pathlib import Path
 
 from .config import CONFIG_DIR
 
@@ -55,8 +56,10 @@ def _refuse_config_dir(directory: Path, what: str) -> None:
     shipped = sorted(_shipped_config_names() & _names_in(resolved))
     if resolved == config_dir or config_dir in resolved.parents or shipped:
         beside = shipped[0] if shipped else 'the shipped balance configs'
-        raise OutputError(f'{directory}: {what} is the directory of the balance configs (it holds '
-                          f'{beside}); choose another directory')
+        raise OutputError(
+            f'{directory}: {what} is the directory of the balance configs (it holds '
+            f'{beside}); choose another directory'
+        )
 
 
 def _names_in(directory: Path) -> set[str]:
@@ -98,24 +101,29 @@ def check_out_dir(out_dir: str | Path, *, overwrite: bool) -> Path:
         raise OutputError(f'{out_dir}: --out exists and is not a directory')
     base = next((p for p in [out_dir, *out_dir.parents] if p.exists()), Path('/'))
     if not base.is_dir():
-        raise OutputError(f'{out_dir}: cannot create the output directory ({base} is not a '
-                          f'directory)')
+        raise OutputError(
+            f'{out_dir}: cannot create the output directory ({base} is not a directory)'
+        )
     if not _writable(base):
         raise OutputError(f'{out_dir}: output directory not writable ({base} is not writable)')
     _refuse_config_dir(out_dir, '--out')
     names = _names_in(out_dir)
     record = [n for n in CALIBRATION_RECORD if n in names]
     if record and not overwrite:
-        raise OutputError(f'{out_dir}: --out holds the calibration record of an earlier run '
-                          f'({", ".join(record)}); give --overwrite to replace it, or another '
-                          f'--out')
+        raise OutputError(
+            f'{out_dir}: --out holds the calibration record of an earlier run '
+            f'({", ".join(record)}); give --overwrite to replace it, or another '
+            f'--out'
+        )
     if record and overwrite:
         foreign = sorted(n for n in names if not is_own_output(n))
         if foreign:
             more = f' and {len(foreign) - 1} more' if len(foreign) > 1 else ''
-            raise OutputError(f'{out_dir}: --overwrite replaces only the files of an earlier run, '
-                              f'and --out also holds {foreign[0]}{more}; move them away or choose '
-                              f'another --out')
+            raise OutputError(
+                f'{out_dir}: --overwrite replaces only the files of an earlier run, '
+                f'and --out also holds {foreign[0]}{more}; move them away or choose '
+                f'another --out'
+            )
     if out_dir.exists() and not _writable(out_dir.parent):
         return out_dir
     return out_dir.parent
@@ -135,8 +143,9 @@ def check_out_file(path: str | Path, *, overwrite: bool) -> Path:
         raise OutputError(f'{path}: its directory {parent} does not exist')
     _refuse_config_dir(parent, 'the directory of --out')
     if path.exists() and not overwrite:
-        raise OutputError(f'{path}: --out exists already; give --overwrite to replace it, or '
-                          f'another --out')
+        raise OutputError(
+            f'{path}: --out exists already; give --overwrite to replace it, or another --out'
+        )
     if not _writable(parent):
         raise OutputError(f'{path}: {parent} is not writable')
     return path
@@ -153,7 +162,7 @@ def make_staging(out_dir: str | Path, stage_in: Path, tool: str) -> Path:
     stage_in.mkdir(parents=True, exist_ok=True)
     for stale in stage_in.glob(f'{prefix}*'):
         try:
-            pid = int(stale.name[len(prefix):].split('-', 1)[0])
+            pid = int(stale.name[len(prefix) :].split('-', 1)[0])
         except ValueError:
             continue
         if pid != os.getpid() and not _alive(pid):
@@ -184,7 +193,7 @@ def install_outputs(staging: Path, out_dir: str | Path, *, overwrite: bool) -> P
             os.chmod(item, FILE_MODE)
         os.chmod(staging, DIRECTORY_MODE)
         try:
-            os.rename(staging, out_dir)       # a new or empty out_dir: one atomic rename
+            os.rename(staging, out_dir)  # a new or empty out_dir: one atomic rename
             return out_dir
         except OSError:
             pass
@@ -196,7 +205,7 @@ def install_outputs(staging: Path, out_dir: str | Path, *, overwrite: bool) -> P
             # an earlier run's directory (a record, nothing but outputs): its files not written
             # again go; a *.png beside a user's files without a record is not ours to judge
             for old in out_dir.iterdir():
-                if old.name not in new and not old.is_dir():   # staging: make_staging's care
+                if old.name not in new and not old.is_dir():  # staging: make_staging's care
                     old.unlink()
         # calibration.yaml last: whoever watches it sees the report of the same run
         for item in sorted(staging.iterdir(), key=lambda p: p.name == 'calibration.yaml'):

@@ -9,6 +9,7 @@ and docs/parameters.md (node_parameters.py). No rclpy here: tests and docs read 
 The type of a parameter is the type of its default (bool, integer, double, string, or a list of
 strings or doubles); `STRING_ARRAY` as the default is a string list without a default value.
 """
+
 from __future__ import annotations
 
 import array
@@ -16,11 +17,11 @@ from dataclasses import dataclass
 import math
 from typing import Callable, Mapping
 
-STRING_ARRAY = 'string_array'        # the default of a string list that has none (rclpy: not set)
+STRING_ARRAY = 'string_array'  # the default of a string list that has none (rclpy: not set)
 
 BOOL, INTEGER, DOUBLE, STRING = 'bool', 'integer', 'double', 'string'
 DOUBLE_ARRAY = 'double_array'
-INT64_MAX = 2 ** 63 - 1
+INT64_MAX = 2**63 - 1
 
 
 class ParameterError(ValueError):
@@ -54,8 +55,13 @@ class Spec:
         return not (isinstance(self.default, str) and self.default == STRING_ARRAY)
 
 
-def startup(default: object, description: str, low: float | None = None,
-            high: float | None = None, **options) -> Spec:
+def startup(
+    default: object,
+    description: str,
+    low: float | None = None,
+    high: float | None = None,
+    **options,
+) -> Spec:
     """A parameter the node reads once, at start-up: read-only (a set while it runs is refused)."""
     return Spec(default, description, low, high, read_only=True, **options)
 
@@ -75,8 +81,10 @@ def type_of(default: object) -> str:
             return STRING_ARRAY
         if all(isinstance(item, float) for item in default):
             return DOUBLE_ARRAY
-    raise ValueError(f'no parameter type for the default {default!r}: give a bool, int, float, '
-                     'str, or a non-empty list of str or of float')
+    raise ValueError(
+        f'no parameter type for the default {default!r}: give a bool, int, float, '
+        'str, or a non-empty list of str or of float'
+    )
 
 
 def range_text(spec: Spec) -> str:
@@ -126,12 +134,14 @@ def check_value(name: str, spec: Spec, value: object) -> object:
         if not isinstance(value, str):
             raise ParameterError(f'parameter {name} must be a string, not {value!r}')
         if spec.choices and value not in spec.choices:
-            raise ParameterError(f'parameter {name} must be one of {", ".join(spec.choices)} '
-                                 f'({name} = {value!r} given)')
+            raise ParameterError(
+                f'parameter {name} must be one of {", ".join(spec.choices)} '
+                f'({name} = {value!r} given)'
+            )
         return value
     items = list(value) if isinstance(value, (list, tuple, array.array)) else None
     if kind == STRING_ARRAY:
-        if value is None and not spec.has_default:      # a list without default, not set yet
+        if value is None and not spec.has_default:  # a list without default, not set yet
             return None
         if items is None or not all(isinstance(item, str) for item in items):
             raise ParameterError(f'parameter {name} must be a list of strings, not {value!r}')
@@ -143,9 +153,11 @@ def check_value(name: str, spec: Spec, value: object) -> object:
 
 def table_checker(table: Mapping[str, Spec]) -> Callable[[str, object], object]:
     """check(name, value) for a node's table: check_value of its Spec (names not in it pass)."""
+
     def check(name: str, value: object) -> object:
         spec = table.get(name)
         return value if spec is None else check_value(name, spec, value)
+
     return check
 
 
@@ -156,6 +168,7 @@ def defaults(table: Mapping[str, Spec]) -> dict[str, object]:
 
 def show_default(spec: Spec) -> str:
     """The default as a params file writes it: 100, 1.0, true, 'upright', [0.0, 1.0], ''."""
+
     def show(value: object) -> str:
         if isinstance(value, bool):
             return 'true' if value else 'false'
@@ -164,6 +177,7 @@ def show_default(spec: Spec) -> str:
         if isinstance(value, (list, tuple)):
             return '[' + ', '.join(show(item) for item in value) + ']'
         return repr(value)
+
     return show(spec.default) if spec.has_default else '(none: a string list)'
 
 

@@ -1,4 +1,5 @@
 """Plain Python (dict, list, float, int, str) from numpy-bearing data, for YAML and JSON files."""
+
 from __future__ import annotations
 
 from typing import Mapping

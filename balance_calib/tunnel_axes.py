@@ -7,6 +7,7 @@ The same map applies to the bridge outputs (F_XV = -F_X̄V, ...), so eqs. (50)-(
 `to_tunnel(model(from_tunnel(outputs_tunnel)))`. Another installation is a config string such as
 "-FX,FY,-FZ,MX,MY,MZ".
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -20,14 +21,18 @@ from .units import COMPONENTS
 @dataclass(frozen=True)
 class Installation:
     name: str
-    permutation: tuple[int, ...]   # tunnel component i comes from balance component permutation[i]
+    permutation: tuple[int, ...]  # tunnel component i comes from balance component permutation[i]
     signs: tuple[float, ...]
 
     def __post_init__(self):
-        if sorted(self.permutation) != list(range(len(self.permutation))) or len(self.signs) != len(self.permutation):
+        if sorted(self.permutation) != list(range(len(self.permutation))) or len(
+            self.signs
+        ) != len(self.permutation):
             raise ValueError(f'installation {self.name}: not a signed permutation')
         if len(self.permutation) == 6 and (sorted(self.permutation[:3]) != [0, 1, 2]):
-            raise ValueError(f'installation {self.name}: forces must map to forces and moments to moments')
+            raise ValueError(
+                f'installation {self.name}: forces must map to forces and moments to moments'
+            )
 
     def to_tunnel(self, balance_values) -> np.ndarray:
         """Balance-axis loads (or outputs) (..., 6) -> tunnel axes."""
@@ -48,24 +53,30 @@ class Installation:
 
     @property
     def spec(self) -> str:
-        return ','.join(('-' if s < 0 else '') + COMPONENTS[p] for p, s in zip(self.permutation, self.signs))
+        return ','.join(
+            ('-' if s < 0 else '') + COMPONENTS[p] for p, s in zip(self.permutation, self.signs)
+        )
 
 
 IDENTITY = Installation('balance', tuple(range(6)), (1.0,) * 6)
-UPRIGHT = Installation('upright', tuple(range(6)), (-1.0, 1.0, -1.0, 1.0, 1.0, 1.0))      # §10.2.1
+UPRIGHT = Installation('upright', tuple(range(6)), (-1.0, 1.0, -1.0, 1.0, 1.0, 1.0))  # §10.2.1
 INVERTED = Installation('inverted', tuple(range(6)), (-1.0, -1.0, 1.0, 1.0, -1.0, -1.0))  # §10.2.2
 NAMED = {'upright': UPRIGHT, 'inverted': INVERTED, 'balance': IDENTITY, 'none': IDENTITY}
 
 
 def parse_installation(spec: str) -> Installation:
-    """'upright' (§10.2.1), 'inverted' (§10.2.2), 'balance' (no change) or e.g. '-FX,FY,-FZ,MX,MY,MZ'."""
+    """'upright' (§10.2.1), 'inverted' (§10.2.2), 'balance' (no change) or e.g.
+    '-FX,FY,-FZ,MX,MY,MZ'.
+    """
     key = spec.strip().lower()
     if key in NAMED:
         return NAMED[key]
     parts = [p.strip().upper() for p in spec.split(',')]
     if len(parts) != 6:
-        raise ValueError(f'installation {spec!r}: expected upright, inverted, or six signed components '
-                         f'like "-FX,FY,-FZ,MX,MY,MZ"')
+        raise ValueError(
+            f'installation {spec!r}: expected upright, inverted, or six signed components '
+            f'like "-FX,FY,-FZ,MX,MY,MZ"'
+        )
     signs, perm = [], []
     for p in parts:
         sign = -1.0 if p.startswith('-') else 1.0

@@ -4,6 +4,7 @@ Lab units live only at the edges: bridge outputs recorded ratiometrically (mV/V,
 with the excitation voltage they were measured at; loads are shown in lbf / in-lbf (or kgf) in
 reports on request. Everything inside stays N, N·m, mV.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -16,7 +17,7 @@ BRIDGE_OUTPUTS = ('FXV', 'FYV', 'FZV', 'MXV', 'MYV', 'MZV')
 
 # Exact by definition: 1 lb = 0.45359237 kg, 1 in = 0.0254 m.
 METRE_PER_INCH = 0.0254
-NEWTON_PER_LBF = 0.45359237 * STANDARD_GRAVITY_M_S2          # 4.4482216152605 N
+NEWTON_PER_LBF = 0.45359237 * STANDARD_GRAVITY_M_S2  # 4.4482216152605 N
 NEWTON_METRE_PER_INCH_LBF = NEWTON_PER_LBF * METRE_PER_INCH  # 0.1129848290276167 N·m
 
 # Display systems for loads: (force unit, moment unit, N per force unit, N·m per moment unit).
@@ -31,7 +32,7 @@ _MV_PER_UNIT_PER_VOLT = {'mV/V': 1.0, 'microV/V': 1e-3, 'µV/V': 1e-3, 'uV/V': 1
 
 
 def kgf_to_newton(value_kgf):
-    """kgf (or kgf·m) to N (or N·m)."""
+    """Kgf (or kgf·m) to N (or N·m)."""
     return value_kgf * STANDARD_GRAVITY_M_S2
 
 
@@ -63,16 +64,23 @@ def ratiometric_to_mv(values, unit: str, excitation_v):
     try:
         per_volt = _MV_PER_UNIT_PER_VOLT[unit]
     except KeyError:
-        raise ValueError(f'bridge output unit {unit!r}: expected one of {", ".join(_MV_PER_UNIT_PER_VOLT)}') from None
+        raise ValueError(
+            f'bridge output unit {unit!r}: expected one of {", ".join(_MV_PER_UNIT_PER_VOLT)}'
+        ) from None
     excitation = np.asarray(excitation_v, dtype=float)
     if excitation.size == 0 or not np.all(np.isfinite(excitation)) or np.any(excitation <= 0.0):
-        raise ValueError(f'excitation voltage {excitation_v!r}: must be a positive number of volts '
-                         f'to convert {unit} to mV')
+        raise ValueError(
+            f'excitation voltage {excitation_v!r}: must be a positive number of volts '
+            f'to convert {unit} to mV'
+        )
     return np.asarray(values, dtype=float) * per_volt * excitation
 
 
-def implied_excitation_v(rated_output_mv, rated_output_microstrain, gauge_factor: float = 2.0) -> float | None:
-    """Excitation implied by a table giving rated outputs both in mV and in µst (TM-663 Tables 3, 6).
+def implied_excitation_v(
+    rated_output_mv, rated_output_microstrain, gauge_factor: float = 2.0
+) -> float | None:
+    """Excitation implied by a table giving rated outputs both in mV and in µst (TM-663 Tables 3,
+    6).
 
     A strain meter reads µst = 4·V_out / (K·E) for a bridge (K the gauge factor it is set to), so
     E = 4·V_out / (K·µst). The median over the bridges; None if the table lacks either row.
@@ -91,4 +99,6 @@ def _system(system: str):
     try:
         return LOAD_UNIT_SYSTEMS[str(system).lower()]
     except KeyError:
-        raise ValueError(f'load units {system!r}: expected one of {", ".join(LOAD_UNIT_SYSTEMS)}') from None
+        raise ValueError(
+            f'load units {system!r}: expected one of {", ".join(LOAD_UNIT_SYSTEMS)}'
+        ) from None

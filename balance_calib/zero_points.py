@@ -3,6 +3,7 @@
 Every block of 5-10 load points is bracketed by no-load points in the same orientation; within a
 block the zero is taken to move linearly in time between its two brackets, and is subtracted.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -16,13 +17,15 @@ class ZeroPointError(ValueError):
 
 @dataclass(frozen=True)
 class ZeroCorrection:
-    zeroed_outputs_mv: np.ndarray   # (N, n) outputs minus the interpolated zero
-    zero_mv: np.ndarray             # (N, n) the zero that was subtracted
-    before: np.ndarray              # (N,) index of the zero point used before (-1: none)
-    after: np.ndarray               # (N,) index of the zero point used after (-1: none)
+    zeroed_outputs_mv: np.ndarray  # (N, n) outputs minus the interpolated zero
+    zero_mv: np.ndarray  # (N, n) the zero that was subtracted
+    before: np.ndarray  # (N,) index of the zero point used before (-1: none)
+    after: np.ndarray  # (N,) index of the zero point used after (-1: none)
 
 
-def subtract_zero_points(times_s, outputs_mv, is_zero_point, orientation, point_labels=None) -> ZeroCorrection:
+def subtract_zero_points(
+    times_s, outputs_mv, is_zero_point, orientation, point_labels=None
+) -> ZeroCorrection:
     """Subtract from every point the zero interpolated in time between its bracketing zero points.
 
     The brackets of a point are the nearest zero points before and after it *in the same
@@ -59,8 +62,10 @@ def subtract_zero_points(times_s, outputs_mv, is_zero_point, orientation, point_
     missing = np.flatnonzero((before < 0) & (after < 0))
     if missing.size:
         shown = ', '.join(str(labels[i]) for i in missing[:5])
-        raise ZeroPointError(f'{missing.size} load point(s) have no zero point in the same orientation block '
-                             f'(first: {shown}); TM-663 §5(4) brackets every block with zero points')
+        raise ZeroPointError(
+            f'{missing.size} load point(s) have no zero point in the same orientation block '
+            f'(first: {shown}); TM-663 §5(4) brackets every block with zero points'
+        )
     b = np.where(before >= 0, before, after)
     a = np.where(after >= 0, after, before)
     span = times[a] - times[b]
@@ -72,10 +77,10 @@ def subtract_zero_points(times_s, outputs_mv, is_zero_point, orientation, point_
 def zero_point_noise_factor(times_s, is_zero_point, orientation) -> float:
     """RMS gain of independent per-point noise through the zero-point subtraction.
 
-    The zeroed outputs are (I - W) v for a fixed interpolation matrix W; a loaded point also carries
-    the noise of its brackets, a zero point none at all. For the Appendix A/B schedules this is
-    about 1.11: the noise a fit sees is 11 % above the noise of one point.
+    The zeroed outputs are (I - W) v for a fixed interpolation matrix W; a loaded point also
+    carries the noise of its brackets, a zero point none at all. For the Appendix A/B schedules
+    this is about 1.11: the noise a fit sees is 11 % above the noise of one point.
     """
     n = len(times_s)
     zeroed = subtract_zero_points(times_s, np.eye(n), is_zero_point, orientation).zeroed_outputs_mv
-    return float(np.sqrt(np.sum(zeroed ** 2) / n))
+    return float(np.sqrt(np.sum(zeroed**2) / n))

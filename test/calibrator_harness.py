@@ -1,16 +1,18 @@
 """balance_calibrator in the test process for the DDS tests (test_ros_calibrator*.py): the
 probe and the memo's calibration file as fixtures, the node started with parameter overrides,
-/balance/raw published from the probe, and a ~/tare or ~/zero window fed and answered."""
+/balance/raw published from the probe, and a ~/tare or ~/zero window fed and answered.
+"""
+
+from geometry_msgs.msg import WrenchStamped
 import numpy as np
 import pytest
-from geometry_msgs.msg import WrenchStamped
 from rclpy.parameter import Parameter
+from ros_harness import new_domain_id, Probe, RELIABLE, wait_for
 from std_srvs.srv import Trigger
 
 from balance_calib.calibration_file import load_calibration, save_calibration
 from balance_calib.config import CONFIG_DIR
 from balance_calib.nodes.balance_calibrator import BalanceCalibrator
-from ros_harness import RELIABLE, Probe, new_domain_id, wait_for
 
 MEMO = load_calibration(CONFIG_DIR / 'lmc6522.yaml')
 SAMPLE_MV = (0.3, -0.2, 0.5, 0.1, -0.4, 0.2)
@@ -33,10 +35,18 @@ def calibration_file(tmp_path):
 def start_calibrator(probe, tmp_path, calibration_file, refit=None, **parameters):
     bag = tmp_path / 'campaign'
     bag.mkdir(exist_ok=True)
-    overrides = {'calibration_file': str(calibration_file), 'report_dir': str(tmp_path / 'reports'),
-                 'calibration_bags': [str(bag)], 'diagnostics_period_s': 0.2, **parameters}
-    node = BalanceCalibrator(refit_function=refit, context=probe.context,
-                             parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()])
+    overrides = {
+        'calibration_file': str(calibration_file),
+        'report_dir': str(tmp_path / 'reports'),
+        'calibration_bags': [str(bag)],
+        'diagnostics_period_s': 0.2,
+        **parameters,
+    }
+    node = BalanceCalibrator(
+        refit_function=refit,
+        context=probe.context,
+        parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()],
+    )
     probe.add_node(node)
     return node
 
@@ -52,10 +62,19 @@ class RawSource:
 
     def send(self, outputs=SAMPLE_MV):
         msg = WrenchStamped()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = 1000 + self.sent // 1000, (self.sent % 1000) * 1000
+        msg.header.stamp.sec, msg.header.stamp.nanosec = (
+            1000 + self.sent // 1000,
+            (self.sent % 1000) * 1000,
+        )
         msg.header.frame_id = 'LMC6522'
-        (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
-         msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = (float(v) for v in outputs)
+        (
+            msg.wrench.force.x,
+            msg.wrench.force.y,
+            msg.wrench.force.z,
+            msg.wrench.torque.x,
+            msg.wrench.torque.y,
+            msg.wrench.torque.z,
+        ) = (float(v) for v in outputs)
         self.publisher.publish(msg)
         self.sent += 1
 
@@ -67,14 +86,29 @@ class RawSource:
 
 
 def wrench_values(messages):
-    return np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
-                      m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z] for m in messages])
+    return np.array(
+        [
+            [
+                m.wrench.force.x,
+                m.wrench.force.y,
+                m.wrench.force.z,
+                m.wrench.torque.x,
+                m.wrench.torque.y,
+                m.wrench.torque.z,
+            ]
+            for m in messages
+        ]
+    )
 
 
 def connected(node, source):
     """Both links matched on the writer side, so that no sample of a volatile topic is lost."""
-    wait_for(lambda: source.publisher.get_subscription_count() >= 1, 10.0, 'the calibrator to subscribe')
-    wait_for(lambda: node._wrench_pub.get_subscription_count() >= 1, 10.0, '/balance/wrench to connect')
+    wait_for(
+        lambda: source.publisher.get_subscription_count() >= 1, 10.0, 'the calibrator to subscribe'
+    )
+    wait_for(
+        lambda: node._wrench_pub.get_subscription_count() >= 1, 10.0, '/balance/wrench to connect'
+    )
 
 
 class Stamped(RawSource):
@@ -90,8 +124,14 @@ class Stamped(RawSource):
         msg = WrenchStamped()
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 10**9)
         msg.header.frame_id = frame_id
-        (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
-         msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = (float(v) for v in outputs)
+        (
+            msg.wrench.force.x,
+            msg.wrench.force.y,
+            msg.wrench.force.z,
+            msg.wrench.torque.x,
+            msg.wrench.torque.y,
+            msg.wrench.torque.z,
+        ) = (float(v) for v in outputs)
         self.publisher.publish(msg)
         self.sent += 1
 

@@ -1,5 +1,7 @@
 """Shared fixtures: the two balances of TM-663, seeded simulated campaigns (as the simulation's
-Campaign, reduced to points, or recorded as a bag), and a ROS domain for a DDS test."""
+Campaign, reduced to points, or recorded as a bag), and a ROS domain for a DDS test.
+"""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -15,10 +17,14 @@ RECIPES = {
     # the memo's schedule at the simulation's own pace: one sample a point
     'memo': {},
     # recorded and refitted from a bag: 10 samples a point, 3 while the weights change
-    'bag': dict(samples_per_point=10, transition_samples=3, point_duration_s=1.0,
-                transition_s=0.5),
+    'bag': {
+        'samples_per_point': 10,
+        ('transition_samples'): 3,
+        ('point_duration_s'): 1.0,
+        ('transition_s'): 0.5,
+    },
     # short enough to play over DDS or refit inside a node: 5 samples a point, 0.1 s a point
-    'dds': dict(samples_per_point=5, point_duration_s=0.1, transition_s=0.05),
+    'dds': {'samples_per_point': 5, 'point_duration_s': 0.1, 'transition_s': 0.05},
 }
 
 
@@ -41,51 +47,90 @@ class Campaigns:
             self._built[key] = build()
         return self._built[key]
 
-    def campaign(self, balance: str = 'lmc6522', seed: int = 0, recipe: str = 'memo',
-                 noise: str | float | None = 'table17', effects: str = ''):
+    def campaign(
+        self,
+        balance: str = 'lmc6522',
+        seed: int = 0,
+        recipe: str = 'memo',
+        noise: str | float | None = 'table17',
+        effects: str = '',
+    ):
         """The simulation's Campaign (read-only arrays)."""
-        from balance_calib.simulation.balance_sim import (SimulationSettings, simulate_campaign,
-                                                          table17_noise)
+        from balance_calib.simulation.balance_sim import (
+            simulate_campaign,
+            SimulationSettings,
+            table17_noise,
+        )
         from balance_calib.simulation.effects import parse_effects
 
         def build():
             config = load_balance_config(balance)
             sigma = table17_noise(config) if noise == 'table17' else noise
             settings = SimulationSettings(noise_sigma_pct_fs=sigma, seed=seed, **RECIPES[recipe])
-            campaign = simulate_campaign(config, settings=settings,
-                                         effects=parse_effects(effects) if effects else ())
+            campaign = simulate_campaign(
+                config, settings=settings, effects=parse_effects(effects) if effects else ()
+            )
             for value in vars(campaign).values():
                 if isinstance(value, np.ndarray):
                     value.flags.writeable = False
             return campaign
+
         return self._once(('campaign', balance, seed, recipe, noise, effects), build)
 
-    def points(self, balance: str = 'lmc6522', seed: int = 0, recipe: str = 'memo',
-               noise: str | float | None = 'table17', effects: str = ''):
+    def points(
+        self,
+        balance: str = 'lmc6522',
+        seed: int = 0,
+        recipe: str = 'memo',
+        noise: str | float | None = 'table17',
+        effects: str = '',
+    ):
         """The campaign reduced to load points (refit.pipeline.campaign_points)."""
         from balance_calib.refit.pipeline import campaign_points
-        campaign = self.campaign(balance, seed, recipe, noise, effects)
-        return self._once(('points', balance, seed, recipe, noise, effects),
-                          lambda: campaign_points(campaign))
 
-    def bag(self, balance: str = 'lmc6522', seed: int = 0, recipe: str = 'memo',
-            noise: str | float | None = 'table17', effects: str = '',
-            points: slice | None = None) -> Path:
+        campaign = self.campaign(balance, seed, recipe, noise, effects)
+        return self._once(
+            ('points', balance, seed, recipe, noise, effects), lambda: campaign_points(campaign)
+        )
+
+    def bag(
+        self,
+        balance: str = 'lmc6522',
+        seed: int = 0,
+        recipe: str = 'memo',
+        noise: str | float | None = 'table17',
+        effects: str = '',
+        points: slice | None = None,
+    ) -> Path:
         """The campaign (or a slice of its points) written as a rosbag2 MCAP bag directory, once;
-        tests read it and never write into it."""
+        tests read it and never write into it.
+        """
         from balance_calib.simulation.campaign_bag import write_campaign_bag
-        key = (balance, seed, recipe, noise, effects, None if points is None else
-               (points.start, points.stop, points.step))
+
+        key = (
+            balance,
+            seed,
+            recipe,
+            noise,
+            effects,
+            None if points is None else (points.start, points.stop, points.step),
+        )
         name = '_'.join(str(part) for part in key).replace(' ', '')
-        return self._once(('bag',) + key, lambda: write_campaign_bag(
-            self.campaign(balance, seed, recipe, noise, effects), self._directory / name,
-            points=points))
+        return self._once(
+            ('bag',) + key,
+            lambda: write_campaign_bag(
+                self.campaign(balance, seed, recipe, noise, effects),
+                self._directory / name,
+                points=points,
+            ),
+        )
 
 
 def pytest_collection_modifyitems(config, items):
     """The DDS tests (marker ros) form one pytest-xdist group: with --dist loadgroup (as
     launchless_scripts/test runs them) one worker runs them one after another while the others
-    take the remaining tests, so that no two tests' nodes compete for discovery at once."""
+    take the remaining tests, so that no two tests' nodes compete for discovery at once.
+    """
     for item in items:
         if item.get_closest_marker('ros') is not None:
             item.add_marker(pytest.mark.xdist_group('dds'))
@@ -119,5 +164,6 @@ def rng():
 @pytest.fixture
 def ros_domain():
     """A ROS_DOMAIN_ID for this test alone (ros_harness.new_domain_id, the one allocator)."""
-    from ros_harness import new_domain_id       # rclpy only for the tests that ask for a domain
+    from ros_harness import new_domain_id  # rclpy only for the tests that ask for a domain
+
     return new_domain_id()

@@ -30,8 +30,10 @@ Others
 
 Each effect is an `Effect` of the simulator (it gets the sample context, returns the outputs).
 `scaled(...)` sizes one so that it adds `floors` x Table 17's cubic σ (RMS) to a component's
-cubic-fit residual, measured on the noise-free campaign, the size convention of simulation/diagnosis_rates.
+cubic-fit residual, measured on the noise-free campaign, the size convention of
+simulation/diagnosis_rates.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -40,10 +42,10 @@ from functools import lru_cache
 import numpy as np
 
 from balance_calib.config import load_balance_config
-from balance_calib.simulation.diagnosis_rates import noise_floor_pct_fs, simulate_reduction
 from balance_calib.diagnosis.statistics import fit_columns
 from balance_calib.model.terms import as_variables, design_matrix
 from balance_calib.model.tm663 import tm663_terms
+from balance_calib.simulation.diagnosis_rates import noise_floor_pct_fs, simulate_reduction
 from balance_calib.simulation.effects import Effect
 
 COMPONENTS = ('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ')
@@ -61,9 +63,9 @@ def _where(bridges, n=6) -> np.ndarray:
 
 @dataclass(frozen=True)
 class PreisachLoop(Effect):
-    size: float = 0.0               # offset of a fully switched field, x rated output
+    size: float = 0.0  # offset of a fully switched field, x rated output
     bridges: str = 'all'
-    spread: float = 0.35            # Gaussian width of the hysterons' switching half-gap
+    spread: float = 0.35  # Gaussian width of the hysterons' switching half-gap
     name = 'preisach'
 
     def outputs(self, outputs_mv, ctx):
@@ -71,10 +73,12 @@ class PreisachLoop(Effect):
         alpha, beta = np.meshgrid(grid, grid, indexing='ij')
         keep = alpha > beta
         alpha, beta = alpha[keep], beta[keep]
-        weight = np.exp(-0.5 * ((alpha - beta) / 2 / self.spread) ** 2 - 0.5 * ((alpha + beta) / 1.0) ** 2)
+        weight = np.exp(
+            -0.5 * ((alpha - beta) / 2 / self.spread) ** 2 - 0.5 * ((alpha + beta) / 1.0) ** 2
+        )
         weight /= weight.sum()
-        u = ctx.outputs_mv / ctx.rated_output_mv                       # (S, 6)
-        state = np.where(alpha + beta < 0, 1.0, -1.0)[None, :].repeat(6, axis=0)   # demagnetised
+        u = ctx.outputs_mv / ctx.rated_output_mv  # (S, 6)
+        state = np.where(alpha + beta < 0, 1.0, -1.0)[None, :].repeat(6, axis=0)  # demagnetised
         offset = np.empty_like(u)
         for i, row in enumerate(u):
             state = np.where(row[:, None] >= alpha[None, :], 1.0, state)
@@ -85,9 +89,9 @@ class PreisachLoop(Effect):
 
 @dataclass(frozen=True)
 class BoucWenLoop(Effect):
-    size: float = 0.0               # offset at saturation, x rated output
+    size: float = 0.0  # offset at saturation, x rated output
     bridges: str = 'all'
-    knee: float = 0.15              # travel (x rated output) over which the offset saturates
+    knee: float = 0.15  # travel (x rated output) over which the offset saturates
     exponent: float = 1.0
     name = 'bouc_wen'
 
@@ -96,7 +100,7 @@ class BoucWenLoop(Effect):
         # saturates at ±knee; integrated in small steps of u (the offset is size x z / knee)
         u = ctx.outputs_mv / ctx.rated_output_mv
         n = self.exponent
-        beta = gamma = 1.0 / (2.0 * self.knee ** n)
+        beta = gamma = 1.0 / (2.0 * self.knee**n)
         z = np.zeros(u.shape[1])
         out = np.empty_like(u)
         previous = u[0].copy()
@@ -105,19 +109,27 @@ class BoucWenLoop(Effect):
             steps = max(1, int(np.ceil(np.max(np.abs(travel)) / (0.02 * self.knee))))
             du = travel / steps
             for _ in range(steps):
-                z = z + du - beta * np.abs(du) * np.abs(z) ** (n - 1) * z - gamma * du * np.abs(z) ** n
+                z = (
+                    z
+                    + du
+                    - beta * np.abs(du) * np.abs(z) ** (n - 1) * z
+                    - gamma * du * np.abs(z) ** n
+                )
             out[i] = z
             previous = row
-        return outputs_mv + self.size * ctx.rated_output_mv * _where(self.bridges) * out / self.knee
+        return (
+            outputs_mv + self.size * ctx.rated_output_mv * _where(self.bridges) * out / self.knee
+        )
 
 
 def _masing(u: np.ndarray, backbone) -> np.ndarray:
     """Masing's rules with memory (the Iwan model of joints slipping one after another) on one
     series u (S,): the virgin curve is the backbone f; after a reversal at (u_r, y_r) the branch
     is y_r + 2 f((u - u_r) / 2); a branch that reaches the turning point it started from closes
-    that inner loop and the response continues on the branch it interrupted (or the backbone)."""
+    that inner loop and the response continues on the branch it interrupted (or the backbone).
+    """
     y = np.empty_like(u)
-    stack = []                                  # turning points (u_r, y_r), oldest first
+    stack = []  # turning points (u_r, y_r), oldest first
     going, previous, current = 0.0, u[0], float(backbone(u[0]))
     for i, x in enumerate(u):
         step = np.sign(x - previous)
@@ -130,7 +142,7 @@ def _masing(u: np.ndarray, backbone) -> np.ndarray:
             stack.pop()
             stack.pop()
         if len(stack) == 1 and (x - (-stack[0][0])) * going >= 0 and abs(x) >= abs(stack[0][0]):
-            stack.pop()                         # beyond the largest excursion: the backbone again
+            stack.pop()  # beyond the largest excursion: the backbone again
         if stack:
             u_r, y_r = stack[-1]
             current = y_r + 2.0 * float(backbone((x - u_r) / 2.0))
@@ -143,14 +155,14 @@ def _masing(u: np.ndarray, backbone) -> np.ndarray:
 
 @dataclass(frozen=True)
 class MasingLoop(Effect):
-    size: float = 0.0               # backbone saturation, x rated output
+    size: float = 0.0  # backbone saturation, x rated output
     bridges: str = 'all'
-    knee: float = 0.3               # backbone tanh scale, x rated output
+    knee: float = 0.3  # backbone tanh scale, x rated output
     name = 'masing'
 
     def outputs(self, outputs_mv, ctx):
         u = ctx.outputs_mv / ctx.rated_output_mv
-        backbone = lambda x: np.tanh(x / self.knee)               # noqa: E731
+        backbone = lambda x: np.tanh(x / self.knee)  # noqa: E731
         mask = _where(self.bridges)
         loop = np.zeros_like(u)
         for j in np.flatnonzero(mask):
@@ -163,17 +175,18 @@ class MasingLoop(Effect):
 class ReseatingJoint(Effect):
     """A joint that re-seats at every reversal and so forgets the earlier cycles: each branch is
     the doubled tanh backbone from the last turning point, no inner loop closes, and the slip
-    saturates at full slip (|y| <= 1): the offset ratchets with the history of small reversals."""
+    saturates at full slip (|y| <= 1): the offset ratchets with the history of small reversals.
+    """
 
-    size: float = 0.0               # full slip, x rated output
+    size: float = 0.0  # full slip, x rated output
     bridges: str = 'all'
     knee: float = 0.3
-    saturate: bool = True           # False: the slip accumulates without bound (ratcheting)
+    saturate: bool = True  # False: the slip accumulates without bound (ratcheting)
     name = 'reseating'
 
     def outputs(self, outputs_mv, ctx):
         u = ctx.outputs_mv / ctx.rated_output_mv
-        backbone = lambda x: np.tanh(x / self.knee)               # noqa: E731
+        backbone = lambda x: np.tanh(x / self.knee)  # noqa: E731
         y = np.empty_like(u)
         turn_u, turn_y, going = np.zeros(u.shape[1]), np.zeros(u.shape[1]), np.zeros(u.shape[1])
         virgin = np.ones(u.shape[1], bool)
@@ -195,27 +208,27 @@ class ReseatingJoint(Effect):
 
 @dataclass(frozen=True)
 class LoadPathFriction(Effect):
-    friction: float = 0.0           # μ: the fraction of the load lost to friction while moving
+    friction: float = 0.0  # μ: the fraction of the load lost to friction while moving
     bridges: str = 'all'
-    stick: float = 0.04             # δ: half the stick band, x capacity
+    stick: float = 0.04  # δ: half the stick band, x capacity
     name = 'friction'
 
     def outputs(self, outputs_mv, ctx):
         x = ctx.loads / ctx.capacity
-        z = np.empty_like(x)                                      # -1 falling ... +1 rising
+        z = np.empty_like(x)  # -1 falling ... +1 rising
         anchor = x[0].copy()
         for i, row in enumerate(x):
             anchor = np.clip(anchor, row - self.stick, row + self.stick)
             z[i] = (row - anchor) / self.stick
-        lost = self.friction * np.abs(x) * z                      # of capacity, per component
+        lost = self.friction * np.abs(x) * z  # of capacity, per component
         return outputs_mv - ctx.rated_output_mv * _where(self.bridges) * lost
 
 
 @dataclass(frozen=True)
 class SensitivityStep(Effect):
-    step: float = 0.0               # relative sensitivity change for negative loads
+    step: float = 0.0  # relative sensitivity change for negative loads
     bridges: str = 'all'
-    width: float = 0.03             # smoothing, x capacity
+    width: float = 0.03  # smoothing, x capacity
     name = 'sign_step'
 
     def outputs(self, outputs_mv, ctx):
@@ -226,7 +239,7 @@ class SensitivityStep(Effect):
 
 @dataclass(frozen=True)
 class NegativeCurvature(Effect):
-    curvature: float = 0.0          # x rated output at -capacity
+    curvature: float = 0.0  # x rated output at -capacity
     bridges: str = 'all'
     name = 'negative_curvature'
 
@@ -238,7 +251,7 @@ class NegativeCurvature(Effect):
 
 @dataclass(frozen=True)
 class LaggedTemperature(Effect):
-    zero: float = 0.0               # x rated output per kelvin
+    zero: float = 0.0  # x rated output per kelvin
     bridges: str = 'FX'
     lag_s: float = 1200.0
     name = 'lagged_temperature'
@@ -251,14 +264,15 @@ class LaggedTemperature(Effect):
             a = 1.0 - np.exp(-(t[i] - t[i - 1]) / self.lag_s)
             gauge[i] = gauge[i - 1] + a * (temperature[i] - gauge[i - 1])
         d = (gauge - ctx.reference_temperature_c)[:, None]
-        # zero shift and a sensitivity change a tenth of it per kelvin (gauge factor vs temperature)
+        # zero shift and a sensitivity change a tenth of it per kelvin (gauge factor vs
+        # temperature)
         shift = self.zero * ctx.rated_output_mv * d + 0.1 * self.zero * d * ctx.outputs_mv
         return outputs_mv + _where(self.bridges) * shift
 
 
 @dataclass(frozen=True)
 class PowerCreep(Effect):
-    creep: float = 0.0              # relative output gained 1 h after a load change
+    creep: float = 0.0  # relative output gained 1 h after a load change
     bridges: str = 'FX'
     onset_s: float = 10.0
     exponent: float = 0.3
@@ -277,18 +291,32 @@ class PowerCreep(Effect):
         return outputs_mv + self.creep * _where(self.bridges) * gained
 
 
-SHAPES = {'preisach': (PreisachLoop, 'size'), 'bouc_wen': (BoucWenLoop, 'size'),
-          'masing': (MasingLoop, 'size'), 'reseating': (ReseatingJoint, 'size'),
-          'friction': (LoadPathFriction, 'friction'), 'sign_step': (SensitivityStep, 'step'),
-          'negative_curvature': (NegativeCurvature, 'curvature'),
-          'lagged_temperature': (LaggedTemperature, 'zero'), 'power_creep': (PowerCreep, 'creep')}
-FAMILY = {'preisach': 'hysteresis', 'bouc_wen': 'hysteresis', 'masing': 'hysteresis', 'reseating': 'hysteresis', 'friction': 'hysteresis',
-          'sign_step': 'bidirectional', 'negative_curvature': 'bidirectional',
-          'lagged_temperature': 'temperature', 'power_creep': 'creep'}
+SHAPES = {
+    'preisach': (PreisachLoop, 'size'),
+    'bouc_wen': (BoucWenLoop, 'size'),
+    'masing': (MasingLoop, 'size'),
+    'reseating': (ReseatingJoint, 'size'),
+    'friction': (LoadPathFriction, 'friction'),
+    'sign_step': (SensitivityStep, 'step'),
+    'negative_curvature': (NegativeCurvature, 'curvature'),
+    'lagged_temperature': (LaggedTemperature, 'zero'),
+    'power_creep': (PowerCreep, 'creep'),
+}
+FAMILY = {
+    'preisach': 'hysteresis',
+    'bouc_wen': 'hysteresis',
+    'masing': 'hysteresis',
+    'reseating': 'hysteresis',
+    'friction': 'hysteresis',
+    'sign_step': 'bidirectional',
+    'negative_curvature': 'bidirectional',
+    'lagged_temperature': 'temperature',
+    'power_creep': 'creep',
+}
 
 
 def make(shape: str, size: float, bridges: str) -> Effect:
-    if shape == 'ratchet':          # the re-seating joint whose slip never saturates
+    if shape == 'ratchet':  # the re-seating joint whose slip never saturates
         return ReseatingJoint(size=size, bridges=bridges, saturate=False)
     cls, parameter = SHAPES[shape]
     return cls(**{parameter: size, 'bridges': bridges})
@@ -299,8 +327,12 @@ def cubic_residuals(config, reduction) -> np.ndarray:
     terms = tm663_terms('cubic', config.bridge_outputs)
     outputs = reduction.corrected.bridge_outputs_mv
     design = design_matrix(terms, as_variables(config.bridge_outputs, outputs), len(outputs))
-    return np.column_stack([fit_columns(design, reduction.corrected.loads[:, k]).residuals
-                            for k in range(len(config.components))])
+    return np.column_stack(
+        [
+            fit_columns(design, reduction.corrected.loads[:, k]).residuals
+            for k in range(len(config.components))
+        ]
+    )
 
 
 @lru_cache(maxsize=None)
@@ -313,19 +345,30 @@ def added_rms_pct_fs(balance: str, effects) -> np.ndarray:
     """(6,) RMS (% FS) the effects add to each component's cubic residual, noise-free."""
     config = load_balance_config(balance)
     dirty = cubic_residuals(config, simulate_reduction(config, list(effects), noise_scale=0.0))
-    return np.sqrt(np.mean((dirty - _clean_residuals(balance)) ** 2, axis=0)) / config.capacity * 100.0
+    return (
+        np.sqrt(np.mean((dirty - _clean_residuals(balance)) ** 2, axis=0))
+        / config.capacity
+        * 100.0
+    )
 
 
 @lru_cache(maxsize=None)
-def scaled_size(balance: str, shape: str, bridges: str, component: str | None, floors: float = 1.0) -> float:
+def scaled_size(
+    balance: str, shape: str, bridges: str, component: str | None, floors: float = 1.0
+) -> float:
     """The size parameter of `shape` adding `floors` x the cubic σ floor to `component` (None:
-    on average over the six components, for an effect on every bridge)."""
+    on average over the six components, for an effect on every bridge).
+    """
     config = load_balance_config(balance)
     floor = noise_floor_pct_fs(config)
     size = 1e-3
-    for _ in range(4):                      # the sizes are near-linear in the parameter
+    for _ in range(4):  # the sizes are near-linear in the parameter
         added = added_rms_pct_fs(balance, [make(shape, size, bridges)]) / floor
-        got = float(np.mean(added)) if component is None else float(added[config.components.index(component)])
+        got = (
+            float(np.mean(added))
+            if component is None
+            else float(added[config.components.index(component)])
+        )
         if got <= 0:
             break
         size *= floors / got
@@ -334,10 +377,12 @@ def scaled_size(balance: str, shape: str, bridges: str, component: str | None, f
     return float(size)
 
 
-def scaled(balance: str, shape: str, bridges: str, component: str | None = None,
-           floors: float = 1.0) -> Effect:
+def scaled(
+    balance: str, shape: str, bridges: str, component: str | None = None, floors: float = 1.0
+) -> Effect:
     """`shape` on `bridges` ('all' or one component), `floors` x the floor on `component`
-    (default: the bridge's own; for 'all', on average over the components)."""
+    (default: the bridge's own; for 'all', on average over the components).
+    """
     if component is None and bridges != 'all':
         component = bridges
     return make(shape, scaled_size(balance, shape, bridges, component, floors), bridges)
@@ -345,8 +390,10 @@ def scaled(balance: str, shape: str, bridges: str, component: str | None = None,
 
 def widest_loop(shape: str) -> float:
     """Widest |rising - falling| branch difference (x rated output) of `shape` at size 1 over a
-    major cycle 0 -> +rated -> -rated -> +rated: the size that gives a loop w wide is w / this."""
+    major cycle 0 -> +rated -> -rated -> +rated: the size that gives a loop w wide is w / this.
+    """
     from types import SimpleNamespace
+
     u = np.concatenate([np.linspace(0, 1, 101), np.linspace(1, -1, 201), np.linspace(-1, 1, 201)])
     v = np.repeat(u[:, None], 6, axis=1)
     ctx = SimpleNamespace(outputs_mv=v, rated_output_mv=np.ones(6), loads=v, capacity=np.ones(6))

@@ -1,12 +1,14 @@
 """Live messages as rclpy serializes them, and the live path's one call fed one message at a time:
 what the C kernel's tests (test_lone_kernel, test_live_partial_calibration) compare with the pure
-core."""
-import numpy as np
+core.
+"""
+
 from geometry_msgs.msg import WrenchStamped
+import numpy as np
 from rclpy.serialization import deserialize_message, serialize_message
+from ros_harness import six as wrench_six
 
 from balance_calib.live.raw_codec import decode_wrenches
-from ros_harness import six as wrench_six
 
 
 def serialized(values, stamps_ns, frame='LMC6522'):
@@ -15,8 +17,14 @@ def serialized(values, stamps_ns, frame='LMC6522'):
         msg = WrenchStamped()
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp), 10**9)
         msg.header.frame_id = frame
-        (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
-         msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = [float(v) for v in row]
+        (
+            msg.wrench.force.x,
+            msg.wrench.force.y,
+            msg.wrench.force.z,
+            msg.wrench.torque.x,
+            msg.wrench.torque.y,
+            msg.wrench.torque.z,
+        ) = [float(v) for v in row]
         messages.append(serialize_message(msg))
     return messages
 
@@ -28,9 +36,16 @@ def six(data: bytes) -> np.ndarray:
 def through_kernel(live, data, now_s, encoder, scale=1.0):
     """One message through LiveCalibrator.process_messages (the live path's one call) ->
     (wrench bytes, uncertainty bytes or None) when the C kernel took it, else None (the pure
-    core took it in the same call)."""
-    out = live.process_messages([data], now_s=now_s, decode=decode_wrenches, input_scale=scale,
-                                encoder=encoder, uncertainty_wanted=True)
+    core took it in the same call).
+    """
+    out = live.process_messages(
+        [data],
+        now_s=now_s,
+        decode=decode_wrenches,
+        input_scale=scale,
+        encoder=encoder,
+        uncertainty_wanted=True,
+    )
     if not out.accelerated:
         return None
     uncertainty = out.uncertainty()
@@ -39,11 +54,18 @@ def through_kernel(live, data, now_s, encoder, scale=1.0):
 
 def lone_through_kernel(live, messages, scale, encoder):
     """Each message alone through process_messages, 0.1 s apart; wrench/uncertainty per message
-    (None: not published), and which ones the kernel took."""
+    (None: not published), and which ones the kernel took.
+    """
     wrench, uncertainty, by_kernel = [], [], []
     for k, data in enumerate(messages):
-        out = live.process_messages([data], now_s=0.1 * k, decode=decode_wrenches,
-                                    input_scale=scale, encoder=encoder, uncertainty_wanted=True)
+        out = live.process_messages(
+            [data],
+            now_s=0.1 * k,
+            decode=decode_wrenches,
+            input_scale=scale,
+            encoder=encoder,
+            uncertainty_wanted=True,
+        )
         by_kernel.append(out.accelerated == 1)
         values = out.uncertainty()
         wrench.append(six(out.wrench[0]) if out.wrench else None)

@@ -4,15 +4,16 @@ Each test gets its own ROS_DOMAIN_ID from new_domain_id() (or the `ros_domain` f
 conftest.py, which calls it); node processes get it in their environment, the in-process
 probe node in its own rclpy context. Waits are bounded polls, never sleeps as synchronisation.
 """
+
 from __future__ import annotations
 
 import itertools
 import os
+from pathlib import Path
 import socket
 import subprocess
 import threading
 import time
-from pathlib import Path
 
 import rclpy
 from rclpy.context import Context
@@ -24,7 +25,7 @@ from balance_calib.launchless.processes import NodeProcess, ros_args  # noqa: F4
 
 _counter = itertools.count()
 DOMAIN_IDS = range(1, 102)
-DISCOVERY_PORT_0, DOMAIN_PORT_GAIN = 7410, 250      # RTPS default ports: PB + d1 = 7410, DG = 250
+DISCOVERY_PORT_0, DOMAIN_PORT_GAIN = 7410, 250  # RTPS default ports: PB + d1 = 7410, DG = 250
 SCRIPTS = Path(__file__).resolve().parent.parent / 'launchless_scripts'
 RELIABLE = QoSProfile(depth=10000, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -44,7 +45,8 @@ def _xdist_worker() -> tuple[int, int]:
 
 def _nobody_on(domain_id: int) -> bool:
     """Fast DDS's first participant on a domain binds UDP port 7410 + 250 d (its metatraffic
-    unicast port): if that port can be bound, no participant of this machine is on the domain."""
+    unicast port): if that port can be bound, no participant of this machine is on the domain.
+    """
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         try:
             sock.bind(('0.0.0.0', DISCOVERY_PORT_0 + DOMAIN_PORT_GAIN * domain_id))
@@ -69,14 +71,21 @@ def new_domain_id() -> int:
         candidate = own[(start + next(_counter)) % len(own)]
         if _nobody_on(candidate):
             return candidate
-    raise RuntimeError(f'no free ROS domain among {own[0]}..{own[-1]} for this test: every one '
-                       'has a participant on this machine')
+    raise RuntimeError(
+        f'no free ROS domain among {own[0]}..{own[-1]} for this test: every one '
+        'has a participant on this machine'
+    )
 
 
 def ros(domain_id: int, *args, timeout: float = 120):
     """launchless_scripts/ros ARGS on a domain (the ros2 CLI habits), output captured."""
-    return subprocess.run([str(SCRIPTS / 'ros'), *map(str, args)], capture_output=True, text=True,
-                          timeout=timeout, env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)))
+    return subprocess.run(
+        [str(SCRIPTS / 'ros'), *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=dict(os.environ, ROS_DOMAIN_ID=str(domain_id)),
+    )
 
 
 def wait_for(predicate, timeout_s: float, what: str, poll_s: float = 0.02):
@@ -99,8 +108,8 @@ class Probe:
         self.context = Context()
         rclpy.init(context=self.context, domain_id=domain_id)
         self.node = Node(name, context=self.context)
-        # single-threaded, as rclpy.spin() runs the nodes: rclpy's MultiThreadedExecutor busy-loops while
-        # a coroutine callback (the calibrator's ~/tare, ~/refit) awaits
+        # single-threaded, as rclpy.spin() runs the nodes: rclpy's MultiThreadedExecutor busy-loops
+        # while a coroutine callback (the calibrator's ~/tare, ~/refit) awaits
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, daemon=True)
@@ -110,7 +119,7 @@ class Probe:
     def _spin(self):
         try:
             self.executor.spin()
-        except Exception:   # context shut down
+        except Exception:  # context shut down
             pass
 
     def add_node(self, node: Node):

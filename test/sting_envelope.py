@@ -7,26 +7,38 @@ lift slope and vortex lift (C_N = C_Nα α + C_Nv sin α |sin α|), axial force 
 centre ahead of it (C_m = C_m0 + C_mα α, plus x_r·N), side force with β, rolling moment with β
 growing with α (dihedral effect), yawing moment with β and its transfer. Loads are made in
 the tunnel axes of interfaces.md (normal force up, axial aft, pitching nose-up) and turned into
-balance axes by the upright installation; each component is then scaled so that the envelope peaks at a chosen
-fraction of the balance's capacity (30-70 %). None of this is a shape the calibration models: the
-loads are products and sines of α, β and q, all six components at once.
+balance axes by the upright installation; each component is then scaled so that the envelope peaks
+at a chosen fraction of the balance's capacity (30-70 %). None of this is a shape the calibration
+models: the loads are products and sines of α, β and q, all six components at once.
 """
+
 from __future__ import annotations
 
 import numpy as np
 
 from balance_calib.tunnel_axes import parse_installation
 
-PEAK_FRACTION = np.array([0.35, 0.45, 0.70, 0.40, 0.60, 0.50])    # FX ... MZ, of capacity
+PEAK_FRACTION = np.array([0.35, 0.45, 0.70, 0.40, 0.60, 0.50])  # FX ... MZ, of capacity
 
 
-def tunnel_loads(alpha_rad, beta_rad, q_pa, *, area_m2=0.012, chord_m=0.09, span_m=0.15,
-                 reference_x_m=0.03, weight_n=40.0, cg_x_m=0.01) -> np.ndarray:
+def tunnel_loads(
+    alpha_rad,
+    beta_rad,
+    q_pa,
+    *,
+    area_m2=0.012,
+    chord_m=0.09,
+    span_m=0.15,
+    reference_x_m=0.03,
+    weight_n=40.0,
+    cg_x_m=0.01,
+) -> np.ndarray:
     """(N, 6) air loads plus weight, tunnel axes: axial force aft, side force starboard, normal
-    force up, rolling, pitching (nose up), yawing moment."""
+    force up, rolling, pitching (nose up), yawing moment.
+    """
     a, b, q = np.asarray(alpha_rad), np.asarray(beta_rad), np.asarray(q_pa)
     c_n = 2.8 * a + 1.6 * np.sin(a) * np.abs(np.sin(a))
-    c_af = 0.025 + 0.35 * a ** 2 - 0.1 * c_n * a
+    c_af = 0.025 + 0.35 * a**2 - 0.1 * c_n * a
     c_m = -0.04 - 0.55 * a - 0.3 * np.sin(a) * np.abs(np.sin(a))
     c_y = -0.9 * b - 0.4 * a * b
     c_l = -0.12 * b - 0.9 * a * b
@@ -42,11 +54,16 @@ def tunnel_loads(alpha_rad, beta_rad, q_pa, *, area_m2=0.012, chord_m=0.09, span
 
 def envelope(capacity, count: int, seed: int) -> np.ndarray:
     """(count, 6) balance-axis loads, N and N·m, of random attitudes and q∞ over the envelope;
-    the same scale per component whatever the seed (fixed by a dense reference sweep)."""
+    the same scale per component whatever the seed (fixed by a dense reference sweep).
+    """
     capacity = np.asarray(capacity, float)
     upright = parse_installation('upright')
-    grid = np.meshgrid(np.radians(np.linspace(-4, 20, 49)), np.radians(np.linspace(-6, 6, 25)),
-                       np.linspace(5e3, 15e3, 5), indexing='ij')
+    grid = np.meshgrid(
+        np.radians(np.linspace(-4, 20, 49)),
+        np.radians(np.linspace(-6, 6, 25)),
+        np.linspace(5e3, 15e3, 5),
+        indexing='ij',
+    )
     reference = upright.from_tunnel(tunnel_loads(*(g.ravel() for g in grid)))
     scale = PEAK_FRACTION * capacity / np.max(np.abs(reference), axis=0)
     rng = np.random.default_rng(seed)

@@ -1,5 +1,7 @@
 """The two σ of the code, on hand-worked residuals: the memo's eq. (44) (root mean square about
-zero, divided by N_max) and the tables' sample standard deviation (about the mean, N - 1)."""
+zero, divided by N_max) and the tables' sample standard deviation (about the mean, N - 1).
+"""
+
 import numpy as np
 import pytest
 
@@ -7,11 +9,14 @@ from balance_calib.accuracy.sigma import sample_std_pct_fs, sigma_pct_fs
 
 
 def test_eq_44_divides_the_sum_of_squares_by_the_number_of_points():
-    residuals = np.array([[1.0, 2.0], [-1.0, 0.0], [3.0, -2.0]])          # N, N·m
+    residuals = np.array([[1.0, 2.0], [-1.0, 0.0], [3.0, -2.0]])  # N, N·m
     full_scale = np.array([10.0, 4.0])
     # Σr² / 3 = 11/3 and 8/3; σ = sqrt of that / F.S. × 100
-    np.testing.assert_allclose(sigma_pct_fs(residuals, full_scale),
-                               [np.sqrt(11 / 3) * 10.0, np.sqrt(8 / 3) * 25.0], rtol=1e-15)
+    np.testing.assert_allclose(
+        sigma_pct_fs(residuals, full_scale),
+        [np.sqrt(11 / 3) * 10.0, np.sqrt(8 / 3) * 25.0],
+        rtol=1e-15,
+    )
     # one component as a 1-D array: a float, the same number
     one = sigma_pct_fs(residuals[:, 0], 10.0)
     assert isinstance(one, float) and one == pytest.approx(np.sqrt(11 / 3) * 10.0, rel=1e-15)

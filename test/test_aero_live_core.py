@@ -1,14 +1,16 @@
 """The node's core (aero/live.py) fed message by message gives the same held points as `reduce`'s
-offline run (aero/run.py), whatever order the three topics arrive in; stale inputs are dropped."""
+offline run (aero/run.py), whatever order the three topics arrive in; stale inputs are dropped.
+"""
+
+from aero_cases import CALIBRATION, MODEL, readings, simulated_run
 import numpy as np
 import pytest
 
 from balance_calib.aero.held_points import HoldSettings
 from balance_calib.aero.live import LiveReduction
 from balance_calib.aero.run import reduce_run
-from aero_cases import CALIBRATION, MODEL, readings, simulated_run
 
-START_NS = 1_700_000_000 * 10 ** 9
+START_NS = 1_700_000_000 * 10**9
 
 
 def feed(core, stamps, loads, attitude, q, rng):
@@ -19,7 +21,11 @@ def feed(core, stamps, loads, attitude, q, rng):
         messages = [('attitude', attitude[i]), ('q', q[i])]
         rng.shuffle(messages)
         for kind, value in messages:
-            out = core.add_attitude(stamp, value) if kind == 'attitude' else core.add_dynamic_pressure(stamp, value)
+            out = (
+                core.add_attitude(stamp, value)
+                if kind == 'attitude'
+                else core.add_dynamic_pressure(stamp, value)
+            )
             samples += out[0]
             points += out[1]
         delayed.append((stamp, loads[i]))
@@ -33,7 +39,7 @@ def feed(core, stamps, loads, attitude, q, rng):
         out = core.add_wrench(s, value)
         samples += out[0]
         points += out[1]
-    out = core.flush(int(stamps[-1]) + 10 ** 10)
+    out = core.flush(int(stamps[-1]) + 10**10)
     return samples + out[0], points + out[1]
 
 
@@ -46,9 +52,13 @@ def test_live_points_equal_the_offline_reduction(point_samples):
     settings = HoldSettings(point_samples=point_samples, settle_samples=3)
     model = MODEL.with_estimated_weight()
     sigma_loads = sigma / 100 * CALIBRATION.capacity
-    offline = reduce_run(loads, profile.support_attitude, profile.q_pa, model, settings, sigma_loads)
+    offline = reduce_run(
+        loads, profile.support_attitude, profile.q_pa, model, settings, sigma_loads
+    )
     core = LiveReduction(model, settings, sigma_loads, max_input_age_s=0.5)
-    samples, points = feed(core, stamps, loads, profile.support_attitude, profile.q_pa, np.random.default_rng(2))
+    samples, points = feed(
+        core, stamps, loads, profile.support_attitude, profile.q_pa, np.random.default_rng(2)
+    )
     live = [p.point for p in points if not p.point.wind_off]
     assert len(live) == len(offline.wind_on) == 13
     for a, b in zip(live, offline.wind_on):
@@ -67,15 +77,16 @@ def test_samples_without_a_recent_attitude_are_dropped_as_stale():
     loads = readings(raw)
     stamps = START_NS + np.round(profile.times_s * 1e9).astype(np.int64)
     core = LiveReduction(MODEL, HoldSettings(), np.ones(6), max_input_age_s=0.5)
-    for i in range(300):                       # q∞ keeps coming, the attitude stops after 100 samples
+    for i in range(300):  # q∞ keeps coming, the attitude stops after 100 samples
         core.add_dynamic_pressure(stamps[i], profile.q_pa[i])
         if i < 100:
             core.add_attitude(stamps[i], profile.support_attitude[i])
         core.add_wrench(stamps[i], loads[i])
-    assert core.counters.samples == 100        # the rest wait for an attitude at or after their stamp ...
-    core.flush(int(stamps[299]) + 503 * 10 ** 6)   # ... for match_wait_s (2 s) after they arrived:
-    assert core.counters.samples == 150            # at 3.498 s, those stamped (= arrived) before 1.498 s
-    core.flush(int(stamps[299]) + 3 * 10 ** 9)
+    # the rest wait for an attitude at or after their stamp ...
+    assert core.counters.samples == 100
+    core.flush(int(stamps[299]) + 503 * 10**6)  # ... for match_wait_s (2 s) after they arrived:
+    assert core.counters.samples == 150  # at 3.498 s, those stamped (= arrived) before 1.498 s
+    core.flush(int(stamps[299]) + 3 * 10**9)
     # samples up to 0.5 s after the last attitude still use it; later ones are stale
     assert core.counters.samples == 300 and core.counters.stale == 300 - 100 - 50
     assert 'attitude older than 0.5 s' in core.counters.last_stale_reason
@@ -93,22 +104,30 @@ def test_a_point_on_demand_averages_the_next_samples_of_the_hold_or_says_why_not
             core.add_dynamic_pressure(stamps[i], profile.q_pa[i])
             core.add_wrench(stamps[i], loads[i])
 
-    first_wind_on = int(np.flatnonzero(profile.q_pa > 0)[0])       # holds of 50 samples from here
+    first_wind_on = int(np.flatnonzero(profile.q_pa > 0)[0])  # holds of 50 samples from here
     request = core.request_point(20)
     play(range(first_wind_on - 5))
     assert request.done and not request.success and 'wind off' in request.message
     play(range(first_wind_on - 5, first_wind_on))
     request = core.request_point(20)
     play(range(first_wind_on, first_wind_on + 10))
-    assert not request.done                                          # 10 of 20 so far
+    assert not request.done  # 10 of 20 so far
     play(range(first_wind_on + 10, first_wind_on + 30))
     assert request.done and request.success and request.point.samples == 20
     # the point of samples 0..19 of the hold: exactly the reduction of those samples' mean
     from balance_calib.aero.coefficients import reduce_loads
-    expected = reduce_loads(loads[first_wind_on:first_wind_on + 20].mean(axis=0),
-                            profile.support_attitude[first_wind_on], 50e3, MODEL, core.tracker.tare)
+
+    expected = reduce_loads(
+        loads[first_wind_on : first_wind_on + 20].mean(axis=0),
+        profile.support_attitude[first_wind_on],
+        50e3,
+        MODEL,
+        core.tracker.tare,
+    )
     assert np.allclose(request.point.reduced.body, expected.body, atol=1e-14, rtol=0)
-    assert np.allclose(request.point.reduced.body, profile.body_coefficients[first_wind_on], atol=1e-9)
-    request = core.request_point(30)                                 # 20 samples left in this hold
+    assert np.allclose(
+        request.point.reduced.body, profile.body_coefficients[first_wind_on], atol=1e-9
+    )
+    request = core.request_point(30)  # 20 samples left in this hold
     play(range(first_wind_on + 30, first_wind_on + 60))
     assert request.done and not request.success and 'changed after 20 of 30' in request.message

@@ -1,10 +1,13 @@
 """read_bags: campaign bags to arrays, and errors a person can act on."""
+
 import shutil
 
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
-from rosbags.rosbag2 import StoragePlugin, Writer as RosbagsWriter
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as RosbagsWriter
 from rosbags.typesys import get_typestore, Stores
 
 from balance_calib.bags.errors import BagError
@@ -21,7 +24,8 @@ NAN6 = [float('nan')] * 6
 
 def header(stamp_ns, frame_id='LMC6522'):
     return T['std_msgs/msg/Header'](
-        T['builtin_interfaces/msg/Time'](stamp_ns // 10**9, stamp_ns % 10**9), frame_id)
+        T['builtin_interfaces/msg/Time'](stamp_ns // 10**9, stamp_ns % 10**9), frame_id
+    )
 
 
 def cdr(message, little_endian=True):
@@ -30,8 +34,10 @@ def cdr(message, little_endian=True):
 
 def wrench(stamp_ns, six, frame_id='LMC6522'):
     vector = T['geometry_msgs/msg/Vector3']
-    return T[WRENCH](header(stamp_ns, frame_id),
-                     T['geometry_msgs/msg/Wrench'](vector(*six[:3]), vector(*six[3:])))
+    return T[WRENCH](
+        header(stamp_ns, frame_id),
+        T['geometry_msgs/msg/Wrench'](vector(*six[:3]), vector(*six[3:])),
+    )
 
 
 def gravity(stamp_ns, three):
@@ -54,30 +60,49 @@ def write_bag(path, records, types=None):
 
 def campaign(t0, points, rng):
     """A small calibration sequence: gravity, then per point a load and ten raw samples."""
-    records = [('/calibration/gravity', t0, gravity(t0 - 1, (0.0, 1.0, 0.0))),
-               ('/balance/temperature', t0 + 1, temperature(t0, 21.5))]
+    records = [
+        ('/calibration/gravity', t0, gravity(t0 - 1, (0.0, 1.0, 0.0))),
+        ('/balance/temperature', t0 + 1, temperature(t0, 21.5)),
+    ]
     for point in range(points):
         start = t0 + 1_000_000 * (point + 1)
         load = NAN6 if point == 1 else list(rng.normal(size=6) * 100)
         records.append(('/calibration/applied_load', start, wrench(start - 10, load, '')))
-        records += [('/balance/raw', start + 1000 * k + 7,
-                     wrench(start + 1000 * k, list(rng.normal(size=6))))
-                    for k in range(1, 11)]
+        records += [
+            (
+                '/balance/raw',
+                start + 1000 * k + 7,
+                wrench(start + 1000 * k, list(rng.normal(size=6))),
+            )
+            for k in range(1, 11)
+        ]
     return records
 
 
 def expected_raw(records):
     raw = sorted((r for r in records if r[0] == '/balance/raw'), key=lambda r: r[1])
-    values = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
-                        m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z]
-                       for _, _, m in raw])
+    values = np.array(
+        [
+            [
+                m.wrench.force.x,
+                m.wrench.force.y,
+                m.wrench.force.z,
+                m.wrench.torque.x,
+                m.wrench.torque.y,
+                m.wrench.torque.z,
+            ]
+            for _, _, m in raw
+        ]
+    )
     return np.array([r[1] for r in raw]), values
 
 
 def test_arrays_hold_every_topic_in_interface_order_and_units(tmp_path):
     records = campaign(1_700_000_000_000_000_000, 4, np.random.default_rng(1))
-    data = read_bags(write_bag(tmp_path / 'bag', records),
-                     required=('raw', 'applied_load', 'gravity', 'temperature'))
+    data = read_bags(
+        write_bag(tmp_path / 'bag', records),
+        required=('raw', 'applied_load', 'gravity', 'temperature'),
+    )
     times, values = expected_raw(records)
     np.testing.assert_array_equal(data.raw.times_ns, times)
     np.testing.assert_array_equal(data.raw.stamps_ns, times - 7)
@@ -111,11 +136,16 @@ def test_several_bags_of_both_kinds_merge_in_time_order(tmp_path):
 
 
 def test_remapped_topics_and_extra_topics(tmp_path):
-    records = [('/rig/raw', 10, wrench(5, [1, 2, 3, 4, 5, 6])),
-               ('/rig/raw', 20, wrench(15, [6, 5, 4, 3, 2, 1])),
-               ('/rig/note', 15, T['std_msgs/msg/String']('zero point'))]
-    data = read_bags(write_bag(tmp_path / 'bag', records),
-                     topics=TopicNames(raw='/rig/raw'), extra_topics=['/rig/note'])
+    records = [
+        ('/rig/raw', 10, wrench(5, [1, 2, 3, 4, 5, 6])),
+        ('/rig/raw', 20, wrench(15, [6, 5, 4, 3, 2, 1])),
+        ('/rig/note', 15, T['std_msgs/msg/String']('zero point')),
+    ]
+    data = read_bags(
+        write_bag(tmp_path / 'bag', records),
+        topics=TopicNames(raw='/rig/raw'),
+        extra_topics=['/rig/note'],
+    )
     np.testing.assert_array_equal(data.raw.values[:, 0], [1, 6])
     assert data.extra['/rig/note'].messages[0].data == 'zero point'
     assert data.extra['/rig/note'].times_ns.tolist() == [15]
@@ -123,9 +153,8 @@ def test_remapped_topics_and_extra_topics(tmp_path):
 
 
 def test_bags_written_by_other_tools_are_read(tmp_path):
-    """rosbags' own writer stands in for `ros2 bag record` (different file names, no chunk CRC)."""
-    with RosbagsWriter(tmp_path / 'other', version=9,
-                       storage_plugin=StoragePlugin.MCAP) as writer:
+    """Rosbags' own writer stands in for `ros2 bag record` (different file names, no chunk CRC)."""
+    with RosbagsWriter(tmp_path / 'other', version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         connection = writer.add_connection('/balance/raw', WRENCH, typestore=TYPESTORE)
         for i in range(5):
             writer.write(connection, 100 + i, cdr(wrench(i, [i] * 6)))
@@ -136,34 +165,44 @@ def test_bags_written_by_other_tools_are_read(tmp_path):
 def test_progress_is_reported_up_to_the_total(tmp_path):
     records = [('/balance/raw', i, wrench(i, [i] * 6)) for i in range(25_000)]
     calls = []
-    read_bags(write_bag(tmp_path / 'bag', records), progress=lambda done, total:
-              calls.append((done, total)))
+    read_bags(
+        write_bag(tmp_path / 'bag', records),
+        progress=lambda done, total: calls.append((done, total)),
+    )
     assert calls[-1] == (25_000, 25_000)
     assert [done for done, _ in calls] == sorted(done for done, _ in calls) and len(calls) > 1
 
 
 @settings(max_examples=60, deadline=None)
-@given(frame_ids=st.lists(st.text(max_size=12), min_size=1, max_size=8),
-       values=st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=6,
-                       max_size=6),
-       stamp_ns=st.integers(min_value=0, max_value=2**31 * 10**9 - 1 - 16),  # + index below
-       little_endian=st.booleans())
-def test_vectorised_cdr_decoding_equals_rosbags_deserialisation(frame_ids, values, stamp_ns,
-                                                               little_endian):
-    payloads = [cdr(wrench(stamp_ns + i, values, frame_id), little_endian)
-                for i, frame_id in enumerate(frame_ids)]
+@given(
+    frame_ids=st.lists(st.text(max_size=12), min_size=1, max_size=8),
+    values=st.lists(
+        st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=6, max_size=6
+    ),
+    stamp_ns=st.integers(min_value=0, max_value=2**31 * 10**9 - 1 - 16),  # + index below
+    little_endian=st.booleans(),
+)
+def test_vectorised_cdr_decoding_equals_rosbags_deserialisation(
+    frame_ids, values, stamp_ns, little_endian
+):
+    payloads = [
+        cdr(wrench(stamp_ns + i, values, frame_id), little_endian)
+        for i, frame_id in enumerate(frame_ids)
+    ]
     payloads.append(cdr(wrench(stamp_ns, values[::-1], 'x'), not little_endian))
     stamps_ns, decoded, decoded_frame_ids = _decode_header_and_doubles(payloads, 6)
     for i, payload in enumerate(payloads):
         message = TYPESTORE.deserialize_cdr(payload, WRENCH)
         force, torque = message.wrench.force, message.wrench.torque
         np.testing.assert_array_equal(
-            decoded[i], [force.x, force.y, force.z, torque.x, torque.y, torque.z])
+            decoded[i], [force.x, force.y, force.z, torque.x, torque.y, torque.z]
+        )
         assert decoded_frame_ids[i] == message.header.frame_id
         assert stamps_ns[i] == message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
 
 
 # -- errors ---------------------------------------------------------------------------------------
+
 
 def test_missing_path_names_it(tmp_path):
     with pytest.raises(BagError, match=f'{tmp_path / "nowhere"}: no such file'):
@@ -208,7 +247,9 @@ def test_a_bag_still_being_recorded_is_read_up_to_what_is_on_disk(tmp_path):
         assert len(data.losses) == 1 and 'still being recorded' in data.losses[0]
         assert f'read the {on_disk} messages on disk so far' in data.losses[0]
     # nothing flushed yet: the required topic is missing, and the reason is said
-    early = _recording_in_progress(tmp_path, 'early', finished[:chunks[0].chunk_start_offset + 30])
+    early = _recording_in_progress(
+        tmp_path, 'early', finished[: chunks[0].chunk_start_offset + 30]
+    )
     with pytest.raises(
         BagError, match=r'early: no messages on /balance/raw.*still being recorded'
     ):
@@ -217,9 +258,9 @@ def test_a_bag_still_being_recorded_is_read_up_to_what_is_on_disk(tmp_path):
     whole = read_bags(_recording_in_progress(tmp_path, 'whole', finished))
     assert len(whole.raw) == 3000 and whole.losses == ()
     # damage inside a complete chunk of a file being recorded is still damage
-    damaged = bytearray(finished[:chunks[4].chunk_start_offset])
+    damaged = bytearray(finished[: chunks[4].chunk_start_offset])
     middle = chunks[2].chunk_start_offset + chunks[2].chunk_length // 2
-    damaged[middle:middle + 8] = bytes(b ^ 0xA5 for b in damaged[middle:middle + 8])
+    damaged[middle : middle + 8] = bytes(b ^ 0xA5 for b in damaged[middle : middle + 8])
     with pytest.raises(
         BagError, match=f'damaged data at byte offset {chunks[2].chunk_start_offset}'
     ):
@@ -232,7 +273,7 @@ def test_truncated_mcap_names_the_file(tmp_path, bare):
     bag = write_bag(tmp_path / 'bag', records)
     mcap_path = bag / 'bag_0.mcap'
     content = mcap_path.read_bytes()
-    mcap_path.write_bytes(content[:len(content) // 2])
+    mcap_path.write_bytes(content[: len(content) // 2])
     target = mcap_path if bare else bag
     with pytest.raises(BagError, match=f'{mcap_path}: truncated or damaged: no valid footer'):
         read_bags(target)
@@ -240,19 +281,25 @@ def test_truncated_mcap_names_the_file(tmp_path, bare):
 
 def test_wrong_message_type_names_file_topic_and_types(tmp_path):
     array = T['std_msgs/msg/Float64MultiArray'](
-        T['std_msgs/msg/MultiArrayLayout']([], 0), np.zeros(6))
+        T['std_msgs/msg/MultiArrayLayout']([], 0), np.zeros(6)
+    )
     bag = write_bag(tmp_path / 'bag', [('/balance/raw', 1, array)])
     with pytest.raises(BagError) as error:
         read_bags(bag)
-    assert str(error.value) == (f'{bag / "bag_0.mcap"}: topic /balance/raw has type '
-                                f'std_msgs/msg/Float64MultiArray, expected {WRENCH}')
+    assert str(error.value) == (
+        f'{bag / "bag_0.mcap"}: topic /balance/raw has type '
+        f'std_msgs/msg/Float64MultiArray, expected {WRENCH}'
+    )
 
 
 def test_required_topic_without_messages_names_bag_and_topic(tmp_path):
     bag = write_bag(tmp_path / 'bag', [('/balance/raw', 1, wrench(1, [0] * 6))])
     read_bags(bag)  # applied_load is optional by default
-    with pytest.raises(BagError, match=f'{bag}: no messages on /calibration/applied_load, '
-                                       'which is required .topics in the bag: /balance/raw'):
+    with pytest.raises(
+        BagError,
+        match=f'{bag}: no messages on /calibration/applied_load, '
+        'which is required .topics in the bag: /balance/raw',
+    ):
         read_bags(bag, required=('raw', 'applied_load'))
 
 
@@ -261,13 +308,16 @@ def test_corrupt_payload_names_file_and_topic(tmp_path):
     with BagWriter(bag) as writer:
         writer.add_topic('/balance/raw', WRENCH)
         writer.write('/balance/raw', 1, cdr(wrench(1, [0] * 6))[:30])
-    with pytest.raises(BagError, match=f'{bag / "bag_0.mcap"}: topic /balance/raw: message 0 is shorter'):
+    with pytest.raises(
+        BagError, match=f'{bag / "bag_0.mcap"}: topic /balance/raw: message 0 is shorter'
+    ):
         read_bags(bag)
 
 
 def test_damaged_chunk_names_the_file(tmp_path):
-    bag = write_bag(tmp_path / 'bag', [('/balance/raw', i, wrench(i, [i] * 6))
-                                       for i in range(20_000)])
+    bag = write_bag(
+        tmp_path / 'bag', [('/balance/raw', i, wrench(i, [i] * 6)) for i in range(20_000)]
+    )
     mcap_path = bag / 'bag_0.mcap'
     content = bytearray(mcap_path.read_bytes())
     content[1000:1100] = bytes(b ^ 0x55 for b in content[1000:1100])
@@ -278,15 +328,26 @@ def test_damaged_chunk_names_the_file(tmp_path):
 
 # -- integrity: counted against the file's own summary and index ---------------------------------
 
+
 def _campaign_mcap(path, *, crcs, compression='zstd'):
-    from balance_calib.benchmarks.refit_reliability import campaign_events, small_campaign, write_mcap
-    return write_mcap(campaign_events(small_campaign('lmc6522', seed=1)), path, crcs=crcs,
-                      compression=compression)
+    from balance_calib.benchmarks.refit_reliability import (
+        campaign_events,
+        small_campaign,
+        write_mcap,
+    )
+
+    return write_mcap(
+        campaign_events(small_campaign('lmc6522', seed=1)),
+        path,
+        crcs=crcs,
+        compression=compression,
+    )
 
 
 def _chunks_and_counts(path):
     """Chunk offsets and per-topic message counts, as the mcap package reads the summary."""
     from mcap.reader import make_reader
+
     with open(path, 'rb') as stream:
         summary = make_reader(stream).get_summary()
     topics = {c.id: c.topic for c in summary.channels.values()}
@@ -304,9 +365,11 @@ def test_a_damaged_chunk_is_an_error_at_its_offset_and_salvage_says_what_was_los
     data = bytearray(path.read_bytes())
     # flip bytes in the compressed records, well inside the chunk (its header is ~60 bytes)
     middle = victim.chunk_start_offset + victim.chunk_length // 2
-    data[middle:middle + 8] = bytes(b ^ 0xA5 for b in data[middle:middle + 8])
+    data[middle : middle + 8] = bytes(b ^ 0xA5 for b in data[middle : middle + 8])
     path.write_bytes(bytes(data))
-    with pytest.raises(BagError, match=f'{path}: damaged data at byte offset {victim.chunk_start_offset}: '):
+    with pytest.raises(
+        BagError, match=f'{path}: damaged data at byte offset {victim.chunk_start_offset}: '
+    ):
         read_bags(path)
     salvaged = read_bags(path, salvage=True, required=('raw', 'applied_load', 'gravity'))
     assert f'byte offset {victim.chunk_start_offset}' in salvaged.losses[0]
@@ -314,42 +377,68 @@ def test_a_damaged_chunk_is_an_error_at_its_offset_and_salvage_says_what_was_los
     assert any('do not match the summary' in line for line in salvaged.losses)
     # the per-topic sequence gaps account for exactly the messages the summary says are missing
     import re
-    gaps = {m.group(1): int(m.group(2)) for line in salvaged.losses
-            for m in [re.search(r': (/\S+): (\d+) message\(s\) missing', line)] if m}
+
+    gaps = {
+        m.group(1): int(m.group(2))
+        for line in salvaged.losses
+        for m in [re.search(r': (/\S+): (\d+) message\(s\) missing', line)]
+        if m
+    }
     assert gaps == {t: n for t, n in shortfall.items() if n}
     assert sum(gaps.values()) > 0
     assert all(len(line.splitlines()) == 1 for line in salvaged.losses)
 
 
 def test_a_chunk_skipped_by_a_lenient_reader_is_counted_missing(tmp_path):
-    """A chunk whose opcode is damaged looks like a record a reader may skip; the counts catch it."""
+    """A chunk whose opcode is damaged looks like a record a reader may skip; the counts catch
+    it.
+    """
     path = _campaign_mcap(tmp_path / 'campaign.mcap', crcs=False)
     chunks, counts = _chunks_and_counts(path)
     data = bytearray(path.read_bytes())
-    data[chunks[1].chunk_start_offset] = 0x07           # now a "message index" record
+    data[chunks[1].chunk_start_offset] = 0x07  # now a "message index" record
     path.write_bytes(bytes(data))
-    with pytest.raises(BagError, match=f'{path}: .*chunk at byte offset {chunks[1].chunk_start_offset}'):
+    with pytest.raises(
+        BagError, match=f'{path}: .*chunk at byte offset {chunks[1].chunk_start_offset}'
+    ):
         read_bags(path)
     salvaged = read_bags(path, salvage=True)
-    assert any(f'/balance/raw {salvaged.message_counts["/balance/raw"]} of {counts["/balance/raw"]}' in line
-               for line in salvaged.losses)
+    assert any(
+        f'/balance/raw {salvaged.message_counts["/balance/raw"]} of {counts["/balance/raw"]}'
+        in line
+        for line in salvaged.losses
+    )
 
 
 def test_messages_missing_from_a_topic_sequence_are_an_error(tmp_path):
     from mcap.writer import Writer
+
     path = tmp_path / 'gap.mcap'
     with open(path, 'wb') as stream:
         writer = Writer(stream)
         writer.start(profile='ros2', library='test')
-        schema = writer.register_schema(name=WRENCH, encoding='ros2msg',
-                                        data=TYPESTORE.generate_msgdef(WRENCH, ros_version=2)[0].encode())
-        channel = writer.register_channel(topic='/balance/raw', message_encoding='cdr', schema_id=schema)
-        for sequence in [*range(0, 50), *range(53, 100)]:      # 3 lost by the recorder
-            writer.add_message(channel_id=channel, log_time=sequence * 1000, publish_time=sequence * 1000,
-                               sequence=sequence, data=cdr(wrench(sequence * 1000, [1.0] * 6)))
+        schema = writer.register_schema(
+            name=WRENCH,
+            encoding='ros2msg',
+            data=TYPESTORE.generate_msgdef(WRENCH, ros_version=2)[0].encode(),
+        )
+        channel = writer.register_channel(
+            topic='/balance/raw', message_encoding='cdr', schema_id=schema
+        )
+        for sequence in [*range(0, 50), *range(53, 100)]:  # 3 lost by the recorder
+            writer.add_message(
+                channel_id=channel,
+                log_time=sequence * 1000,
+                publish_time=sequence * 1000,
+                sequence=sequence,
+                data=cdr(wrench(sequence * 1000, [1.0] * 6)),
+            )
         writer.finish()
-    with pytest.raises(BagError, match=r'gap.mcap: /balance/raw: 3 message\(s\) missing \(sequence jumps '
-                                       r'from 49 to 53 at log time 53000 ns'):
+    with pytest.raises(
+        BagError,
+        match=r'gap.mcap: /balance/raw: 3 message\(s\) missing \(sequence jumps '
+        r'from 49 to 53 at log time 53000 ns',
+    ):
         read_bags(path)
     assert len(read_bags(path, salvage=True).raw) == 97
 
@@ -357,7 +446,7 @@ def test_messages_missing_from_a_topic_sequence_are_an_error(tmp_path):
 def test_a_truncated_file_salvages_its_complete_chunks(tmp_path):
     path = _campaign_mcap(tmp_path / 'campaign.mcap', crcs=True)
     chunks, counts = _chunks_and_counts(path)
-    cut = chunks[3].chunk_start_offset + 20                   # inside the fourth chunk
+    cut = chunks[3].chunk_start_offset + 20  # inside the fourth chunk
     path.write_bytes(path.read_bytes()[:cut])
     with pytest.raises(BagError, match=f'{path}: truncated or damaged: no valid footer'):
         read_bags(path)
@@ -366,8 +455,11 @@ def test_a_truncated_file_salvages_its_complete_chunks(tmp_path):
     assert 0 < sum(salvaged.message_counts.values()) < sum(counts.values())
 
 
-@pytest.mark.parametrize('content', [b'', b'\x89MCAP0\r\n', b'\x89MCAP0\r\n' * 3 + b'\x00' * 5],
-                         ids=['empty', 'magic only', 'magic and zeros'])
+@pytest.mark.parametrize(
+    'content',
+    [b'', b'\x89MCAP0\r\n', b'\x89MCAP0\r\n' * 3 + b'\x00' * 5],
+    ids=['empty', 'magic only', 'magic and zeros'],
+)
 def test_tiny_files_name_the_file(tmp_path, content):
     path = tmp_path / 'tiny.mcap'
     path.write_bytes(content)
@@ -377,6 +469,7 @@ def test_tiny_files_name_the_file(tmp_path, content):
 
 def test_a_fifo_is_refused_without_opening_it(tmp_path):
     import os
+
     fifo = tmp_path / 'campaign.mcap'
     os.mkfifo(fifo)
     # opening a FIFO for reading blocks until a writer comes: the check must come first

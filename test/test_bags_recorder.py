@@ -5,26 +5,30 @@ publishes from this process on the same domain. Waits are bounded polls: the pub
 subscription counts (the recorder has subscribed), then wait_for_all_acked (it has every
 message), then the process exit.
 """
+
 import os
 import signal
 import subprocess
 import time
 
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 import numpy as np
 import pytest
 import rclpy
-import yaml
-from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+import yaml
 
 from balance_calib.bags.reader import read_bags
 from balance_calib.nodes.balance_recorder import offered_qos_as_dict, subscription_qos
 
 SAMPLES = 200
-GRAVITY_VECTORS = [(0.0, 1.0, 0.0), (0.0, 0.0, 1.0), (0.0, -0.7071067811865476,
-                                                     0.7071067811865476)]
+GRAVITY_VECTORS = [
+    (0.0, 1.0, 0.0),
+    (0.0, 0.0, 1.0),
+    (0.0, -0.7071067811865476, 0.7071067811865476),
+]
 
 
 @pytest.fixture
@@ -42,10 +46,19 @@ def test_node(ros_domain):
 
 def start_recorder(bag, ros_domain):
     return subprocess.Popen(
-        ['balance_recorder', '--ros-args', '-p', f'output:={bag}',
-         '-p', 'topics:=[/balance/raw, /calibration/gravity]'],
+        [
+            'balance_recorder',
+            '--ros-args',
+            '-p',
+            f'output:={bag}',
+            '-p',
+            'topics:=[/balance/raw, /calibration/gravity]',
+        ],
         env={**os.environ, 'ROS_DOMAIN_ID': str(ros_domain)},
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
 
 
 def wait_until(condition, executor, recorder, timeout_s=30.0):
@@ -67,16 +80,28 @@ def record_and_stop(tmp_path, ros_domain, test_node, stop_signal):
     bag = tmp_path / 'campaign'
     recorder = start_recorder(bag, ros_domain)
     try:
-        wait_until(lambda: raw_publisher.get_subscription_count() > 0
-                   and gravity_publisher.get_subscription_count() > 0, executor, recorder)
+        wait_until(
+            lambda: (
+                raw_publisher.get_subscription_count() > 0
+                and gravity_publisher.get_subscription_count() > 0
+            ),
+            executor,
+            recorder,
+        )
         sent = []
         for index in range(SAMPLES):
             message = WrenchStamped()
             message.header.stamp.sec, message.header.stamp.nanosec = 1_700_000_000, index
             message.header.frame_id = 'LMC6522'
             six = [index + 0.125 * k for k in range(6)]
-            (message.wrench.force.x, message.wrench.force.y, message.wrench.force.z,
-             message.wrench.torque.x, message.wrench.torque.y, message.wrench.torque.z) = six
+            (
+                message.wrench.force.x,
+                message.wrench.force.y,
+                message.wrench.force.z,
+                message.wrench.torque.x,
+                message.wrench.torque.y,
+                message.wrench.torque.z,
+            ) = six
             sent.append(six)
             raw_publisher.publish(message)
             if index % 80 == 0:
@@ -96,10 +121,10 @@ def record_and_stop(tmp_path, ros_domain, test_node, stop_signal):
 
 
 @pytest.mark.ros
-@pytest.mark.parametrize('stop_signal', [signal.SIGINT, signal.SIGTERM],
-                         ids=['SIGINT', 'SIGTERM'])
-def test_recorder_keeps_every_message_in_order_and_closes_the_bag_on(tmp_path, ros_domain,
-                                                                     test_node, stop_signal):
+@pytest.mark.parametrize('stop_signal', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_recorder_keeps_every_message_in_order_and_closes_the_bag_on(
+    tmp_path, ros_domain, test_node, stop_signal
+):
     bag, sent, output = record_and_stop(tmp_path, ros_domain, test_node, stop_signal)
     data = read_bags(bag, required=('raw', 'gravity'))
     np.testing.assert_array_equal(data.raw.values, sent)
@@ -109,8 +134,11 @@ def test_recorder_keeps_every_message_in_order_and_closes_the_bag_on(tmp_path, r
     assert f'/balance/raw: {SAMPLES}' in output and '/calibration/gravity: 3' in output
     info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     assert info['version'] == 9 and info['message_count'] == SAMPLES + 3
-    raw = next(t['topic_metadata'] for t in info['topics_with_message_count']
-               if t['topic_metadata']['name'] == '/balance/raw')
+    raw = next(
+        t['topic_metadata']
+        for t in info['topics_with_message_count']
+        if t['topic_metadata']['name'] == '/balance/raw'
+    )
     assert [q['reliability'] for q in raw['offered_qos_profiles']] == ['reliable']
     assert raw['type_description_hash'].startswith('RIHS01_')
     assert_identical_through_rosbags_and_mcap(bag)
@@ -120,16 +148,22 @@ def assert_identical_through_rosbags_and_mcap(bag):
     """The recorder's bag reads back the same through rosbags and through mcap + mcap_ros2."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
+    from message_fields import fields_of
     from rosbags.highlevel import AnyReader
 
-    from message_fields import fields_of
     with AnyReader([bag]) as reader:
-        by_rosbags = [(c.topic, t, fields_of(reader.deserialize(raw, c.msgtype))) for c, t, raw in reader.messages()]
+        by_rosbags = [
+            (c.topic, t, fields_of(reader.deserialize(raw, c.msgtype)))
+            for c, t, raw in reader.messages()
+        ]
     mcap_file = next(bag.glob('*.mcap'))
     with open(mcap_file, 'rb') as stream:
-        by_mcap = [(channel.topic, message.log_time, fields_of(decoded)) for _, channel, message, decoded
-                   in make_reader(stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
-                       log_time_order=True)]
+        by_mcap = [
+            (channel.topic, message.log_time, fields_of(decoded))
+            for _, channel, message, decoded in make_reader(
+                stream, decoder_factories=[DecoderFactory()]
+            ).iter_decoded_messages(log_time_order=True)
+        ]
     assert len(by_rosbags) == SAMPLES + 3
     assert by_rosbags == by_mcap
 
@@ -138,6 +172,7 @@ def assert_identical_through_rosbags_and_mcap(bag):
 def test_a_bag_being_recorded_is_read_up_to_the_last_flush(tmp_path, ros_domain, test_node):
     """Issue 21: ~/refit of the recorder's bag while it still records (no metadata.yaml yet)."""
     from balance_calib.nodes.balance_recorder import FLUSH_PERIOD_S
+
     node, executor = test_node
     reliable = QoSProfile(depth=SAMPLES, reliability=ReliabilityPolicy.RELIABLE)
     raw_publisher = node.create_publisher(WrenchStamped, '/balance/raw', reliable)
@@ -155,7 +190,7 @@ def test_a_bag_being_recorded_is_read_up_to_the_last_flush(tmp_path, ros_domain,
         assert raw_publisher.wait_for_all_acked(Duration(seconds=20))
         time.sleep(2.5 * FLUSH_PERIOD_S)
         assert recorder.poll() is None and not (bag / 'metadata.yaml').exists()
-        data = read_bags(bag)                  # the directory as it is, the recorder still at work
+        data = read_bags(bag)  # the directory as it is, the recorder still at work
     finally:
         recorder.send_signal(signal.SIGINT)
         output, _ = recorder.communicate(timeout=30)
@@ -165,7 +200,7 @@ def test_a_bag_being_recorded_is_read_up_to_the_last_flush(tmp_path, ros_domain,
     assert (
         len(data.losses) == 1 and f'read the {SAMPLES} messages on disk so far' in data.losses[0]
     )
-    closed = read_bags(bag)                    # and once stopped: the complete bag, nothing to say
+    closed = read_bags(bag)  # and once stopped: the complete bag, nothing to say
     assert len(closed.raw) == SAMPLES and closed.losses == ()
 
 
@@ -174,15 +209,21 @@ def test_recorder_refuses_an_existing_output(tmp_path, ros_domain):
     (tmp_path / 'campaign').mkdir()
     result = subprocess.run(
         ['balance_recorder', '--ros-args', '-p', f'output:={tmp_path / "campaign"}'],
-        env={**os.environ, 'ROS_DOMAIN_ID': str(ros_domain)}, capture_output=True, text=True,
-        timeout=30)
+        env={**os.environ, 'ROS_DOMAIN_ID': str(ros_domain)},
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert result.returncode == 1
     assert 'exists already' in result.stderr + result.stdout
 
 
 def test_subscription_is_reliable_only_if_every_publisher_offers_it():
-    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    reliable = QoSProfile(
+        depth=10,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
     best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
     assert subscription_qos([reliable]).reliability == ReliabilityPolicy.RELIABLE
     assert subscription_qos([reliable]).durability == DurabilityPolicy.TRANSIENT_LOCAL
@@ -192,8 +233,13 @@ def test_subscription_is_reliable_only_if_every_publisher_offers_it():
 
 
 def test_offered_qos_is_written_in_rosbag2_v9_words():
-    profile = offered_qos_as_dict(QoSProfile(depth=7, reliability=ReliabilityPolicy.BEST_EFFORT,
-                                             durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    profile = offered_qos_as_dict(
+        QoSProfile(
+            depth=7,
+            reliability=ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL,
+        )
+    )
     assert profile['history'] == 'keep_last' and profile['depth'] == 7
     assert profile['reliability'] == 'best_effort'
     assert profile['durability'] == 'transient_local'

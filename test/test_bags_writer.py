@@ -5,37 +5,41 @@ package with mcap_ros2's decoder), and the file layout against what rosbag2 (Jaz
 metadata version 9 with offered QoS, ros2msg schemas, cdr channels, compressed chunks.
 """
 
-import numpy as np
-import pytest
-import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from message_fields import fields_of
+import numpy as np
+import pytest
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
+import yaml
 
 from balance_calib.bags.errors import BagError
 from balance_calib.bags.writer import BagWriter, qos_profiles_yaml
-from message_fields import fields_of
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 T = TYPESTORE.types
 WRENCH = 'geometry_msgs/msg/WrenchStamped'
 GRAVITY = 'geometry_msgs/msg/Vector3Stamped'
 DIAGNOSTICS = 'diagnostic_msgs/msg/DiagnosticArray'
-RELIABLE = qos_profiles_yaml([{'history': 'keep_last', 'depth': 10, 'reliability': 'reliable',
-                               'durability': 'volatile'}])
+RELIABLE = qos_profiles_yaml(
+    [{'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'volatile'}]
+)
 BEST_EFFORT = qos_profiles_yaml([{'reliability': 'best_effort'}, {'reliability': 'reliable'}])
 
 
 def header(stamp_ns, frame_id):
     return T['std_msgs/msg/Header'](
-        T['builtin_interfaces/msg/Time'](stamp_ns // 10**9, stamp_ns % 10**9), frame_id)
+        T['builtin_interfaces/msg/Time'](stamp_ns // 10**9, stamp_ns % 10**9), frame_id
+    )
 
 
 def wrench(stamp_ns, frame_id, six):
     vector = T['geometry_msgs/msg/Vector3']
-    return T[WRENCH](header(stamp_ns, frame_id),
-                     T['geometry_msgs/msg/Wrench'](vector(*six[:3]), vector(*six[3:])))
+    return T[WRENCH](
+        header(stamp_ns, frame_id),
+        T['geometry_msgs/msg/Wrench'](vector(*six[:3]), vector(*six[3:])),
+    )
 
 
 def gravity(stamp_ns, three):
@@ -44,8 +48,12 @@ def gravity(stamp_ns, three):
 
 def diagnostics(stamp_ns, level):
     status = T['diagnostic_msgs/msg/DiagnosticStatus'](
-        level=level, name='balance_calibrator: input', message='rate ok', hardware_id='LMC6522',
-        values=[T['diagnostic_msgs/msg/KeyValue']('rate_hz', '1000.0')])
+        level=level,
+        name='balance_calibrator: input',
+        message='rate ok',
+        hardware_id='LMC6522',
+        values=[T['diagnostic_msgs/msg/KeyValue']('rate_hz', '1000.0')],
+    )
     return T[DIAGNOSTICS](header(stamp_ns, ''), [status])
 
 
@@ -53,14 +61,22 @@ def campaign_messages():
     """(topic, receive time ns, message) for a small campaign, deliberately not time-sorted."""
     rng = np.random.default_rng(7)
     t0 = 1_700_000_000_123_456_789
-    messages = [('/balance/raw', t0 + 1000 * i + 17, wrench(t0 + 1000 * i, 'LMC6522',
-                                                              rng.normal(size=6) * 5.0))
-                for i in range(300)]
-    messages += [('/calibration/gravity', t0 + 5, gravity(t0, (0.0, 1.0, 0.0))),
-                 ('/calibration/gravity', t0 + 150_003, gravity(t0 + 150_000,
-                                                                (0.0, 0.0, -1.0)))]
-    messages += [('/diagnostics', t0 + 10_000 * i + 3, diagnostics(t0 + 10_000 * i, i % 3))
-                 for i in range(30)]
+    messages = [
+        (
+            '/balance/raw',
+            t0 + 1000 * i + 17,
+            wrench(t0 + 1000 * i, 'LMC6522', rng.normal(size=6) * 5.0),
+        )
+        for i in range(300)
+    ]
+    messages += [
+        ('/calibration/gravity', t0 + 5, gravity(t0, (0.0, 1.0, 0.0))),
+        ('/calibration/gravity', t0 + 150_003, gravity(t0 + 150_000, (0.0, 0.0, -1.0))),
+    ]
+    messages += [
+        ('/diagnostics', t0 + 10_000 * i + 3, diagnostics(t0 + 10_000 * i, i % 3))
+        for i in range(30)
+    ]
     return messages[::-1]
 
 
@@ -83,11 +99,15 @@ def expected_in_log_time_order(messages):
 def test_rosbags_anyreader_reads_back_every_message_field_and_timestamp(tmp_path):
     messages = write_campaign(tmp_path / 'campaign')
     with AnyReader([tmp_path / 'campaign']) as reader:
-        read = [(connection.topic, time_ns,
-                 fields_of(reader.deserialize(raw, connection.msgtype)))
-                for connection, time_ns, raw in reader.messages()]
+        read = [
+            (connection.topic, time_ns, fields_of(reader.deserialize(raw, connection.msgtype)))
+            for connection, time_ns, raw in reader.messages()
+        ]
         assert {c.topic: c.msgtype for c in reader.connections} == {
-            '/balance/raw': WRENCH, '/calibration/gravity': GRAVITY, '/diagnostics': DIAGNOSTICS}
+            '/balance/raw': WRENCH,
+            '/calibration/gravity': GRAVITY,
+            '/diagnostics': DIAGNOSTICS,
+        }
     assert read == expected_in_log_time_order(messages)
 
 
@@ -95,9 +115,12 @@ def test_mcap_with_mcap_ros2_decoder_reads_back_every_message_field_and_timestam
     messages = write_campaign(tmp_path / 'campaign')
     with open(tmp_path / 'campaign' / 'campaign_0.mcap', 'rb') as stream:
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        read = [(channel.topic, message.log_time, fields_of(decoded))
-                for schema, channel, message, decoded
-                in reader.iter_decoded_messages(log_time_order=True)]
+        read = [
+            (channel.topic, message.log_time, fields_of(decoded))
+            for schema, channel, message, decoded in reader.iter_decoded_messages(
+                log_time_order=True
+            )
+        ]
         schemas = {s.name: s.encoding for s in reader.get_summary().schemas.values()}
     assert read == expected_in_log_time_order(messages)
     assert schemas == {WRENCH: 'ros2msg', GRAVITY: 'ros2msg', DIAGNOSTICS: 'ros2msg'}
@@ -116,7 +139,8 @@ def test_messages_live_only_in_compressed_chunks(tmp_path, compression):
     assert len(summary.chunk_indexes) > 1
     assert {index.compression for index in summary.chunk_indexes} == {compression}
     assert sum(i.compressed_size for i in summary.chunk_indexes) < sum(
-        i.uncompressed_size for i in summary.chunk_indexes)
+        i.uncompressed_size for i in summary.chunk_indexes
+    )
     assert summary.statistics.message_count == len(messages)
     assert {c.message_encoding for c in summary.channels.values()} == {'cdr'}
 
@@ -133,13 +157,20 @@ def test_metadata_is_rosbag2_version_9_with_offered_qos_and_counts(tmp_path):
     assert info['message_count'] == len(messages)
     assert info['starting_time']['nanoseconds_since_epoch'] == min(times)
     assert info['duration']['nanoseconds'] == max(times) - min(times)
-    assert info['files'] == [{'path': 'campaign_0.mcap',
-                              'starting_time': {'nanoseconds_since_epoch': min(times)},
-                              'duration': {'nanoseconds': max(times) - min(times)},
-                              'message_count': len(messages)}]
+    assert info['files'] == [
+        {
+            'path': 'campaign_0.mcap',
+            'starting_time': {'nanoseconds_since_epoch': min(times)},
+            'duration': {'nanoseconds': max(times) - min(times)},
+            'message_count': len(messages),
+        }
+    ]
     topics = {t['topic_metadata']['name']: t for t in info['topics_with_message_count']}
     assert {name: t['message_count'] for name, t in topics.items()} == {
-        '/balance/raw': 300, '/calibration/gravity': 2, '/diagnostics': 30}
+        '/balance/raw': 300,
+        '/calibration/gravity': 2,
+        '/diagnostics': 30,
+    }
     raw = topics['/balance/raw']['topic_metadata']
     assert raw['type'] == WRENCH and raw['serialization_format'] == 'cdr'
     assert raw['type_description_hash'] == TYPESTORE.hash_rihs01(WRENCH)
@@ -169,8 +200,7 @@ def test_rosbags_reports_the_offered_qos_profiles(tmp_path):
     write_campaign(tmp_path / 'campaign')
     with AnyReader([tmp_path / 'campaign']) as reader:
         qos = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
-    assert [q.reliability.name for q in qos['/calibration/gravity']] == ['BEST_EFFORT',
-                                                                         'RELIABLE']
+    assert [q.reliability.name for q in qos['/calibration/gravity']] == ['BEST_EFFORT', 'RELIABLE']
     assert qos['/balance/raw'][0].depth == 10
 
 

@@ -1,5 +1,7 @@
 """A calibration.yaml that is not one: one line naming the file once, the line and what is wrong
-(balance_calib.calibration_file.load_calibration), as the commands and the node print it."""
+(balance_calib.calibration_file.load_calibration), as the commands and the node print it.
+"""
+
 import pytest
 
 from balance_calib.calibration_file import load_calibration, save_calibration
@@ -25,15 +27,16 @@ def _error(tmp_path, text):
 
 
 def _line_of(text, needle, after=0):
-    return next(i + 1 for i, line in enumerate(text.splitlines())
-                if i + 1 > after and needle in line)
+    return next(
+        i + 1 for i, line in enumerate(text.splitlines()) if i + 1 > after and needle in line
+    )
 
 
 def test_a_typo_in_a_coefficient_names_its_line(tmp_path, text):
     models = _line_of(text, 'models:')
     quadratic = _line_of(text, '  quadratic:', after=models)
     coefficients = _line_of(text, 'coefficients:', after=quadratic)
-    typo = _line_of(text, '- ', after=coefficients + 1)          # a number under FX:
+    typo = _line_of(text, '- ', after=coefficients + 1)  # a number under FX:
     lines = text.splitlines()
     value = lines[typo - 1].split('- ')[1]
     lines[typo - 1] = lines[typo - 1].split('- ')[0] + f'- {value}x'
@@ -44,7 +47,7 @@ def test_a_typo_in_a_coefficient_names_its_line(tmp_path, text):
 
 def test_a_truncated_file_names_the_model_and_its_line(tmp_path, text):
     cubic = _line_of(text, '  cubic:', after=_line_of(text, 'models:'))
-    cut = '\n'.join(text.splitlines()[:cubic + 3]) + '\n'
+    cut = '\n'.join(text.splitlines()[: cubic + 3]) + '\n'
     message, path = _error(tmp_path, cut)
     assert message.startswith(f'{path}, line {cubic}: models.cubic: '), message
 
@@ -63,11 +66,26 @@ def test_a_model_that_is_not_a_mapping(tmp_path, text, capsys):
     lines = text.splitlines()
     lines[cubic - 1] = '  cubic: 3'
     message, path = _error(tmp_path, '\n'.join(lines[:cubic]) + '\n')
-    assert message == (f'{path}, line {cubic}: models.cubic: expected a mapping (form, terms, '
-                       f'coefficients), not int 3')
+    assert message == (
+        f'{path}, line {cubic}: models.cubic: expected a mapping (form, terms, '
+        f'coefficients), not int 3'
+    )
     # as a command prints it: the file once
-    assert main(['reduce', str(tmp_path / 'none'), '--calibration', str(path), '--model',
-                 'euler_replica', '--out', str(tmp_path / 'out')]) == 2
+    assert (
+        main(
+            [
+                'reduce',
+                str(tmp_path / 'none'),
+                '--calibration',
+                str(path),
+                '--model',
+                'euler_replica',
+                '--out',
+                str(tmp_path / 'out'),
+            ]
+        )
+        == 2
+    )
     error = capsys.readouterr().err
     assert error.count(str(path)) == 1 and error.count('\n') == 1, error
 
@@ -76,8 +94,21 @@ def test_refit_names_a_broken_active_calibration_once(tmp_path, text, capsys):
     cubic = _line_of(text, '  cubic:', after=_line_of(text, 'models:'))
     path = tmp_path / 'active.yaml'
     path.write_text('\n'.join(text.splitlines()[:cubic]) + '\n  cubic: 3\n')
-    assert main(['refit', str(tmp_path / 'none.mcap'), '--balance', 'lmc6522', '--out',
-                 str(tmp_path / 'out'), '--active', str(path)]) == 2
+    assert (
+        main(
+            [
+                'refit',
+                str(tmp_path / 'none.mcap'),
+                '--balance',
+                'lmc6522',
+                '--out',
+                str(tmp_path / 'out'),
+                '--active',
+                str(path),
+            ]
+        )
+        == 2
+    )
     error = capsys.readouterr().err
     assert error.count(str(path)) == 1 and error.count('\n') == 1, error
     assert f'active calibration {path}, line {cubic + 1}: models.cubic:' in error

@@ -8,11 +8,12 @@ Preisach and Bouc-Wen loops, 1.3-2.1 for both sign shapes and for clean campaign
 contrast does not separate them on this schedule (7-10 for loops, 15-21 for sign shapes, 1.7-1.9
 clean): a loop keyed to the strain is traversed around the tare's output, not around zero load.
 """
-import numpy as np
-import pytest
-from PIL import Image
 
 import diagnosis_physics as physics
+import numpy as np
+from PIL import Image
+import pytest
+
 from balance_calib.config import load_balance_config
 from balance_calib.diagnosis import diagnose
 from balance_calib.diagnosis.contrasts import schedule_contrasts
@@ -25,18 +26,27 @@ BALANCE, COMPONENT = 'lmc6522', 'MY'
 def _diagnosis(shape, seed):
     config = load_balance_config(BALANCE)
     effects = [] if shape == 'clean' else [physics.scaled(BALANCE, shape, COMPONENT)]
-    reduction, scatter = simulate_reduction(config, effects, seed=seed, samples_per_point=8,
-                                            with_scatter=True)
+    reduction, scatter = simulate_reduction(
+        config, effects, seed=seed, samples_per_point=8, with_scatter=True
+    )
     return diagnose(reduction, config, **scatter)
 
 
-@pytest.mark.parametrize('shape, loop', [('preisach', True), ('bouc_wen', True), ('sign_step', False),
-                                         ('negative_curvature', False), ('clean', False)])
+@pytest.mark.parametrize(
+    'shape, loop',
+    [
+        ('preisach', True),
+        ('bouc_wen', True),
+        ('sign_step', False),
+        ('negative_curvature', False),
+        ('clean', False),
+    ],
+)
 def test_the_direction_contrast_sees_a_loop_and_not_a_sign_asymmetry(shape, loop):
     diagnosis = _diagnosis(shape, seed=0)
     direction, sign = schedule_contrasts(diagnosis)[COMPONENT]
     assert direction.kind == 'direction' and sign.kind == 'sign'
-    assert direction.count >= 20 and sign.count >= 10          # the schedule's pairs on M_Y
+    assert direction.count >= 20 and sign.count >= 10  # the schedule's pairs on M_Y
     if loop:
         assert direction.ratio > 5.0 and direction.p_value < 1e-10, direction.ratio
     else:

@@ -4,12 +4,17 @@ Each effect sits on the F_X bridge with a size of two Table 17 noise floors: the
 the F_X residual of the cubic fit is twice the memo's cubic σ_FX (as LMC6522's F_X stays at
 0.08 % FS while the other components reach 0.02-0.05).
 """
+
 import numpy as np
 import pytest
 
-from balance_calib.diagnosis import EFFECT_NAMES, DiagnosisSettings, diagnose
-from balance_calib.simulation.diagnosis_rates import (calibrated_parameter, injected_effects, noise_floor_pct_fs,
-                                           simulate_reduction)
+from balance_calib.diagnosis import diagnose, DiagnosisSettings, EFFECT_NAMES
+from balance_calib.simulation.diagnosis_rates import (
+    calibrated_parameter,
+    injected_effects,
+    noise_floor_pct_fs,
+    simulate_reduction,
+)
 
 SEED = 11
 NOISE_FLOORS = 2.0
@@ -17,7 +22,9 @@ NOISE_FLOORS = 2.0
 
 def _campaign(config, effect, seed=SEED, noise_floors=NOISE_FLOORS):
     balance = config.name.lower()
-    effects, estimate = injected_effects(effect, calibrated_parameter(balance, effect, noise_floors))
+    effects, estimate = injected_effects(
+        effect, calibrated_parameter(balance, effect, noise_floors)
+    )
     return simulate_reduction(config, effects, seed=seed, estimate_body_weight=estimate)
 
 
@@ -29,21 +36,29 @@ def test_the_injected_effect_is_named_first_and_sigma_returns_to_the_noise_floor
     assert 'FX' in first.components and first.p_value['FX'] < 0.01
     floor = noise_floor_pct_fs(balance)[0]
     before, after = result.sigma_pct_fs['before']['FX'], result.sigma_pct_fs['after']['FX']
-    assert before > 1.8 * floor                       # the effect is really there
-    assert after <= 1.5 * floor or after ** 2 - floor ** 2 <= 0.5 * (before ** 2 - floor ** 2)
-    assert result.sigma_pct_fs_crossval['after']['FX'] < 0.8 * result.sigma_pct_fs_crossval['before']['FX']
-    # a bridge effect leaves the other components alone (a new body weight, a supply drift change them all)
+    assert before > 1.8 * floor  # the effect is really there
+    assert after <= 1.5 * floor or after**2 - floor**2 <= 0.5 * (before**2 - floor**2)
+    assert (
+        result.sigma_pct_fs_crossval['after']['FX']
+        < 0.8 * result.sigma_pct_fs_crossval['before']['FX']
+    )
+    # a bridge effect leaves the other components alone (a new body weight, a supply drift change
+    # them all)
     for component in ('MX', 'MY') if effect not in ('tare', 'excitation') else ():
-        assert result.sigma_pct_fs['after'][component] == pytest.approx(result.sigma_pct_fs['before'][component],
-                                                                        rel=0.05)
+        assert result.sigma_pct_fs['after'][component] == pytest.approx(
+            result.sigma_pct_fs['before'][component], rel=0.05
+        )
 
 
 def test_a_generic_term_set_that_fits_part_of_an_effect_is_not_adopted(lmc6522):
-    """With hysteresis in the data and only the generic families to try, the time basis fits part of
-    it at best and leaves structure beyond the repeatability: nothing is adopted and the F_X residual
-    is reported unexplained. With every family, hysteresis explains it with one term."""
+    """With hysteresis in the data and only the generic families to try, the time basis fits part
+    of it at best and leaves structure beyond the repeatability: nothing is adopted and the F_X
+    residual is reported unexplained. With every family, hysteresis explains it with one term.
+    """
     reduction = _campaign(lmc6522, 'hysteresis')
-    generic = diagnose(reduction, lmc6522, settings=DiagnosisSettings(effects=('zero_drift', 'cross_terms')))
+    generic = diagnose(
+        reduction, lmc6522, settings=DiagnosisSettings(effects=('zero_drift', 'cross_terms'))
+    )
     assert generic.effects == ()
     assert [u.components for u in generic.unexplained] == [('FX',)]
     assert generic.adopted.term_names == generic.base_fit.term_names
@@ -61,7 +76,11 @@ def test_adopted_model_reproduces_its_residuals_and_the_live_model_drops_nuisanc
     assert set(result.effect_names) == {'temperature', 'hysteresis', 'zero_drift'}
     corrected = result.corrected
     fitted = result.adopted.loads(corrected.bridge_outputs_mv, result.extra_variables)
-    assert np.allclose(corrected.loads - fitted, result.residuals_after, atol=1e-9 * np.max(np.abs(corrected.loads)))
+    assert np.allclose(
+        corrected.loads - fitted,
+        result.residuals_after,
+        atol=1e-9 * np.max(np.abs(corrected.loads)),
+    )
     assert set(result.live_variables) == {'dT', 'dir_FX'}
     assert not any(v.startswith('drift_') for v in result.live.variables)
     assert result.reference_temperature_c == pytest.approx(np.mean(reduction.points.temperature_c))
@@ -72,15 +91,27 @@ def test_adopted_model_reproduces_its_residuals_and_the_live_model_drops_nuisanc
 def test_report_entries_keep_the_interface_names(lmc6522):
     result = diagnose(_campaign(lmc6522, 'temperature'), lmc6522)
     report = result.to_report()
-    assert set(report) == {'sigma_pct_fs', 'sigma_pct_fs_crossval', 'effects', 'unexplained', 'repeatability_pct_fs',
-                           'warnings'}
-    assert report['unexplained'] == [] and set(report['repeatability_pct_fs']) == set(lmc6522.components)
-    assert set(report['sigma_pct_fs']) == {'before', 'after'} and set(report['sigma_pct_fs']['after']) == \
-        {'FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'}
+    assert set(report) == {
+        'sigma_pct_fs',
+        'sigma_pct_fs_crossval',
+        'effects',
+        'unexplained',
+        'repeatability_pct_fs',
+        'warnings',
+    }
+    assert report['unexplained'] == [] and set(report['repeatability_pct_fs']) == set(
+        lmc6522.components
+    )
+    assert set(report['sigma_pct_fs']) == {'before', 'after'} and set(
+        report['sigma_pct_fs']['after']
+    ) == {'FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'}
     entry = report['effects'][0]
     assert set(entry) == {'name', 'components', 'evidence', 'terms', 'sigma_after_pct_fs'}
     assert entry['name'] == 'temperature' and entry['terms'] == ['dT*FXV']
-    assert entry['evidence'].startswith('FX residual follows dT*FXV: r = ') and '\n' not in entry['evidence']
+    assert (
+        entry['evidence'].startswith('FX residual follows dT*FXV: r = ')
+        and '\n' not in entry['evidence']
+    )
     assert '% FS' in entry['evidence'] and 'p = ' in entry['evidence']
 
 

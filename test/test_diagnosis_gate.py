@@ -9,19 +9,24 @@ same campaign with one point individually wrong (a weight typo, one point record
 marker on the wrong point) is still refused, naming that point. Through real bags and the refit
 pipeline.
 """
+
 from dataclasses import replace
 
+import diagnosis_physics as physics
 import numpy as np
 import pytest
 
-import diagnosis_physics as physics
 from balance_calib.bags.reader import read_bags
 from balance_calib.config import load_balance_config
 from balance_calib.diagnosis.coherence import diagnosis_structure
 from balance_calib.refit.gates import acceptance_limits, fit_gates
 from balance_calib.refit.load_points import cut_load_points
-from balance_calib.refit.pipeline import RefitError, calibrate_points, run_refit
-from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
+from balance_calib.refit.pipeline import calibrate_points, RefitError, run_refit
+from balance_calib.simulation.balance_sim import (
+    simulate_campaign,
+    SimulationSettings,
+    table17_noise,
+)
 from balance_calib.simulation.campaign_bag import write_campaign_bag
 
 KGF_N = 9.80665
@@ -29,15 +34,22 @@ KGF_N = 9.80665
 
 def _campaign(balance, effects, seed):
     config = load_balance_config(balance)
-    settings = SimulationSettings(samples_per_point=8, transition_samples=2, point_duration_s=1.0,
-                                  transition_s=0.5, seed=seed, noise_sigma_pct_fs=table17_noise(config))
+    settings = SimulationSettings(
+        samples_per_point=8,
+        transition_samples=2,
+        point_duration_s=1.0,
+        transition_s=0.5,
+        seed=seed,
+        noise_sigma_pct_fs=table17_noise(config),
+    )
     return simulate_campaign(config, settings=settings, effects=list(effects))
 
 
 def _calibrated(campaign, balance, tmp_path):
     bag = write_campaign_bag(campaign, tmp_path / 'bag')
-    points, cut = cut_load_points(read_bags([bag], required=('raw', 'applied_load', 'gravity')),
-                                  load_balance_config(balance))
+    points, cut = cut_load_points(
+        read_bags([bag], required=('raw', 'applied_load', 'gravity')), load_balance_config(balance)
+    )
     return calibrate_points(points, load_balance_config(balance), cut=cut, force=True)
 
 
@@ -47,14 +59,20 @@ def _gate(result, name='outliers'):
 
 # a loop on every bridge: the issue's 0.25 % of rated output at its widest, and a ratchet at 0.5 %
 # (which the gate refused before it held the flagged points against the campaign's structure)
-LOOPS = [('lmc6522', 'preisach', 0.0025, 1), ('b660h', 'masing', 0.0025, 1),
-         ('lmc6522', 'bouc_wen', 0.0025, 1), ('b660h', 'preisach', 0.0025, 2),
-         ('lmc6522', 'ratchet', 0.005, 1), ('lmc6522', 'ratchet', 0.005, 2)]
+LOOPS = [
+    ('lmc6522', 'preisach', 0.0025, 1),
+    ('b660h', 'masing', 0.0025, 1),
+    ('lmc6522', 'bouc_wen', 0.0025, 1),
+    ('b660h', 'preisach', 0.0025, 2),
+    ('lmc6522', 'ratchet', 0.005, 1),
+    ('lmc6522', 'ratchet', 0.005, 2),
+]
 
 
 @pytest.mark.parametrize('balance, shape, width, seed', LOOPS)
-def test_a_campaign_whose_only_fault_is_a_hysteresis_loop_passes_the_gates(balance, shape, width, seed,
-                                                                           tmp_path):
+def test_a_campaign_whose_only_fault_is_a_hysteresis_loop_passes_the_gates(
+    balance, shape, width, seed, tmp_path
+):
     campaign = _campaign(balance, [physics.loop_of_width(shape, width)], seed)
     result = _calibrated(campaign, balance, tmp_path)
     failed = [g.reason for g in result.gates if not g.passed]
@@ -66,36 +84,55 @@ def test_a_campaign_whose_only_fault_is_a_hysteresis_loop_passes_the_gates(balan
         assert outliers.reason.startswith('no point wrong on its own: ')
         assert 'not a weight or marker error' in outliers.reason
     # through the pipeline, without --force, and the report says what the gate saw
-    refit = run_refit([write_campaign_bag(campaign, tmp_path / 'again')], balance, tmp_path / 'out',
-                      plots=False)
+    refit = run_refit(
+        [write_campaign_bag(campaign, tmp_path / 'again')], balance, tmp_path / 'out', plots=False
+    )
     gates = {g['name']: g for g in refit.report['acceptance']['gates']}
     assert refit.report['acceptance']['passed'] and gates['outliers']['passed']
 
 
 def test_the_points_the_structure_explains_are_those_the_gate_refused_before(tmp_path):
     """Without the campaign's structure (the gate before issue 24) the same residuals are refused
-    at the same point, and the explanation names the structure the diagnosis left there."""
+    at the same point, and the explanation names the structure the diagnosis left there.
+    """
     balance = 'lmc6522'
-    result = _calibrated(_campaign(balance, [physics.loop_of_width('ratchet', 0.005)], 1), balance, tmp_path)
+    result = _calibrated(
+        _campaign(balance, [physics.loop_of_width('ratchet', 0.005)], 1), balance, tmp_path
+    )
     config, diagnosis = result.config, result.diagnosis
     limits = acceptance_limits(config)
-    arguments = (config, result.points, diagnosis.sigma_pct_fs['after'], diagnosis.residuals_after,
-                 diagnosis.press_residuals_after, limits, 'adopted model')
+    arguments = (
+        config,
+        result.points,
+        diagnosis.sigma_pct_fs['after'],
+        diagnosis.residuals_after,
+        diagnosis.press_residuals_after,
+        limits,
+        'adopted model',
+    )
     before = fit_gates(*arguments)[1]
-    after = fit_gates(*arguments, structure=diagnosis_structure(diagnosis, result.points, config))[1]
+    after = fit_gates(*arguments, structure=diagnosis_structure(diagnosis, result.points, config))[
+        1
+    ]
     assert not before.passed and 'a weight, unit or marker error' in before.reason
     assert after.passed
     refused = {(p['point'], p['component']) for p in before.details['points']}
-    explained = {(point, component) for component, entry in after.details['explained_by_structure'].items()
-                 for point in entry['points']}
+    explained = {
+        (point, component)
+        for component, entry in after.details['explained_by_structure'].items()
+        for point in entry['points']
+    }
     assert explained == refused
-    assert all('unexplained on' in entry['structure'] or 'effect adopted' in entry['structure']
-               for entry in after.details['explained_by_structure'].values())
+    assert all(
+        'unexplained on' in entry['structure'] or 'effect adopted' in entry['structure']
+        for entry in after.details['explained_by_structure'].values()
+    )
 
 
 def _largest_load_point(campaign, config, below=0.8):
     """The point with the largest single load under `below` of capacity (a typo there stays
-    within the capacity gate's limit and falls to the outliers gate)."""
+    within the capacity gate's limit and falls to the outliers gate).
+    """
     fraction = np.max(np.abs(campaign.applied_loads) / config.capacity, axis=1)
     return int(np.argmax(np.where(fraction <= below, fraction, -1.0)))
 
@@ -134,7 +171,12 @@ def test_a_point_individually_wrong_is_still_refused_naming_it(mistake, effects,
     loop = [physics.loop_of_width('ratchet', 0.005)] if effects == 'ratchet' else []
     campaign, wrong = mistake(_campaign(balance, loop, 1), config)
     with pytest.raises(RefitError) as refused:
-        run_refit([write_campaign_bag(campaign, tmp_path / 'bag')], balance, tmp_path / 'out', plots=False)
+        run_refit(
+            [write_campaign_bag(campaign, tmp_path / 'bag')],
+            balance,
+            tmp_path / 'out',
+            plots=False,
+        )
     message = str(refused.value)
     assert 'acceptance gate outliers' in message, message
     labels = {int(campaign.point[i]) for i in wrong}

@@ -7,22 +7,28 @@ The residuals are built by hand: 40 pairs of points at equal load, noise σ = 1 
 of half-width a (falling +a, rising -a: contrast 2a, ratio mean(c²)/(2σ²) = 1 + 2a²) or a sign
 step (the same offset on both branches of a pair: contrast 0, ratio ≈ 1).
 """
+
+import diagnosis_physics as physics
 import numpy as np
 import pytest
 
-import diagnosis_physics as physics
 from balance_calib.config import load_balance_config
 from balance_calib.diagnosis import diagnose
-from balance_calib.diagnosis.loop_or_sign import (LOOP_RATIO, MIN_DIRECTION_PAIRS,
-                                                  components_to_drop, direction_pairs, shows_loop)
+from balance_calib.diagnosis.loop_or_sign import (
+    components_to_drop,
+    direction_pairs,
+    LOOP_RATIO,
+    MIN_DIRECTION_PAIRS,
+    shows_loop,
+)
 from balance_calib.simulation.diagnosis_rates import simulate_reduction
 
-PAIRS = [(2 * i, 2 * i + 1) for i in range(40)]      # (falling, rising)
+PAIRS = [(2 * i, 2 * i + 1) for i in range(40)]  # (falling, rising)
 
 
 def _residual(loop_half_width: float, sign_offset: float, seed: int) -> np.ndarray:
     rng = np.random.default_rng(seed)
-    branch = np.tile([1.0, -1.0], 40)                  # falling, rising
+    branch = np.tile([1.0, -1.0], 40)  # falling, rising
     load_sign = np.repeat(rng.choice([-1.0, 1.0], 40), 2)
     return loop_half_width * branch + sign_offset * (load_sign > 0) + rng.normal(0, 1, 80)
 
@@ -36,19 +42,19 @@ def test_a_loop_shows_and_a_sign_step_does_not(seed):
     # a = 0.8: ratio ≈ 2.3, significant with 40 pairs but below LOOP_RATIO: a small loop, left
     # to the selection (neither adopted nor refused by the contrast)
     assert shows_loop(_residual(0.8, 0.0, seed), PAIRS, 1.0) is None
-    assert shows_loop(_residual(1.5, 0.0, seed), PAIRS[:MIN_DIRECTION_PAIRS - 1], 1.0) is None
-    assert LOOP_RATIO < 1 + 2 * 1.5 ** 2
+    assert shows_loop(_residual(1.5, 0.0, seed), PAIRS[: MIN_DIRECTION_PAIRS - 1], 1.0) is None
+    assert LOOP_RATIO < 1 + 2 * 1.5**2
 
 
 def test_each_family_keeps_only_what_its_contrast_explains():
     loop, step, few = _residual(1.5, 0.0, 0), _residual(0.0, 3.0, 1), _residual(1.5, 0.0, 2)
     current = [loop, step, few]
-    noise = np.random.default_rng(9).normal(0, 1, 80)     # what a good fit leaves
+    noise = np.random.default_rng(9).normal(0, 1, 80)  # what a good fit leaves
     after = {0: noise, 1: noise, 2: noise}
     pairs = [PAIRS, PAIRS, PAIRS[:3]]
     loop_drop, sign_drop = components_to_drop(after, after, current, pairs)
-    assert loop_drop == {1}            # no branch difference: not a loop
-    assert sign_drop == {0}            # a branch difference: the loop first
+    assert loop_drop == {1}  # no branch difference: not a loop
+    assert sign_drop == {0}  # a branch difference: the loop first
     # bidirectional not offered on the loop's component: nothing to yield
     loop_drop, sign_drop = components_to_drop(after, {1: noise}, current, pairs)
     assert loop_drop == {1} and sign_drop == set()
@@ -56,14 +62,20 @@ def test_each_family_keeps_only_what_its_contrast_explains():
 
 def test_the_schedule_pairs_are_equal_loads_on_opposite_branches():
     config = load_balance_config('lmc6522')
-    reduction, scatter = simulate_reduction(config, [physics.scaled('lmc6522', 'sign_step', 'MY')],
-                                            seed=3000, samples_per_point=8, with_scatter=True)
+    reduction, scatter = simulate_reduction(
+        config,
+        [physics.scaled('lmc6522', 'sign_step', 'MY')],
+        seed=3000,
+        samples_per_point=8,
+        with_scatter=True,
+    )
     diagnosis = diagnose(reduction, config, **scatter)
     assert diagnosis.effect_names == ('bidirectional',)
-    pairs = direction_pairs(diagnosis.corrected, diagnosis.orientation, diagnosis.load_direction,
-                            diagnosis.capacity)
+    pairs = direction_pairs(
+        diagnosis.corrected, diagnosis.orientation, diagnosis.load_direction, diagnosis.capacity
+    )
     k = diagnosis.components.index('MY')
-    assert len(pairs[k]) >= MIN_DIRECTION_PAIRS and len(pairs[0]) == 0   # none on F_X here
+    assert len(pairs[k]) >= MIN_DIRECTION_PAIRS and len(pairs[0]) == 0  # none on F_X here
     direction = diagnosis.load_direction[:, k]
     for falling, rising in pairs[k]:
         assert direction[falling] == -1 and direction[rising] == 1

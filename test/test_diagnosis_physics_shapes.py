@@ -12,44 +12,66 @@ band), negative curvature on every bridge 4/10 (LMC6522) and 0/10 (B660H) with c
 beside bidirectional, Preisach on every bridge 8/10 (LMC6522) and 7/10 (B660H), and B660H's loops
 on F_Z at σ ratios 1.18-1.56.
 """
+
 from functools import lru_cache
 
+import diagnosis_physics as physics
 import pytest
 
-import diagnosis_physics as physics
 from balance_calib.config import load_balance_config
 from balance_calib.diagnosis import diagnose
 from balance_calib.simulation.diagnosis_rates import simulate_reduction
 
-CELLS = [('lmc6522', 'preisach', 'MY'), ('lmc6522', 'masing', 'MY'), ('lmc6522', 'bouc_wen', 'MY'),
-         ('lmc6522', 'reseating', 'MY'), ('lmc6522', 'sign_step', 'MY'),
-         ('lmc6522', 'negative_curvature', 'MY'), ('lmc6522', 'bouc_wen', 'all'),
-         ('lmc6522', 'sign_step', 'all'), ('b660h', 'sign_step', 'FZ')]
+CELLS = [
+    ('lmc6522', 'preisach', 'MY'),
+    ('lmc6522', 'masing', 'MY'),
+    ('lmc6522', 'bouc_wen', 'MY'),
+    ('lmc6522', 'reseating', 'MY'),
+    ('lmc6522', 'sign_step', 'MY'),
+    ('lmc6522', 'negative_curvature', 'MY'),
+    ('lmc6522', 'bouc_wen', 'all'),
+    ('lmc6522', 'sign_step', 'all'),
+    ('b660h', 'sign_step', 'FZ'),
+]
 SEEDS = tuple(range(3000, 3010))
 
 
 @lru_cache(maxsize=None)
 def _clean(balance, seed):
     config = load_balance_config(balance)
-    reduction, scatter = simulate_reduction(config, seed=seed, samples_per_point=8, with_scatter=True)
+    reduction, scatter = simulate_reduction(
+        config, seed=seed, samples_per_point=8, with_scatter=True
+    )
     return diagnose(reduction, config, **scatter)
 
 
 def _outcome(balance, shape, bridges, seed):
-    """(right, worst σ after / clean σ, worst cross-validated ratio) over the affected components."""
+    """(right, worst σ after / clean σ, worst cross-validated ratio) over the affected
+    components.
+    """
     config = load_balance_config(balance)
     effect = physics.scaled(balance, shape, bridges)
-    reduction, scatter = simulate_reduction(config, [effect], seed=seed, samples_per_point=8,
-                                            with_scatter=True)
+    reduction, scatter = simulate_reduction(
+        config, [effect], seed=seed, samples_per_point=8, with_scatter=True
+    )
     result = diagnose(reduction, config, **scatter)
     clean = _clean(balance, seed)
     assert clean.effects == () and clean.unexplained == () and not clean.warnings
     components = config.components if bridges == 'all' else (bridges,)
-    sigma = max(result.sigma_pct_fs['after'][c] / clean.sigma_pct_fs['before'][c] for c in components)
-    crossval = max(result.sigma_pct_fs_crossval['after'][c] / clean.sigma_pct_fs_crossval['before'][c]
-                   for c in components)
+    sigma = max(
+        result.sigma_pct_fs['after'][c] / clean.sigma_pct_fs['before'][c] for c in components
+    )
+    crossval = max(
+        result.sigma_pct_fs_crossval['after'][c] / clean.sigma_pct_fs_crossval['before'][c]
+        for c in components
+    )
     right = result.effect_names == (physics.FAMILY[shape],) and not result.unexplained
-    return right, sigma, crossval, (result.effect_names, [u.components for u in result.unexplained])
+    return (
+        right,
+        sigma,
+        crossval,
+        (result.effect_names, [u.components for u in result.unexplained]),
+    )
 
 
 @pytest.mark.parametrize('balance, shape, bridges', CELLS)

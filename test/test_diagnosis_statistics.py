@@ -1,10 +1,16 @@
 """The statistics under the residual diagnosis: PRESS, forward selection, zero-point whitening."""
+
 import numpy as np
 
 from balance_calib.diagnosis.candidates import load_directions, refer_to_zero_points
-from balance_calib.simulation.diagnosis_rates import simulate_reduction
-from balance_calib.diagnosis.statistics import ZeroPointWhitening, fit_columns, forward_select, partial_f
+from balance_calib.diagnosis.statistics import (
+    fit_columns,
+    forward_select,
+    partial_f,
+    ZeroPointWhitening,
+)
 from balance_calib.simulation.balance_sim import _direction_history
+from balance_calib.simulation.diagnosis_rates import simulate_reduction
 from balance_calib.tare.calibration_body import tare_loads
 
 
@@ -24,8 +30,13 @@ def test_forward_selection_takes_the_planted_term_and_stops_at_noise(rng):
     base = np.column_stack([np.ones(200), rng.normal(size=(200, 3))])
     candidates = rng.normal(size=(200, 30))
     target = base @ [1.0, 2.0, -1.0, 0.5] + 0.4 * candidates[:, 7] + 0.1 * rng.normal(size=200)
-    selection = forward_select(fit_columns(base, target), candidates, [(j,) for j in range(30)],
-                               alpha_per_test=0.01 / 30, max_groups=5)
+    selection = forward_select(
+        fit_columns(base, target),
+        candidates,
+        [(j,) for j in range(30)],
+        alpha_per_test=0.01 / 30,
+        max_groups=5,
+    )
     assert selection.groups == (7,)
     f_value, p_value = partial_f(selection.rss_before, selection.steps[0].rss_after, 1, 200 - 5)
     assert f_value > 100 and p_value < 1e-20
@@ -33,12 +44,17 @@ def test_forward_selection_takes_the_planted_term_and_stops_at_noise(rng):
 
 def test_whitening_keeps_the_f_test_at_its_level_under_zero_point_noise(lmc6522):
     """Zero points (§5(4)) share their noise with a whole block: without whitening, a slow
-    regressor passes a 5 % F-test on pure noise a fifth of the time or more."""
+    regressor passes a 5 % F-test on pure noise a fifth of the time or more.
+    """
     reduction = simulate_reduction(lmc6522, noise_scale=0.0)
     points = reduction.points
     n = len(points.label)
-    whiten = ZeroPointWhitening.for_points(points.times_s, points.is_zero_point, points.orientation)
-    referring = refer_to_zero_points(np.eye(n), points.times_s, points.is_zero_point, points.orientation)
+    whiten = ZeroPointWhitening.for_points(
+        points.times_s, points.is_zero_point, points.orientation
+    )
+    referring = refer_to_zero_points(
+        np.eye(n), points.times_s, points.is_zero_point, points.orientation
+    )
     base = np.column_stack([np.ones(n), reduction.corrected.bridge_outputs_mv])
     slow = np.sin(2 * np.pi * points.times_s / 20000.0)
     augmented = np.column_stack([base, slow])
@@ -47,7 +63,10 @@ def test_whitening_keeps_the_f_test_at_its_level_under_zero_point_noise(lmc6522)
     draws = 300
     for _ in range(draws):
         noise = referring @ rng.normal(size=n)
-        for design_pair, counter in (((base, augmented), 'plain'), ((whiten(base), whiten(augmented)), 'white')):
+        for design_pair, counter in (
+            ((base, augmented), 'plain'),
+            ((whiten(base), whiten(augmented)), 'white'),
+        ):
             y = noise if counter == 'plain' else whiten(noise)
             small, large = fit_columns(design_pair[0], y), fit_columns(design_pair[1], y)
             rejected = partial_f(small.rss, large.rss, 1, large.dof)[1] < 0.05
@@ -56,26 +75,34 @@ def test_whitening_keeps_the_f_test_at_its_level_under_zero_point_noise(lmc6522)
             else:
                 rejected_white += rejected
     assert rejected_white / draws < 0.10
-    assert rejected_plain / draws > 0.12       # the reason the whitening is there
+    assert rejected_plain / draws > 0.12  # the reason the whitening is there
 
 
 def test_load_directions_follow_the_simulated_load_history(lmc6522):
     gravity = np.array([lmc6522.gravity(i) for i in lmc6522.schedule.orientation])
     loads = lmc6522.schedule.loads + tare_loads(lmc6522.calibration_body, gravity)
     times = np.arange(len(loads)) * 90.0
-    assert np.array_equal(load_directions(loads, times, lmc6522.capacity), _direction_history(loads))
+    assert np.array_equal(
+        load_directions(loads, times, lmc6522.capacity), _direction_history(loads)
+    )
     # the order is time, not row order
     shuffled = np.random.default_rng(1).permutation(len(loads))
-    assert np.array_equal(load_directions(loads[shuffled], times[shuffled], lmc6522.capacity),
-                          _direction_history(loads)[shuffled])
+    assert np.array_equal(
+        load_directions(loads[shuffled], times[shuffled], lmc6522.capacity),
+        _direction_history(loads)[shuffled],
+    )
 
 
 def test_variables_referred_to_zero_points_vanish_there_and_keep_fast_changes(lmc6522):
     reduction = simulate_reduction(lmc6522, noise_scale=0.0)
     points, zero = reduction.points, reduction.zero
     ramp = points.times_s / 3600.0
-    referred = refer_to_zero_points(np.column_stack([ramp, np.sin(points.times_s / 50.0)]), points.times_s,
-                                    points.is_zero_point, points.orientation)
+    referred = refer_to_zero_points(
+        np.column_stack([ramp, np.sin(points.times_s / 50.0)]),
+        points.times_s,
+        points.is_zero_point,
+        points.orientation,
+    )
     assert np.all(referred[points.is_zero_point] == 0.0)
     # a straight line in time is what two brackets follow: it survives only where a block has one
     one_bracket = ((zero.before < 0) | (zero.after < 0)) & ~points.is_zero_point

@@ -3,6 +3,7 @@
 A clone of this repository alone holds the interfaces it promises (docs/interfaces.md and the table
 format it cites, docs/field_data_format.md); beside the steering copy, the two must not drift.
 """
+
 from pathlib import Path
 
 import pytest
@@ -26,4 +27,5 @@ def test_the_copy_equals_the_steering_contract(name):
         pytest.skip(f'no {shared} beside this checkout (a clone on its own)')
     own = ROOT / 'docs' / name
     assert own.read_bytes() == shared.read_bytes(), (
-        f'docs/{name} differs from {shared}: copy the shared one (it is the contract)')
+        f'docs/{name} differs from {shared}: copy the shared one (it is the contract)'
+    )

@@ -1,13 +1,15 @@
 """`fit` on tables whose outputs are not the loads' own bridges: an 8-channel sensor with a term
 file of its outputs, with --validate and --axes, and --excitation-v on outputs it cannot convert
-(issue 20, Deliver 2 and 3: the gaps found after the units and 8-output reader landed)."""
-import json
+(issue 20, Deliver 2 and 3: the gaps found after the units and 8-output reader landed).
+"""
+
 from dataclasses import replace
+import json
 
 import numpy as np
 import pytest
-
 import table_cases as tc
+
 from balance_calib.cli import main
 from balance_calib.tables.balfit_writer import write_table
 
@@ -17,10 +19,15 @@ def _halves(table):
     keep = np.arange(table.points) % 4 != 0
 
     def part(mask):
-        return replace(table, point_id=tuple(np.array(table.point_id)[mask]),
-                       series=table.series[mask],
-                       point_zero_set=tuple(np.array(table.point_zero_set)[mask]),
-                       applied_loads=table.applied_loads[mask], outputs=table.outputs[mask])
+        return replace(
+            table,
+            point_id=tuple(np.array(table.point_id)[mask]),
+            series=table.series[mask],
+            point_zero_set=tuple(np.array(table.point_zero_set)[mask]),
+            applied_loads=table.applied_loads[mask],
+            outputs=table.outputs[mask],
+        )
+
     return part(keep), part(~keep)
 
 
@@ -33,9 +40,23 @@ def test_a_term_file_of_eight_outputs_fits_direct_with_validation_and_axes(tmp_p
     terms.write_text('# the eight bridges and their cubes\n' + ', '.join(names) + '\n')
     for method in ('direct', 'auto'):
         out = tmp_path / method
-        code = main(['fit', str(paths[0]), '--validate', str(paths[1]), '--method', method,
-                     '--terms', str(terms), '--axes', 'FX,FY,FZ,MX,MY,MZ', '--out', str(out),
-                     '--no-plots'])
+        code = main(
+            [
+                'fit',
+                str(paths[0]),
+                '--validate',
+                str(paths[1]),
+                '--method',
+                method,
+                '--terms',
+                str(terms),
+                '--axes',
+                'FX,FY,FZ,MX,MY,MZ',
+                '--out',
+                str(out),
+                '--no-plots',
+            ]
+        )
         assert code == 0, capsys.readouterr().err
         report = json.loads((out / 'report.json').read_text())
         assert report['method'] == 'direct' and report['terms'] == names
@@ -47,8 +68,10 @@ def test_a_term_file_of_eight_outputs_fits_direct_with_validation_and_axes(tmp_p
 @pytest.mark.parametrize('unit', ['counts', '-', 'mV'])
 def test_an_excitation_on_outputs_that_are_not_ratios_is_refused(tmp_path, capsys, unit):
     table, _ = tc.six_component_balance(np.random.default_rng(4))
-    path = write_table(tmp_path / 'daq.csv', replace(table, output_units=(unit,) * 6,
-                                                     output_capacity=np.full(6, np.nan)))
+    path = write_table(
+        tmp_path / 'daq.csv',
+        replace(table, output_units=(unit,) * 6, output_capacity=np.full(6, np.nan)),
+    )
     out = tmp_path / 'out'
     assert main(['fit', str(path), '--excitation-v', '5', '--out', str(out), '--no-plots']) == 2
     err = capsys.readouterr().err.strip()

@@ -1,12 +1,14 @@
 """Acceptance gates of `fit` (issue 20, Deliver 4): every bad table is refused with exit 2, one
-line naming the gate and nothing written; --force writes it anyway and report.json says so."""
-import json
+line naming the gate and nothing written; --force writes it anyway and report.json says so.
+"""
+
 from dataclasses import replace
+import json
 
 import numpy as np
 import pytest
-
 import table_cases as tc
+
 from balance_calib.cli import main
 from balance_calib.tables.balfit_writer import write_table
 from balance_calib.tables.gates import condition_gate, overfit_gate
@@ -18,10 +20,14 @@ def _balance(seed=7):
 
 def _without_column(table, k):
     keep = [i for i in range(len(table.output_symbols)) if i != k]
-    return replace(table, output_symbols=tuple(table.output_symbols[i] for i in keep),
-                   output_units=tuple(table.output_units[i] for i in keep),
-                   output_capacity=table.output_capacity[keep], zero_outputs=table.zero_outputs[:, keep],
-                   outputs=table.outputs[:, keep])
+    return replace(
+        table,
+        output_symbols=tuple(table.output_symbols[i] for i in keep),
+        output_units=tuple(table.output_units[i] for i in keep),
+        output_capacity=table.output_capacity[keep],
+        zero_outputs=table.zero_outputs[:, keep],
+        outputs=table.outputs[:, keep],
+    )
 
 
 def _constant_column(table, k):
@@ -32,7 +38,7 @@ def _constant_column(table, k):
 
 def _typo(table):
     applied = table.applied_loads.copy()
-    i = int(np.argmax(applied[:, 2]))           # the largest FZ: 1200 N written as 1080 N
+    i = int(np.argmax(applied[:, 2]))  # the largest FZ: 1200 N written as 1080 N
     applied[i, 2] *= 0.9
     return replace(table, applied_loads=applied), table.point_id[i]
 
@@ -60,12 +66,15 @@ def test_a_good_table_passes_every_gate(tmp_path, capsys):
     assert all(g['passed'] and g['reason'] for g in report['gates']) and report['forced'] is False
 
 
-@pytest.mark.parametrize('case, gate, words', [
-    ('deleted', 'channels', 'missing'),
-    ('constant', 'channels', 'rMZ constant'),
-    ('typo', 'outliers', None),
-    ('kgf', 'sensitivity', 'rated output'),
-])
+@pytest.mark.parametrize(
+    'case, gate, words',
+    [
+        ('deleted', 'channels', 'missing'),
+        ('constant', 'channels', 'rMZ constant'),
+        ('typo', 'outliers', None),
+        ('kgf', 'sensitivity', 'rated output'),
+    ],
+)
 def test_bad_tables_are_refused_and_forced_ones_say_so(tmp_path, capsys, case, gate, words):
     table = _balance()
     point = None
@@ -80,8 +89,21 @@ def test_bad_tables_are_refused_and_forced_ones_say_so(tmp_path, capsys, case, g
         bad = _kgf_as_newtons(table)
     err = _refused(tmp_path, capsys, bad)
     assert f'acceptance gate {gate}' in err and words in err, err
-    assert main(['fit', str(tmp_path / 'bad.csv'), '--out', str(tmp_path / 'forced'), '--no-plots',
-                 '--force', '--method', 'direct']) == 0
+    assert (
+        main(
+            [
+                'fit',
+                str(tmp_path / 'bad.csv'),
+                '--out',
+                str(tmp_path / 'forced'),
+                '--no-plots',
+                '--force',
+                '--method',
+                'direct',
+            ]
+        )
+        == 0
+    )
     report = json.loads((tmp_path / 'forced' / 'report.json').read_text())
     entry = {g['name']: g for g in report['gates']}[gate]
     assert report['forced'] is True and entry['passed'] is False and entry['reason']
@@ -105,6 +127,7 @@ def test_overfit_and_condition_limits_by_hand():
 
 def test_overfit_gate_judges_the_ratio_only_above_round_off():
     from balance_calib.tables.gates import OVERFIT_FLOOR_PCT, overfit_gate
+
     # a noise-free table: both σ round to 0 % capacity; the ratio of round-offs is no overfit
     zero = {'FX': 0.0, 'FY': 0.0}
     assert overfit_gate(zero, zero, 516, 117, 'iterative model').passed

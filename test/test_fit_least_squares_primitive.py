@@ -5,40 +5,46 @@ mixed by an integer triangular matrix and scaled 1e-6 … 1e6, carry the model, 
 two columns carry the residual. The exact answer (coefficients, residual, leverage 5/8 at
 every point, covariance) follows from H ᵀH = 8 I without a least-squares solver.
 """
+
 import numpy as np
 import pytest
 import scipy.linalg
 
 from balance_calib.diagnosis.statistics import fit_columns
-from balance_calib.fit.least_squares import UnexcitedTermsError, fit_model, scaled_least_squares
+from balance_calib.fit.least_squares import fit_model, scaled_least_squares, UnexcitedTermsError
 from balance_calib.fit.series_tares import solve_scaled
 from balance_calib.model.terms import parse_terms
 
-HADAMARD = scipy.linalg.hadamard(8).astype(float)            # columns orthogonal, norm √8
-MIXING = np.array([[1, 2, 0, -1, 3],                            # unit upper triangular: the
-                   [0, 1, 4, 2, 0],                             # columns are correlated
-                   [0, 0, 1, 5, -2],
-                   [0, 0, 0, 1, 1],
-                   [0, 0, 0, 0, 1]], dtype=float)
+HADAMARD = scipy.linalg.hadamard(8).astype(float)  # columns orthogonal, norm √8
+MIXING = np.array(
+    [
+        [1, 2, 0, -1, 3],  # unit upper triangular: the
+        [0, 1, 4, 2, 0],  # columns are correlated
+        [0, 0, 1, 5, -2],
+        [0, 0, 0, 1, 1],
+        [0, 0, 0, 0, 1],
+    ],
+    dtype=float,
+)
 SCALES = np.array([1e-6, 1e-3, 1.0, 1e3, 1e6])
-TRUE = np.array([[3.0, -1.0], [-2.0, 4.0], [5.0, 0.5], [1.0, -3.0], [-4.0, 2.0]])   # (5, 2)
-OFF_MODEL = HADAMARD[:, 5:] @ np.array([[2.0, -1.0], [-1.0, 0.5], [0.5, 3.0]])      # (8, 2)
+TRUE = np.array([[3.0, -1.0], [-2.0, 4.0], [5.0, 0.5], [1.0, -3.0], [-4.0, 2.0]])  # (5, 2)
+OFF_MODEL = HADAMARD[:, 5:] @ np.array([[2.0, -1.0], [-1.0, 0.5], [0.5, 3.0]])  # (8, 2)
 
 
 def hand_case():
-    """design (8, 5) = H₅ M diag(s), targets (8, 2) = H₅ M c + residual ⟂ the columns."""
+    """Design (8, 5) = H₅ M diag(s), targets (8, 2) = H₅ M c + residual ⟂ the columns."""
     unscaled = HADAMARD[:, :5] @ MIXING
     design = unscaled * SCALES
     targets = unscaled @ TRUE + OFF_MODEL
     # exact: coefficients c / s; (XᵀX)⁻¹ = diag(1/s) (8 MᵀM)⁻¹ diag(1/s)
-    inverse_mixing = np.linalg.inv(MIXING)         # integer matrix: M is unit triangular
+    inverse_mixing = np.linalg.inv(MIXING)  # integer matrix: M is unit triangular
     covariance = (inverse_mixing @ inverse_mixing.T / 8.0) / np.outer(SCALES, SCALES)
     return design, targets, TRUE / SCALES[:, None], covariance
 
 
 def test_the_hand_worked_ill_conditioned_case_is_solved_to_round_off():
     design, targets, coefficients, covariance = hand_case()
-    assert np.linalg.cond(design) > 1e11                 # the column scales alone make it so
+    assert np.linalg.cond(design) > 1e11  # the column scales alone make it so
     solution = scaled_least_squares(design, targets)
     assert solution.rank == 5 and solution.kept.all()
     np.testing.assert_allclose(solution.coefficients, coefficients, rtol=1e-12)
@@ -50,7 +56,8 @@ def test_the_hand_worked_ill_conditioned_case_is_solved_to_round_off():
     # scaled to unit columns, the design's condition is that of H₅ M with unit columns
     unit = HADAMARD[:, :5] @ MIXING
     assert solution.condition_number == pytest.approx(
-        np.linalg.cond(unit / np.linalg.norm(unit, axis=0)), rel=1e-12)
+        np.linalg.cond(unit / np.linalg.norm(unit, axis=0)), rel=1e-12
+    )
 
 
 def test_the_primitive_agrees_with_numpy_lstsq_on_the_scaled_problem():
@@ -60,8 +67,9 @@ def test_the_primitive_agrees_with_numpy_lstsq_on_the_scaled_problem():
     solution = scaled_least_squares(design, targets)
     np.testing.assert_allclose(solution.coefficients, reference, rtol=1e-12)
     # and one target column at a time gives the same 1-D answer
-    np.testing.assert_allclose(scaled_least_squares(design, targets[:, 1]).coefficients,
-                               reference[:, 1], rtol=1e-12)
+    np.testing.assert_allclose(
+        scaled_least_squares(design, targets[:, 1]).coefficients, reference[:, 1], rtol=1e-12
+    )
 
 
 def test_the_three_callers_give_the_primitives_answer():
@@ -69,16 +77,18 @@ def test_the_three_callers_give_the_primitives_answer():
     primitive = scaled_least_squares(design, targets)
     names = [f'c{j}' for j in range(5)]
 
-    tares = solve_scaled(design, targets, names)                     # fit/series_tares.py
+    tares = solve_scaled(design, targets, names)  # fit/series_tares.py
     np.testing.assert_array_equal(tares.coefficients, primitive.coefficients)
     np.testing.assert_allclose(tares.covariance_unscaled, covariance, rtol=1e-11)
 
-    for k in range(2):                                               # diagnosis/statistics.py
+    for k in range(2):  # diagnosis/statistics.py
         component = fit_columns(design, targets[:, k])
-        np.testing.assert_array_equal(component.coefficients,
-                                      scaled_least_squares(design, targets[:, k]).coefficients)
-        np.testing.assert_allclose(component.coefficients, primitive.coefficients[:, k],
-                                   rtol=1e-12)
+        np.testing.assert_array_equal(
+            component.coefficients, scaled_least_squares(design, targets[:, k]).coefficients
+        )
+        np.testing.assert_allclose(
+            component.coefficients, primitive.coefficients[:, k], rtol=1e-12
+        )
         np.testing.assert_allclose(component.coefficients, coefficients[:, k], rtol=1e-12)
         np.testing.assert_allclose(component.hat, np.full(8, 5 / 8), rtol=1e-13)
         assert component.rank == 5 and component.dof == 3
@@ -89,7 +99,7 @@ def test_fit_model_agrees_with_the_primitive_and_lstsq_with_bridges_of_very_diff
     """fit_model (fit/least_squares.py) on terms whose columns span twelve decades."""
     rng = np.random.default_rng(23)
     n = 40
-    sizes = np.array([1e-6, 1e-4, 1e-2, 1.0, 1e2, 1e4])                  # mV, per bridge
+    sizes = np.array([1e-6, 1e-4, 1e-2, 1.0, 1e2, 1e4])  # mV, per bridge
     outputs = rng.uniform(-1.0, 1.0, (n, 6)) * sizes
     terms = parse_terms(['1', 'FXV', 'FYV', 'FZV', 'MXV', 'MYV', 'MZV', 'FXV*MZV'])
     design = np.column_stack([np.ones(n), outputs, outputs[:, 0] * outputs[:, 5]])
@@ -105,16 +115,17 @@ def test_fit_model_agrees_with_the_primitive_and_lstsq_with_bridges_of_very_diff
     np.testing.assert_allclose(fit.residuals, residuals, rtol=1e-8, atol=1e-14)
     # standard errors: sqrt(RSS / (N - p) · diag((XᵀX)⁻¹)), (XᵀX)⁻¹ from the scaled SVD
     _, singular, vt = np.linalg.svd(design / norms, full_matrices=False)
-    inverse_diagonal = ((vt.T / singular) ** 2).sum(axis=1) / norms ** 2
-    variance = (residuals ** 2).sum(axis=0) / (n - 8)
-    np.testing.assert_allclose(fit.standard_errors, np.sqrt(np.outer(variance, inverse_diagonal)),
-                               rtol=1e-9)
+    inverse_diagonal = ((vt.T / singular) ** 2).sum(axis=1) / norms**2
+    variance = (residuals**2).sum(axis=0) / (n - 8)
+    np.testing.assert_allclose(
+        fit.standard_errors, np.sqrt(np.outer(variance, inverse_diagonal)), rtol=1e-9
+    )
     assert fit.rank == 8 and fit.degrees_of_freedom == n - 8
 
 
 def test_a_dependent_column_is_fixed_at_zero_or_named():
     design, targets, coefficients, _ = hand_case()
-    doubled = np.column_stack([design, 2.0 * design[:, 2]])              # column 5 = 2 × column 2
+    doubled = np.column_stack([design, 2.0 * design[:, 2]])  # column 5 = 2 × column 2
     solution = scaled_least_squares(doubled, targets)
     assert solution.rank == 5 and not solution.kept.all()
     assert len(solution.dependent_columns) == 1 and solution.dependent_columns[0] in (2, 5)
@@ -129,10 +140,15 @@ def test_a_dependent_column_is_fixed_at_zero_or_named():
 def test_fit_model_drops_a_term_the_schedule_does_not_excite():
     rng = np.random.default_rng(5)
     outputs = rng.uniform(-1.0, 1.0, (30, 6))
-    outputs[:, 4] = 0.0                                                    # MYV never loaded
+    outputs[:, 4] = 0.0  # MYV never loaded
     terms = parse_terms(['FXV', 'FYV', 'MYV'])
     loads = rng.normal(size=(30, 6))
-    fit = fit_model(terms, outputs, loads, rated_outputs={v: 1.0 for v in ('FXV', 'FYV', 'MYV')},
-                    on_unexcited='drop')
+    fit = fit_model(
+        terms,
+        outputs,
+        loads,
+        rated_outputs=dict.fromkeys(('FXV', 'FYV', 'MYV'), 1.0),
+        on_unexcited='drop',
+    )
     assert fit.unexcited_terms == ('MYV',) and fit.rank == 2
     assert np.all(fit.model.coefficients[:, 2] == 0.0) and np.all(fit.standard_errors[:, 2] == 0.0)

@@ -1,32 +1,47 @@
 """Honest validation of table calibrations (issue 20, Deliver 5): validation series the calibration
 lacks get their own tares with the model held fixed; loads beyond the calibrated range or in a
 sign never calibrated, and a coverage of ±1.96 u below 90 %, are warned; the console line shows
-in-sample, cross-validated and validation σ."""
+in-sample, cross-validated and validation σ.
+"""
+
 import json
 
 import numpy as np
-
 import table_cases as tc
+
 from balance_calib.cli import main
 from balance_calib.tables.balfit_writer import write_table
 
 
 def _campaign(tmp_path, seed, **validation):
     """A 3-component cell (4 orientations per axis: 12 series of 6 points) and a validation run
-    in other orientations (series 21-...), both from one physical cell (same random structure)."""
-    cal, _, cal_tares = tc.three_component_cell(np.random.default_rng(seed), series_per_axis=4, steps=6,
-                                                knee=0.0, return_tares=True)
-    val, _, val_tares = tc.three_component_cell(np.random.default_rng(seed), series_per_axis=4, steps=6,
-                                                knee=0.0, first_series=21, return_tares=True,
-                                                **validation)
-    return (write_table(tmp_path / 'cal.csv', cal), write_table(tmp_path / 'val.csv', val),
-            val_tares, cal_tares)
+    in other orientations (series 21-...), both from one physical cell (same random structure).
+    """
+    cal, _, cal_tares = tc.three_component_cell(
+        np.random.default_rng(seed), series_per_axis=4, steps=6, knee=0.0, return_tares=True
+    )
+    val, _, val_tares = tc.three_component_cell(
+        np.random.default_rng(seed),
+        series_per_axis=4,
+        steps=6,
+        knee=0.0,
+        first_series=21,
+        return_tares=True,
+        **validation,
+    )
+    return (
+        write_table(tmp_path / 'cal.csv', cal),
+        write_table(tmp_path / 'val.csv', val),
+        val_tares,
+        cal_tares,
+    )
 
 
 def _fit(tmp_path, capsys, cal, val):
     out = tmp_path / 'out'
-    assert main(['fit', str(cal), '--validate', str(val), '--out', str(out), '--no-plots']) == 0, \
+    assert main(['fit', str(cal), '--validate', str(val), '--out', str(out), '--no-plots']) == 0, (
         capsys.readouterr().err
+    )
     return json.loads((out / 'report.json').read_text()), capsys.readouterr().out
 
 
@@ -41,8 +56,10 @@ def test_other_setups_get_their_own_tares_within_their_standard_errors(tmp_path,
     for s, truth in val_tares.items():
         for k, symbol in enumerate(('FX', 'FY', 'FZ')):
             capacity = report['capacities'][symbol]
-            allowed = 4 * sigma[str(s)][symbol] + 3 * report['sigma_pct_capacity']['crossval'][symbol] \
-                * capacity / 100
+            allowed = (
+                4 * sigma[str(s)][symbol]
+                + 3 * report['sigma_pct_capacity']['crossval'][symbol] * capacity / 100
+            )
             assert abs(own[str(s)][symbol] - truth[k]) <= allowed, (s, symbol)
     assert any('not in the calibration' in w for w in report['warnings'])
     assert not any('extrapolation' in w for w in report['warnings'])
@@ -61,7 +78,7 @@ def test_loads_beyond_the_calibrated_range_are_warned(tmp_path, capsys):
         assert f'validation loads {symbol} positive to 2.00x' in warnings
         assert f'validation loads {symbol} negative to 2.00x' in warnings
     coverage = report['methods_compared'][report['method']]['validation_coverage_1.96u']
-    assert coverage >= 0.9 and 'within ±1.96 u' not in warnings   # the cell extrapolates well
+    assert coverage >= 0.9 and 'within ±1.96 u' not in warnings  # the cell extrapolates well
 
 
 def test_a_coverage_below_ninety_percent_is_warned(tmp_path, capsys):
@@ -75,12 +92,24 @@ def test_a_coverage_below_ninety_percent_is_warned(tmp_path, capsys):
 
 def test_a_sign_never_calibrated_is_named(tmp_path, capsys):
     # the calibration: positive loads only (series_per_axis=1); validation: negative
-    cal, _, _ = tc.three_component_cell(np.random.default_rng(43), series_per_axis=1, steps=6, knee=0.0,
-                                        return_tares=True)
-    val, _, _ = tc.three_component_cell(np.random.default_rng(43), series_per_axis=1, steps=6, knee=0.0,
-                                        sign=-1.0, first_series=7, return_tares=True)
-    report, _ = _fit(tmp_path, capsys, write_table(tmp_path / 'cal.csv', cal),
-                     write_table(tmp_path / 'val.csv', val))
+    cal, _, _ = tc.three_component_cell(
+        np.random.default_rng(43), series_per_axis=1, steps=6, knee=0.0, return_tares=True
+    )
+    val, _, _ = tc.three_component_cell(
+        np.random.default_rng(43),
+        series_per_axis=1,
+        steps=6,
+        knee=0.0,
+        sign=-1.0,
+        first_series=7,
+        return_tares=True,
+    )
+    report, _ = _fit(
+        tmp_path,
+        capsys,
+        write_table(tmp_path / 'cal.csv', cal),
+        write_table(tmp_path / 'val.csv', val),
+    )
     warnings = ' | '.join(report['warnings'])
     for symbol in ('FX', 'FY', 'FZ'):
         assert f'validation applies {symbol} negative' in warnings and 'never applied' in warnings

@@ -3,6 +3,7 @@
 Every import is counted, at the top of a module and inside functions alike (a lazy import hides a
 cycle from Python, not from the reader): the folders show the pipeline, and imports point down it.
 """
+
 import ast
 from pathlib import Path
 
@@ -25,7 +26,7 @@ def import_graph(package: Path = PACKAGE) -> dict[str, set[str]]:
         here = name.split('.') if path.name == '__init__.py' else name.split('.')[:-1]
         for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
             if isinstance(node, ast.ImportFrom):
-                base = (here[:len(here) - node.level + 1] if node.level else [])
+                base = here[: len(here) - node.level + 1] if node.level else []
                 target = '.'.join(base + ([node.module] if node.module else []))
                 names = [target] + [f'{target}.{alias.name}' for alias in node.names]
             elif isinstance(node, ast.Import):
@@ -98,5 +99,6 @@ def test_no_folder_imports_itself_back():
     folders: dict[str, set[str]] = {}
     for module, targets in import_graph().items():
         folders.setdefault(_folder(module), set()).update(
-            _folder(t) for t in targets if _folder(t) != _folder(module))
+            _folder(t) for t in targets if _folder(t) != _folder(module)
+        )
     assert cycles(folders) == []

@@ -1,9 +1,12 @@
 """Zero and tare belong to an installation: the persisted state records the calibration file's
 content, the installation, the namespace and the node, and the session restores it only when all
-four match (without ROS: the session the node drives)."""
+four match (without ROS: the session the node drives).
+"""
+
 from dataclasses import replace
 from pathlib import Path
 
+from live_cases import CAPACITY, MEMO, NOISE_MV, TRUTH
 import numpy as np
 import pytest
 import yaml
@@ -12,28 +15,34 @@ from balance_calib.calibration_file import save_calibration
 from balance_calib.live.calibrator_core import OK, WARN
 from balance_calib.live.parameters import PARAMETERS, STRING_ARRAY
 from balance_calib.live.session import CalibratorSession
-from balance_calib.live.tare_store import TareOwner, calibration_sha256, restore_refusal
+from balance_calib.live.tare_store import calibration_sha256, restore_refusal, TareOwner
 from balance_calib.simulation.wind_on import wind_on_outputs
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
-from live_cases import CAPACITY, MEMO, NOISE_MV, TRUTH
 
 # what the balance carries with the model on, balance axes: 0.3 FS on F_Z, 0.05 FS on M_Y
 WEIGHT_BALANCE = np.array([0.0, 0.0, 0.3, 0.0, 0.05, 0.0]) * CAPACITY
 
 
 def session(calibration: Path, node: str = '/balance_calibrator', **parameters):
-    values = {name: spec.default for name, spec in PARAMETERS.items()
-              if spec.default != STRING_ARRAY}
+    values = {
+        name: spec.default for name, spec in PARAMETERS.items() if spec.default != STRING_ARRAY
+    }
     values.update(calibration_file=str(calibration), tare_samples=50, model='cubic', **parameters)
     lines = []
-    made = CalibratorSession(values.__getitem__, node,
-                             lambda level, line: lines.append((level, line)))
+    made = CalibratorSession(
+        values.__getitem__, node, lambda level, line: lines.append((level, line))
+    )
     return made, lines
 
 
 def take_tare(made: CalibratorSession, seed: int = 0):
-    outputs = wind_on_outputs(TRUTH, np.repeat(WEIGHT_BALANCE[None], 50, axis=0),
-                              electrical_zero_mv=0.0, noise_mv=NOISE_MV, seed=seed)
+    outputs = wind_on_outputs(
+        TRUTH,
+        np.repeat(WEIGHT_BALANCE[None], 50, axis=0),
+        electrical_zero_mv=0.0,
+        noise_mv=NOISE_MV,
+        seed=seed,
+    )
     assert made.start_window('tare', lambda: None) is None
     made.live.process(outputs, 10**9 + np.arange(50) * 10**6, now_s=0.0)
     ok, message = made.finish_window('tare', True, 1.0)
@@ -57,8 +66,11 @@ def test_the_tare_is_restored_for_the_same_calibration_installation_and_node(cal
     take_tare(first)
     saved = yaml.safe_load((calibration.parent / 'calibration.tare.yaml').read_text())['taken_for']
     assert saved['calibration_sha256'] == calibration_sha256(calibration) != ''
-    assert (saved['installation'], saved['namespace'], saved['node']) == \
-        ('-FX,FY,-FZ,MX,MY,MZ', '/', 'balance_calibrator')
+    assert (saved['installation'], saved['namespace'], saved['node']) == (
+        '-FX,FY,-FZ,MX,MY,MZ',
+        '/',
+        'balance_calibrator',
+    )
     again, lines = session(calibration)
     np.testing.assert_array_equal(again.live.tare.tare_load, first.live.tare.tare_load)
     assert again.tare_refused == '' and any('restored from' in line for _, line in lines)
@@ -81,24 +93,27 @@ def test_changed_calibration_content_is_not_restored_and_says_why_until_a_new_ta
     status, values = calibration_status(later)
     assert status.level == WARN and 'NOT restored' in status.message
     assert 'another calibration' in values['tare_not_restored']
-    assert calibration_status(later)[0].level == WARN          # stays, tick after tick
-    take_tare(later)                          # a new ~/tare: it belongs to this calibration
+    assert calibration_status(later)[0].level == WARN  # stays, tick after tick
+    take_tare(later)  # a new ~/tare: it belongs to this calibration
     status, values = calibration_status(later)
     assert status.level == OK and values['tare_not_restored'] == 'none'
     assert session(calibration)[0].live.tare.tare_load is not None
 
 
 def test_another_namespace_or_installation_is_not_restored(calibration, tmp_path):
-    shared = str(tmp_path / 'shared.tare.yaml')       # tare_file names one file for every node
+    shared = str(tmp_path / 'shared.tare.yaml')  # tare_file names one file for every node
     take_tare(session(calibration, tare_file=shared)[0])
     left, lines = session(calibration, '/left/balance_calibrator', tare_file=shared)
     assert left.live.tare.tare_load is None
-    assert 'taken by node /balance_calibrator, this is /left/balance_calibrator' \
-        in left.tare_refused
+    assert (
+        'taken by node /balance_calibrator, this is /left/balance_calibrator' in left.tare_refused
+    )
     inverted, _ = session(calibration, tare_file=shared, installation='inverted')
     assert inverted.live.tare.tare_load is None
-    assert 'taken in the upright installation (-FX,FY,-FZ,MX,MY,MZ), now inverted' \
+    assert (
+        'taken in the upright installation (-FX,FY,-FZ,MX,MY,MZ), now inverted'
         in inverted.tare_refused
+    )
     # the same signed permutation spelt out is the same installation
     spelt, _ = session(calibration, tare_file=shared, installation='-FX,FY,-FZ,MX,MY,MZ')
     assert spelt.live.tare.tare_load is not None and spelt.tare_refused == ''
@@ -109,7 +124,7 @@ def test_an_older_tare_file_without_an_owner_is_read_not_restored_and_warned_abo
     path = calibration.parent / 'calibration.tare.yaml'
     data = yaml.safe_load(path.read_text())
     del data['taken_for']
-    data['format'] = 'balance_calib/tare 1'                  # as the node wrote it before
+    data['format'] = 'balance_calib/tare 1'  # as the node wrote it before
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     older, lines = session(calibration)
     assert older.live.tare.tare_load is None
@@ -122,15 +137,17 @@ def test_the_matching_rule():
 
     def refusal(**changed):
         return restore_refusal(owner, replace(owner, **changed))
+
     assert refusal() == ''
-    assert refusal(installation_name='as calibrated') == ''          # a label, not the axes
+    assert refusal(installation_name='as calibrated') == ''  # a label, not the axes
     assert 'another calibration' in refusal(calibration_sha256='cd' * 32)
     unknown = replace(owner, calibration_sha256='')
-    assert 'another calibration' in restore_refusal(unknown, unknown)   # unknown never matches
+    assert 'another calibration' in restore_refusal(unknown, unknown)  # unknown never matches
     assert 'this is /left/balance_calibrator' in refusal(namespace='/left')
     assert 'this is /balance_calibrator_2' in refusal(node='balance_calibrator_2')
     assert 'installation' in refusal(installation='-FX,-FY,FZ,MX,-MY,-MZ')
     assert 'older tare file' in restore_refusal(None, owner)
-    assert TareOwner.of_node('', INVERTED, '/left/balance_calibrator') == \
-        TareOwner('', '-FX,-FY,FZ,MX,-MY,-MZ', '/left', 'balance_calibrator', 'inverted')
+    assert TareOwner.of_node('', INVERTED, '/left/balance_calibrator') == TareOwner(
+        '', '-FX,-FY,FZ,MX,-MY,-MZ', '/left', 'balance_calibrator', 'inverted'
+    )
     assert TareOwner.of_node('', UPRIGHT, '/balance_calibrator').namespace == '/'

@@ -4,9 +4,10 @@ data/tm663 is a copy of the steering ../shared/data; tools/make_balance_configs.
 config/lmc6522.yaml and config/b660h.yaml. A clone on its own must regenerate the configs byte for
 byte, so that the configs' provenance is in the repository, not beside it.
 """
+
+from pathlib import Path
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 
@@ -27,10 +28,21 @@ def test_the_copy_equals_the_steering_data(name):
 
 
 def test_the_shipped_configs_regenerate_from_the_repository_alone(tmp_path):
-    done = subprocess.run([sys.executable, str(ROOT / 'tools' / 'make_balance_configs.py'),
-                           '--data', str(OWN), '--out-dir', str(tmp_path)],
-                          capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / 'tools' / 'make_balance_configs.py'),
+            '--data',
+            str(OWN),
+            '--out-dir',
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 0, done.stderr
     for name in ('lmc6522.yaml', 'b660h.yaml'):
         assert (tmp_path / name).read_bytes() == (ROOT / 'config' / name).read_bytes(), (
-            f'config/{name} is not what tools/make_balance_configs.py makes of data/tm663')
+            f'config/{name} is not what tools/make_balance_configs.py makes of data/tm663'
+        )

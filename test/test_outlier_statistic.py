@@ -1,5 +1,7 @@
 """The outlier statistic both acceptance gates use (refit/gates.py, tables/gates.py): standardised
-leave-one-out residuals and their robust σ, checked on hand-worked numbers."""
+leave-one-out residuals and their robust σ, checked on hand-worked numbers.
+"""
+
 import numpy as np
 
 from balance_calib.refit.gates import robust_sigma, standardized_press, worst_first
@@ -7,8 +9,8 @@ from balance_calib.refit.gates import robust_sigma, standardized_press, worst_fi
 
 def test_standardised_press_residuals_are_press_times_root_one_minus_leverage():
     leverage = np.array([0.0, 0.5, 0.75, 0.96])
-    residuals = np.array([[2.0], [1.0], [-3.0], [0.5]])                  # N
-    press = residuals / (1.0 - leverage)[:, None]                         # e / (1 - h)
+    residuals = np.array([[2.0], [1.0], [-3.0], [0.5]])  # N
+    press = residuals / (1.0 - leverage)[:, None]  # e / (1 - h)
     press_pct, standardized = standardized_press(residuals, press, np.array([200.0]))
     np.testing.assert_allclose(press_pct[:, 0], [1.0, 1.0, -6.0, 6.25])  # % of 200 N
     # × sqrt(1 - h): 1, √0.5, 0.5, 0.2
@@ -16,7 +18,7 @@ def test_standardised_press_residuals_are_press_times_root_one_minus_leverage():
 
 
 def test_robust_sigma_is_1_4826_mad_of_the_loaded_points_and_the_tail_bound_on_request():
-    values = np.arange(1.0, 13.0)                                         # 1 … 12, median 6.5
+    values = np.arange(1.0, 13.0)  # 1 … 12, median 6.5
     loaded = np.ones(12, bool)
     # |x - 6.5| = 0.5, 0.5, 1.5, 1.5, …, 5.5, 5.5: median 3.0
     assert robust_sigma(values[:, None], loaded)[0] == 1.4826 * 3.0
@@ -32,7 +34,8 @@ def test_robust_sigma_is_1_4826_mad_of_the_loaded_points_and_the_tail_bound_on_r
     assert robust_sigma(with_zeros, np.arange(20) < 12)[0] == 1.4826 * 3.0
     # fewer than 10 loaded points: all points count
     assert robust_sigma(with_zeros, np.arange(20) < 5)[0] == 1.4826 * np.median(
-        np.abs(with_zeros[:, 0] - np.median(with_zeros[:, 0])))
+        np.abs(with_zeros[:, 0] - np.median(with_zeros[:, 0]))
+    )
 
 
 def test_flagged_points_come_worst_first_with_their_worst_component():

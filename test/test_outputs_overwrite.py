@@ -1,6 +1,8 @@
 """--out of refit, fit and export-table (interfaces.md, "Command line"): a DIR holding a
 calibration record is refused unless --overwrite, and then nothing of the earlier run stays;
-never a file that is not the tool's own, never beside the shipped balance configs; files 0644."""
+never a file that is not the tool's own, never beside the shipped balance configs; files 0644.
+"""
+
 import shutil
 import stat
 
@@ -15,13 +17,16 @@ RECORD = {'calibration.yaml', 'report.json', 'report.md'}
 
 @pytest.fixture(scope='module')
 def bag(tmp_path_factory):
-    return write_mcap(campaign_events(small_campaign('lmc6522', seed=11)),
-                      tmp_path_factory.mktemp('bag') / 'campaign.mcap')
+    return write_mcap(
+        campaign_events(small_campaign('lmc6522', seed=11)),
+        tmp_path_factory.mktemp('bag') / 'campaign.mcap',
+    )
 
 
 def _refit(bag, out, *extra):
-    return main(['refit', str(bag), '--balance', 'lmc6522', '--out', str(out), '--no-diagnosis',
-                 *extra])
+    return main(
+        ['refit', str(bag), '--balance', 'lmc6522', '--out', str(out), '--no-diagnosis', *extra]
+    )
 
 
 def _snapshot(directory):
@@ -54,9 +59,9 @@ def test_refit_refuses_an_earlier_record_and_replaces_it_whole(bag, tmp_path, ca
         (out / stale).write_bytes(b'\x89PNG stale')
     before = _snapshot(out)
     _refused(capsys, _refit(bag, out), str(out), 'calibration record', '--overwrite')
-    assert _snapshot(out) == before                                   # nothing touched
+    assert _snapshot(out) == before  # nothing touched
     # a file that is not ours: --overwrite refuses rather than delete it
-    (out / 'notes.txt').write_text('the crew\'s notes')
+    (out / 'notes.txt').write_text("the crew's notes")
     with_notes = _snapshot(out)
     _refused(capsys, _refit(bag, out, '--overwrite'), 'notes.txt', 'move them away')
     assert _snapshot(out) == with_notes
@@ -69,17 +74,17 @@ def test_refit_refuses_an_earlier_record_and_replaces_it_whole(bag, tmp_path, ca
     assert (out / 'calibration.yaml').read_bytes() != before['calibration.yaml'][0]
     modes = {p.name: oct(_mode(p)) for p in out.iterdir()}
     assert set(modes.values()) == {'0o644'}, modes
-    assert [p.name for p in tmp_path.iterdir() if p.name.startswith('.')] == []   # no staging
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith('.')] == []  # no staging
 
 
 def test_refit_into_a_directory_without_a_record_keeps_other_files(bag, tmp_path, capsys):
     out = tmp_path / 'shared'
     out.mkdir()
     (out / 'notes.txt').write_text('kept')
-    (out / 'photo.png').write_bytes(b'\x89PNG the crew\'s')      # a name like a plot's, not ours
+    (out / 'photo.png').write_bytes(b"\x89PNG the crew's")  # a name like a plot's, not ours
     assert _refit(bag, out, '--overwrite') == 0
     assert (out / 'notes.txt').read_text() == 'kept' and (out / 'calibration.yaml').exists()
-    assert (out / 'photo.png').read_bytes() == b'\x89PNG the crew\'s'
+    assert (out / 'photo.png').read_bytes() == b"\x89PNG the crew's"
 
 
 def test_nothing_is_written_beside_the_balance_configs(bag, tmp_path, capsys):
@@ -91,8 +96,14 @@ def test_nothing_is_written_beside_the_balance_configs(bag, tmp_path, capsys):
     copy.mkdir()
     shutil.copy(CONFIG_DIR / 'lmc6522.yaml', copy / 'lmc6522.yaml')
     _refused(capsys, _refit(bag, copy), 'lmc6522.yaml')
-    export = ['export-table', str(bag), '--balance', 'lmc6522', '--out',
-              str(copy / 'lmc6522.yaml')]
+    export = [
+        'export-table',
+        str(bag),
+        '--balance',
+        'lmc6522',
+        '--out',
+        str(copy / 'lmc6522.yaml'),
+    ]
     _refused(capsys, main(export + ['--overwrite']), 'balance configs')
     assert _names(copy) == {'lmc6522.yaml'}
 
@@ -111,13 +122,22 @@ def test_export_table_and_fit_follow_the_same_rule(bag, tmp_path, capsys):
     _refused(capsys, main(export[:-1] + [str(tmp_path)]), 'is a directory')
 
     out = tmp_path / 'fit'
-    fit = ['fit', str(table), '--out', str(out), '--method', 'direct', '--terms', 'tm663-cubic',
-           '--no-plots']
+    fit = [
+        'fit',
+        str(table),
+        '--out',
+        str(out),
+        '--method',
+        'direct',
+        '--terms',
+        'tm663-cubic',
+        '--no-plots',
+    ]
     assert main(fit) == 0
     capsys.readouterr()
     # fit wrote calibration.yaml 0600 before: the same 0644 as refit now
     files = RECORD | {'point_uncertainty.csv'}
-    assert {p.name: _mode(p) for p in out.iterdir()} == {name: 0o644 for name in files}
+    assert {p.name: _mode(p) for p in out.iterdir()} == dict.fromkeys(files, 420)
     (out / 'residuals_iterative.png').write_bytes(b'stale')
     before = _snapshot(out)
     _refused(capsys, main(fit), str(out), 'calibration record')
@@ -129,6 +149,7 @@ def test_export_table_and_fit_follow_the_same_rule(bag, tmp_path, capsys):
 def test_staged_inside_out_stale_files_go_and_calibration_yaml_comes_last(tmp_path, monkeypatch):
     # the path taken when only DIR (not its parent) is writable: staging inside DIR, file by file
     from balance_calib import output_dir
+
     out = tmp_path / 'out'
     out.mkdir()
     for name in RECORD | {'effect_creep.png', 'unexplained_MZ.png'}:

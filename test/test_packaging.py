@@ -1,14 +1,15 @@
 """ROS packaging: launch/graph.launch.yaml starts what launchless_scripts/graph starts, with
 parameters the nodes declare; setup.py installs config/models and the launch file; package.xml
 names a checked key for every third-party import (no DDS, no build: launchless_scripts/colcon_check
-builds for real)."""
+builds for real).
+"""
 
 import ast
+from pathlib import Path
 import re
 import runpy
 import sys
 import xml.etree.ElementTree as ElementTree
-from pathlib import Path
 
 import pytest
 import yaml
@@ -84,6 +85,7 @@ def console_scripts() -> dict[str, str]:
 def setup_keywords(monkeypatch) -> dict:
     """What setup.py passes to setuptools.setup(), run in the source tree, building nothing."""
     import setuptools
+
     captured = {}
     monkeypatch.setattr(setuptools, 'setup', lambda **kwargs: captured.update(kwargs))
     monkeypatch.chdir(ROOT)
@@ -108,8 +110,9 @@ def graph_nodes() -> list[str]:
 
 
 def declared_parameters(executable: str) -> set[str]:
-    module = sys.modules.get(console_scripts()[executable].split(':')[0]) or \
-        __import__(console_scripts()[executable].split(':')[0], fromlist=['main'])
+    module = sys.modules.get(console_scripts()[executable].split(':')[0]) or __import__(
+        console_scripts()[executable].split(':')[0], fromlist=['main']
+    )
     return {name for name, _, _ in _help.parameter_table(module)}
 
 
@@ -173,6 +176,7 @@ def test_declared_parameters_are_read_from_the_nodes_own_tables():
     """The check above can fail: the tables are the nodes', and a made-up name is not in them."""
     from balance_calib.live.parameters import PARAMETERS as CALIBRATOR
     from balance_calib.nodes.bridge_publisher import PARAMETERS as PUBLISHER
+
     assert declared_parameters('balance_calibrator') == set(CALIBRATOR)
     assert declared_parameters('bridge_publisher') == set(PUBLISHER)
     assert declared_parameters('balance_recorder') == {'topics', 'output'}
@@ -192,8 +196,9 @@ def test_setup_installs_config_models_and_the_launch_file(monkeypatch):
 
 def test_an_installed_package_finds_its_models_in_its_share_directory(tmp_path, monkeypatch):
     """Installed without --symlink-install the package has no config/ beside it: share/ it is."""
-    import balance_calib.config as config
     from balance_calib.aero.model_file import load_model
+    import balance_calib.config as config
+
     share = tmp_path / 'prefix' / 'share'
     (share / 'ament_index' / 'resource_index' / 'packages').mkdir(parents=True)
     (share / 'ament_index' / 'resource_index' / 'packages' / 'balance_calib').write_text('')
@@ -204,7 +209,7 @@ def test_an_installed_package_finds_its_models_in_its_share_directory(tmp_path, 
         (ROOT / 'config' / 'lmc6522.yaml').read_text()
     )
     monkeypatch.setenv('AMENT_PREFIX_PATH', str(tmp_path / 'prefix'))
-    monkeypatch.setattr(config, 'CONFIG_DIR', tmp_path / 'site-packages' / 'config')   # not there
+    monkeypatch.setattr(config, 'CONFIG_DIR', tmp_path / 'site-packages' / 'config')  # not there
     model = load_model('euler_replica_lmc6522')
     assert Path(model.path).parent == share / 'balance_calib' / 'config' / 'models'
     assert (
@@ -247,11 +252,10 @@ def test_package_xml_names_a_checked_key_for_every_import():
     )
     # the old, unverified keys are gone
     assert not {'python3-rosbags', 'python3-mcap', 'python3-mcap-ros2-support'} & (run | test)
-    for directory, keys in ((ROOT / 'balance_calib', run),
-                            (ROOT / 'test', run | test)):
+    for directory, keys in ((ROOT / 'balance_calib', run), (ROOT / 'test', run | test)):
         local = {'balance_calib'} | {p.stem for p in (ROOT / 'test').glob('*.py')}
         for name, where in _third_party_imports(directory, local).items():
             assert name in IMPORTS, f'{where} imports {name}: which rosdep key installs it?'
-            assert (
-                IMPORTS[name] in keys
-            ), f'{where} imports {name}; package.xml lacks {IMPORTS[name]}'
+            assert IMPORTS[name] in keys, (
+                f'{where} imports {name}; package.xml lacks {IMPORTS[name]}'
+            )

@@ -1,6 +1,8 @@
 """Fuzz of the refit: a few hundred deterministic damaged or mislabelled campaigns (generated here
 by balance_calib.benchmarks.refit_reliability) give zero tracebacks, zero hangs and zero wrong
-calibrations accepted; a refit killed with SIGKILL leaves nothing half-written."""
+calibrations accepted; a refit killed with SIGKILL leaves nothing half-written.
+"""
+
 import os
 import signal
 import subprocess
@@ -8,27 +10,70 @@ import sys
 
 import pytest
 
-from balance_calib.benchmarks.refit_reliability import (Clean, campaign_events, judge_cli, mutants,
-                                                        run_mutants, small_campaign, write_mcap)
+from balance_calib.benchmarks.refit_reliability import (
+    campaign_events,
+    Clean,
+    judge_cli,
+    mutants,
+    run_mutants,
+    small_campaign,
+    write_mcap,
+)
 
-KINDS = {'clean', 'truncate', 'flip_crc', 'flip_nocrc', 'drop_raw', 'drop_marker', 'drop_gravity',
-         'swap_marker_stamps', 'reorder_raw', 'duplicate', 'kgf', 'lbf', 'volts', 'clip', 'wrong_weight',
-         'wrong_balance', 'negative_body', 'reversed_gravity', 'time_jump', 'split_pause', 'tiny',
-         'flip_summary', 'raw_clock_jump', 'lz4_flip_nocrc', 'clock_back', 'zero_stamps'}
+KINDS = {
+    'clean',
+    'truncate',
+    'flip_crc',
+    'flip_nocrc',
+    'drop_raw',
+    'drop_marker',
+    'drop_gravity',
+    'swap_marker_stamps',
+    'reorder_raw',
+    'duplicate',
+    'kgf',
+    'lbf',
+    'volts',
+    'clip',
+    'wrong_weight',
+    'wrong_balance',
+    'negative_body',
+    'reversed_gravity',
+    'time_jump',
+    'split_pause',
+    'tiny',
+    'flip_summary',
+    'raw_clock_jump',
+    'lz4_flip_nocrc',
+    'clock_back',
+    'zero_stamps',
+}
 
 
-@pytest.mark.slow      # ~45 s on 2 cores: a refit of each of 240 mutant bags
+@pytest.mark.slow  # ~45 s on 2 cores: a refit of each of 240 mutant bags
 def test_hundreds_of_mutants_give_no_traceback_and_no_wrong_calibration(tmp_path):
     summary = run_mutants(240, 0, tmp_path, seeds=(0, 1, 2))
     counts = summary['counts']
     assert summary['failures'] == [], summary['failures'][:5]
     assert counts['tried'] == 240 and counts['traceback'] == 0 and counts['silent_wrong'] == 0
-    assert counts['unnamed'] == 0                   # every refusal names the file
+    assert counts['unnamed'] == 0  # every refusal names the file
     assert set(summary['by_kind']) == KINDS
     # what must be refused was (unit errors, wrong balance, bad body, unreadable files) and what is
     # only inconvenient (pauses, jumps, reordering, duplicates) was accepted, correct
-    for kind in ('truncate', 'tiny', 'kgf', 'lbf', 'volts', 'wrong_balance', 'negative_body', 'reversed_gravity',
-                 'clip', 'swap_marker_stamps', 'drop_gravity', 'clock_back'):
+    for kind in (
+        'truncate',
+        'tiny',
+        'kgf',
+        'lbf',
+        'volts',
+        'wrong_balance',
+        'negative_body',
+        'reversed_gravity',
+        'clip',
+        'swap_marker_stamps',
+        'drop_gravity',
+        'clock_back',
+    ):
         assert set(summary['by_kind'][kind]) == {'refused'}, (kind, summary['by_kind'][kind])
     for kind in ('clean', 'split_pause', 'time_jump', 'reorder_raw', 'duplicate', 'drop_raw'):
         assert set(summary['by_kind'][kind]) == {'accepted'}, (kind, summary['by_kind'][kind])
@@ -42,9 +87,17 @@ def cli_mutants(tmp_path_factory):
     return {m.kind: m for m in mutants(clean, workdir, 7, 24)}, workdir
 
 
-@pytest.mark.parametrize('kind, verdict', [('clean', 'accepted'), ('tiny', 'refused'), ('truncate', 'refused'),
-                                           ('flip_nocrc', 'refused'), ('kgf', 'refused'),
-                                           ('split_pause', 'accepted')])
+@pytest.mark.parametrize(
+    'kind, verdict',
+    [
+        ('clean', 'accepted'),
+        ('tiny', 'refused'),
+        ('truncate', 'refused'),
+        ('flip_nocrc', 'refused'),
+        ('kgf', 'refused'),
+        ('split_pause', 'accepted'),
+    ],
+)
 def test_mutants_through_the_command_line(cli_mutants, kind, verdict):
     by_kind, workdir = cli_mutants
     got, detail = judge_cli(by_kind[kind], workdir / f'out-{kind}', timeout_s=300)
@@ -52,9 +105,24 @@ def test_mutants_through_the_command_line(cli_mutants, kind, verdict):
 
 
 def _start_refit(bag, out, *extra):
-    return subprocess.Popen([sys.executable, '-m', 'balance_calib.cli', 'refit', str(bag), '--balance', 'lmc6522',
-                             '--out', str(out), '--progress', *extra],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [
+            sys.executable,
+            '-m',
+            'balance_calib.cli',
+            'refit',
+            str(bag),
+            '--balance',
+            'lmc6522',
+            '--out',
+            str(out),
+            '--progress',
+            *extra,
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 @pytest.mark.parametrize('kill_at', ['zero points and tare', 'writing calibration.yaml'])
@@ -63,7 +131,7 @@ def test_a_refit_killed_with_sigkill_leaves_nothing_half_written(tmp_path, kill_
     out = tmp_path / 'calibration'
     process = _start_refit(bag, out)
     seen = []
-    for line in process.stderr:           # bounded: the refit ends, and with it stderr
+    for line in process.stderr:  # bounded: the refit ends, and with it stderr
         seen.append(line)
         if kill_at in line:
             os.kill(process.pid, signal.SIGKILL)

@@ -1,7 +1,10 @@
-"""The refit pipeline and `balance-calib refit` on real MCAP bags written from simulated campaigns."""
+"""The refit pipeline and `balance-calib refit` on real MCAP bags written from simulated
+campaigns.
+"""
+
 import json
-import subprocess
 from pathlib import Path
+import subprocess
 
 import numpy as np
 import pytest
@@ -12,8 +15,16 @@ from balance_calib.config import load_balance_config
 from balance_calib.model.inverse import outputs_for_loads
 from balance_calib.refit.pipeline import RefitError, run_refit
 
-REPORT_KEYS = {'balance', 'points', 'base_model', 'calibration_body', 'sigma_pct_fs', 'sigma_pct_fs_crossval',
-               'effects', 'adopted'}
+REPORT_KEYS = {
+    'balance',
+    'points',
+    'base_model',
+    'calibration_body',
+    'sigma_pct_fs',
+    'sigma_pct_fs_crossval',
+    'effects',
+    'adopted',
+}
 
 
 @pytest.fixture(scope='module')
@@ -22,7 +33,9 @@ def campaign_bag(campaigns):
 
 
 def _run_cli(*args):
-    return subprocess.run(['balance-calib', *map(str, args)], capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        ['balance-calib', *map(str, args)], capture_output=True, text=True, timeout=300
+    )
 
 
 def test_refit_command_writes_the_promised_files(campaign_bag, tmp_path):
@@ -31,11 +44,18 @@ def test_refit_command_writes_the_promised_files(campaign_bag, tmp_path):
     done = _run_cli('refit', bag, '--balance', 'lmc6522', '--out', out, '--no-diagnosis')
     assert done.returncode == 0, done.stderr
     assert (out / 'calibration.yaml').exists() and (out / 'report.md').exists()
-    assert sorted(p.name for p in out.glob('*.png')) == ['residuals_cubic.png', 'residuals_linear.png',
-                                                         'residuals_quadratic.png']
+    assert sorted(p.name for p in out.glob('*.png')) == [
+        'residuals_cubic.png',
+        'residuals_linear.png',
+        'residuals_quadratic.png',
+    ]
     report = json.loads((out / 'report.json').read_text())
     assert REPORT_KEYS <= set(report)
-    assert report['balance'] == 'LMC6522' and report['points'] == 328 and report['base_model'] == 'cubic'
+    assert (
+        report['balance'] == 'LMC6522'
+        and report['points'] == 328
+        and report['base_model'] == 'cubic'
+    )
     assert set(report['sigma_pct_fs']['before']) == {'FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'}
     assert report['calibration_body']['source'] == 'estimated'
     assert report['calibration_body']['weight_N'] == pytest.approx(669.44, rel=2e-3)
@@ -45,7 +65,11 @@ def test_refit_command_writes_the_promised_files(campaign_bag, tmp_path):
     for component, sigma in report['sigma_pct_fs']['before'].items():
         assert sigma <= 1.15 * table[component], component
     calibration = load_calibration(out / 'calibration.yaml')
-    assert calibration.adopted == 'cubic' and set(calibration.models) == {'linear', 'quadratic', 'cubic'}
+    assert calibration.adopted == 'cubic' and set(calibration.models) == {
+        'linear',
+        'quadratic',
+        'cubic',
+    }
     assert 'COEFFICIENTS OF FX' in (out / 'report.md').read_text()
 
 
@@ -59,14 +83,20 @@ def test_refit_recovers_the_truth_matrix_within_its_standard_errors(campaign_bag
     # loads, with the body weight); far outside it no calibration can be trusted
     outputs = outputs_for_loads(truth, campaign.true_loads)
     error_pct = (fitted.loads(outputs) - truth.loads(outputs)) / config.capacity * 100
-    assert np.all(np.sqrt(np.mean(error_pct ** 2, axis=0)) < 0.05)
+    assert np.all(np.sqrt(np.mean(error_pct**2, axis=0)) < 0.05)
 
 
-def test_bad_inputs_fail_with_one_line_naming_the_problem_and_write_nothing(campaign_bag, tmp_path):
+def test_bad_inputs_fail_with_one_line_naming_the_problem_and_write_nothing(
+    campaign_bag, tmp_path
+):
     bag, _ = campaign_bag
     out = tmp_path / 'out'
     missing = _run_cli('refit', tmp_path / 'nope', '--balance', 'lmc6522', '--out', out)
-    assert missing.returncode == 2 and 'nope' in missing.stderr and len(missing.stderr.strip().splitlines()) == 1
+    assert (
+        missing.returncode == 2
+        and 'nope' in missing.stderr
+        and len(missing.stderr.strip().splitlines()) == 1
+    )
     assert not out.exists() or not any(out.iterdir())
     truncated = tmp_path / 'truncated.mcap'
     data = next(Path(bag).glob('*.mcap')).read_bytes()
@@ -79,8 +109,11 @@ def test_bad_inputs_fail_with_one_line_naming_the_problem_and_write_nothing(camp
 
 
 def test_a_schedule_that_cannot_determine_the_cubic_terms_is_refused_by_name(tmp_path, campaigns):
-    bag = campaigns.bag(points=slice(0, 160))           # the single-component points alone
-    with pytest.raises(RefitError, match=r'does not excite \d+ term\(s\) of the (quadratic|cubic) model: .*MYV\*MZV'):
+    bag = campaigns.bag(points=slice(0, 160))  # the single-component points alone
+    with pytest.raises(
+        RefitError,
+        match=r'does not excite \d+ term\(s\) of the (quadratic|cubic) model: .*MYV\*MZV',
+    ):
         run_refit([bag], 'lmc6522', tmp_path / 'out', diagnose=False)
     assert not (tmp_path / 'out' / 'calibration.yaml').exists()
 

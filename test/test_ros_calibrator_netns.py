@@ -1,8 +1,11 @@
-"""Across hosts (issue 10 item 7): publisher, calibrator and recorder in three network namespaces joined
-by a bridge, as on a tunnel's DAQ, compute and storage machines. Addresses from 198.18.0.0/15 (the
-benchmarking range), discovery over that subnet (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET, UDPv4 only:
-no shared memory between the "hosts"); every namespace, link and bridge is made and removed here.
-Skipped, with the reason, where network namespaces cannot be created (no CAP_NET_ADMIN)."""
+"""Across hosts (issue 10 item 7): publisher, calibrator and recorder in three network namespaces
+joined by a bridge, as on a tunnel's DAQ, compute and storage machines. Addresses from
+198.18.0.0/15 (the benchmarking range), discovery over that subnet
+(ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET, UDPv4 only: no shared memory between the "hosts"); every
+namespace, link and bridge is made and removed here. Skipped, with the reason, where network
+namespaces cannot be created (no CAP_NET_ADMIN).
+"""
+
 import json
 import os
 import signal
@@ -10,16 +13,16 @@ import subprocess
 import sys
 
 import pytest
+from ros_harness import new_domain_id
 
 from balance_calib.calibration_file import load_calibration, save_calibration
 from balance_calib.config import CONFIG_DIR, load_balance_config
 from balance_calib.launchless.processes import ros_args
 from balance_calib.simulation.wind_on import aoa_sweep_profile
 from balance_calib.tunnel_axes import UPRIGHT
-from ros_harness import new_domain_id
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
-HOSTS = ('daq', 'cal', 'rec')          # publisher, calibrator, recorder (and the checker)
+HOSTS = ('daq', 'cal', 'rec')  # publisher, calibrator, recorder (and the checker)
 
 
 def ip(*args, namespace=None):
@@ -28,8 +31,9 @@ def ip(*args, namespace=None):
 
 
 class Network:
-    """Three namespaces with a veth each into a fourth that holds the bridge: the host's own network
-    is not touched."""
+    """Three namespaces with a veth each into a fourth that holds the bridge: the host's own
+    network is not touched.
+    """
 
     def __init__(self):
         self.prefix = f'bc{os.getpid() % 100000}'
@@ -40,14 +44,18 @@ class Network:
         try:
             ip('netns', 'add', bridge)
         except (OSError, subprocess.CalledProcessError) as err:
-            reason = getattr(err, "stderr", "") or err
+            reason = getattr(err, 'stderr', '') or err
             pytest.skip(f'cannot create network namespaces here: {reason}'.strip())
         self.made.append(bridge)
         ip('link', 'add', 'br0', 'type', 'bridge', namespace=bridge)
         for link in ('br0', 'lo'):
             ip('link', 'set', link, 'up', namespace=bridge)
         for k, host in enumerate(HOSTS, start=1):
-            namespace, inside, outside = f'{self.prefix}{host}', f'{self.prefix}v{host}', f'{self.prefix}b{host}'
+            namespace, inside, outside = (
+                f'{self.prefix}{host}',
+                f'{self.prefix}v{host}',
+                f'{self.prefix}b{host}',
+            )
             ip('netns', 'add', namespace)
             self.made.append(namespace)
             ip('link', 'add', inside, 'type', 'veth', 'peer', 'name', outside)
@@ -58,14 +66,15 @@ class Network:
             ip('addr', 'add', f'198.18.0.{k}/24', 'dev', inside, namespace=namespace)
             for link in (inside, 'lo'):
                 ip('link', 'set', link, 'up', namespace=namespace)
-            ip('route', 'add', '224.0.0.0/4', 'dev', inside, namespace=namespace)    # DDS discovery multicast
+            # DDS discovery multicast
+            ip('route', 'add', '224.0.0.0/4', 'dev', inside, namespace=namespace)
         return self
 
     def namespace(self, host):
         return f'{self.prefix}{host}'
 
     def __exit__(self, *exc):
-        for namespace in reversed(self.made):        # deleting a namespace removes its links
+        for namespace in reversed(self.made):  # deleting a namespace removes its links
             subprocess.run(['ip', 'netns', 'del', namespace], capture_output=True, timeout=20)
 
 
@@ -74,8 +83,13 @@ class HostProcess:
 
     def __init__(self, network, host, command, env, log):
         self.log = open(log, 'w')
-        self.process = subprocess.Popen(['ip', 'netns', 'exec', network.namespace(host)] + command, env=env,
-                                        stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
+        self.process = subprocess.Popen(
+            ['ip', 'netns', 'exec', network.namespace(host)] + command,
+            env=env,
+            stdout=self.log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
 
     def stop(self, timeout_s=10.0):
         if self.process.poll() is None:
@@ -89,7 +103,7 @@ class HostProcess:
         return self.process.returncode
 
 
-CHECKER = r'''
+CHECKER = r"""
 import json, sys, time
 import rclpy
 from geometry_msgs.msg import WrenchStamped
@@ -118,46 +132,115 @@ reply = future.result() if future.done() else None
 print(json.dumps({'raw': len(stamps['raw']), 'wrench': len(stamps['wrench']),
                   'same_stamps': stamps['raw'] == stamps['wrench'],
                   'refit': None if reply is None else [reply.success, reply.message]}), flush=True)
-'''
+"""
 
 
-def test_three_hosts_over_a_bridge_lose_nothing_at_1_khz_and_refit_through_the_service(tmp_path, campaigns):
+def test_three_hosts_over_a_bridge_lose_nothing_at_1_khz_and_refit_through_the_service(
+    tmp_path, campaigns
+):
     config = load_balance_config('lmc6522')
     bag = campaigns.bag(seed=5, recipe='dds', noise=None)
     calibration_file = tmp_path / 'calibration.yaml'
     save_calibration(calibration_file, load_calibration(CONFIG_DIR / 'lmc6522.yaml'))
     rate, hold_s, wind_off_s, alphas = 1000.0, 0.3, 0.5, (-2.0, 6.0, 14.0, 22.0)
-    expected = len(aoa_sweep_profile(config.capacity, UPRIGHT, rate, alphas_deg=alphas, hold_s=hold_s,
-                                     wind_off_s=wind_off_s).times_s)
-    env = dict(os.environ, ROS_DOMAIN_ID=str(new_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE='SUBNET',
-               FASTDDS_BUILTIN_TRANSPORTS='UDPv4', PYTHONUNBUFFERED='1')
+    expected = len(
+        aoa_sweep_profile(
+            config.capacity, UPRIGHT, rate, alphas_deg=alphas, hold_s=hold_s, wind_off_s=wind_off_s
+        ).times_s
+    )
+    env = dict(
+        os.environ,
+        ROS_DOMAIN_ID=str(new_domain_id()),
+        ROS_AUTOMATIC_DISCOVERY_RANGE='SUBNET',
+        FASTDDS_BUILTIN_TRANSPORTS='UDPv4',
+        PYTHONUNBUFFERED='1',
+    )
     processes = {}
     with Network() as network:
         try:
-            processes['calibrator'] = HostProcess(network, 'cal', ['balance_calibrator'] + ros_args({
-                'calibration_file': str(calibration_file), 'calibration_bags': [str(bag)],
-                'report_dir': str(tmp_path / 'reports')}), env, tmp_path / 'calibrator.log')
-            processes['recorder'] = HostProcess(network, 'rec', ['balance_recorder'] + ros_args({
-                'topics': ['/balance/raw', '/balance/wrench'], 'output': str(tmp_path / 'recorded')}),
-                env, tmp_path / 'recorder.log')
-            checker = subprocess.Popen(['ip', 'netns', 'exec', network.namespace('rec'), sys.executable, '-c',
-                                        CHECKER, str(expected), '150'], env=env, stdout=subprocess.PIPE,
-                                       stderr=subprocess.PIPE, text=True, start_new_session=True)
-            processes['publisher'] = HostProcess(network, 'daq', ['bridge_publisher'] + ros_args({
-                'mode': 'wind_on', 'rate_hz': rate, 'hold_s': hold_s, 'wind_off_s': wind_off_s,
-                'alpha_start_deg': alphas[0], 'alpha_end_deg': alphas[-1], 'alpha_step_deg': 8.0,
-                'noise_sigma_pct_fs': 0.005, 'exit_when_done': True, 'wait_for_subscribers': 3}),
-                env, tmp_path / 'publisher.log')
+            processes['calibrator'] = HostProcess(
+                network,
+                'cal',
+                ['balance_calibrator']
+                + ros_args(
+                    {
+                        'calibration_file': str(calibration_file),
+                        'calibration_bags': [str(bag)],
+                        'report_dir': str(tmp_path / 'reports'),
+                    }
+                ),
+                env,
+                tmp_path / 'calibrator.log',
+            )
+            processes['recorder'] = HostProcess(
+                network,
+                'rec',
+                ['balance_recorder']
+                + ros_args(
+                    {
+                        'topics': ['/balance/raw', '/balance/wrench'],
+                        'output': str(tmp_path / 'recorded'),
+                    }
+                ),
+                env,
+                tmp_path / 'recorder.log',
+            )
+            checker = subprocess.Popen(
+                [
+                    'ip',
+                    'netns',
+                    'exec',
+                    network.namespace('rec'),
+                    sys.executable,
+                    '-c',
+                    CHECKER,
+                    str(expected),
+                    '150',
+                ],
+                env=env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+                start_new_session=True,
+            )
+            processes['publisher'] = HostProcess(
+                network,
+                'daq',
+                ['bridge_publisher']
+                + ros_args(
+                    {
+                        'mode': 'wind_on',
+                        'rate_hz': rate,
+                        'hold_s': hold_s,
+                        'wind_off_s': wind_off_s,
+                        'alpha_start_deg': alphas[0],
+                        'alpha_end_deg': alphas[-1],
+                        'alpha_step_deg': 8.0,
+                        'noise_sigma_pct_fs': 0.005,
+                        'exit_when_done': True,
+                        'wait_for_subscribers': 3,
+                    }
+                ),
+                env,
+                tmp_path / 'publisher.log',
+            )
             out, err = checker.communicate(timeout=200)
-            assert processes['publisher'].process.wait(60) == 0, (tmp_path / 'publisher.log').read_text()
+            assert processes['publisher'].process.wait(60) == 0, (
+                tmp_path / 'publisher.log'
+            ).read_text()
         finally:
             for name in ('publisher', 'recorder', 'calibrator'):
                 if name in processes:
                     processes[name].stop()
     result = json.loads(out.strip().splitlines()[-1]) if out.strip() else {'error': err[-2000:]}
-    assert result.get('raw') == expected and result.get('wrench') == expected and result['same_stamps'], result
+    assert (
+        result.get('raw') == expected
+        and result.get('wrench') == expected
+        and result['same_stamps']
+    ), result
     assert result['refit'][0] and result['refit'][1].startswith('refit OK'), result['refit']
     from mcap.reader import make_reader
+
     counts = {}
     for path in sorted((tmp_path / 'recorded').glob('*.mcap')):
         with open(path, 'rb') as handle:

@@ -2,28 +2,35 @@
 --axes FZ,MX,MY` wrote from a small laboratory table: each raw sample gives the three components
 the cell's own linear response says (hand-computed), the other three 0 with their uncertainty NaN,
 and /diagnostics names the absent components; a calibration of 8 bridge outputs stops it with one
-line."""
+line.
+"""
+
 import time
 
-import numpy as np
-import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
-
-from ros_harness import RELIABLE, NodeProcess, Probe, new_domain_id, six, wait_for
-from partial_cells import CAPACITY, SIGMA_LOAD, SLOTS, fit_cell, raw_samples
+import numpy as np
+from partial_cells import CAPACITY, fit_cell, raw_samples, SIGMA_LOAD, SLOTS
+import pytest
+from ros_harness import new_domain_id, NodeProcess, Probe, RELIABLE, six, wait_for
 
 pytestmark = pytest.mark.ros
 ABSENT_SLOTS = [0, 1, 5]
-UPRIGHT_SIGNS = np.array([-1.0, 1.0, -1.0, 1.0, 1.0, 1.0])     # TM-663 §10.2.1, written out
+UPRIGHT_SIGNS = np.array([-1.0, 1.0, -1.0, 1.0, 1.0, 1.0])  # TM-663 §10.2.1, written out
 
 
 def _publish(publisher, values, sec: int, nanosec: int = 0) -> None:
     msg = WrenchStamped()
     msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
     msg.header.frame_id = 'cell-3'
-    (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
-     msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = (float(v) for v in values)
+    (
+        msg.wrench.force.x,
+        msg.wrench.force.y,
+        msg.wrench.force.z,
+        msg.wrench.torque.x,
+        msg.wrench.torque.y,
+        msg.wrench.torque.z,
+    ) = (float(v) for v in values)
     publisher.publish(msg)
 
 
@@ -41,28 +48,38 @@ def test_a_three_component_calibration_runs_in_the_node(tmp_path):
     loads = rng.uniform(-0.9, 0.9, (20, 3)) * CAPACITY
     samples = raw_samples(rng, loads)
     expected = np.zeros((20, 6))
-    expected[:, SLOTS] = loads                      # K⁻¹ · (K · L): the applied loads themselves
+    expected[:, SLOTS] = loads  # K⁻¹ · (K · L): the applied loads themselves
     expected *= UPRIGHT_SIGNS
 
     probe = Probe(new_domain_id())
-    node = NodeProcess('balance_calibrator', probe.domain_id, tmp_path / 'logs',
-                       {'calibration_file': str(calibration_file), 'installation': 'upright'})
+    node = NodeProcess(
+        'balance_calibrator',
+        probe.domain_id,
+        tmp_path / 'logs',
+        {'calibration_file': str(calibration_file), 'installation': 'upright'},
+    )
     try:
         wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
         uncertainties = probe.subscribe(WrenchStamped, '/balance/wrench_uncertainty')
         diagnostics = probe.subscribe(DiagnosticArray, '/diagnostics')
         raw = probe.node.create_publisher(WrenchStamped, '/balance/raw', RELIABLE)
         readers = {s.topic_name: s for s in probe.node.subscriptions}
-        wait_for(lambda: raw.get_subscription_count() >= 1
-                 and readers['/balance/wrench'].get_publisher_count() >= 1
-                 and readers['/balance/wrench_uncertainty'].get_publisher_count() >= 1,
-                 60.0, 'the calibrator to connect')
+        wait_for(
+            lambda: (
+                raw.get_subscription_count() >= 1
+                and readers['/balance/wrench'].get_publisher_count() >= 1
+                and readers['/balance/wrench_uncertainty'].get_publisher_count() >= 1
+            ),
+            60.0,
+            'the calibrator to connect',
+        )
         # the node computes the uncertainty once it has seen its reader: warm-up samples until then
 
         def uncertainty_flows():
             _publish(raw, samples[0], sec=1, nanosec=len(wrenches))
             time.sleep(0.05)
             return len(uncertainties) > 0
+
         wait_for(uncertainty_flows, 60.0, 'the first /balance/wrench_uncertainty')
         for i, values in enumerate(samples):
             _publish(raw, values, sec=100 + i)
@@ -70,6 +87,7 @@ def test_a_three_component_calibration_runs_in_the_node(tmp_path):
         def by_stamp(messages):
             found = {m.header.stamp.sec - 100: m for m in messages if m.header.stamp.sec >= 100}
             return found if len(found) == len(samples) else None
+
         got_wrench = wait_for(lambda: by_stamp(wrenches), 60.0, f'{len(samples)} wrenches')
         got_u = wait_for(lambda: by_stamp(uncertainties), 60.0, f'{len(samples)} uncertainties')
         wrench = np.array([six(got_wrench[i]) for i in range(len(samples))])
@@ -79,11 +97,14 @@ def test_a_three_component_calibration_runs_in_the_node(tmp_path):
         error = np.abs(wrench[:, SLOTS] - expected[:, SLOTS])
         assert np.all(error < 5 * SIGMA_LOAD), error / SIGMA_LOAD
         assert np.all(np.isnan(uncertainty[:, ABSENT_SLOTS]))
-        ratio = uncertainty[:, SLOTS] / SIGMA_LOAD      # the output noise carried to the loads
+        ratio = uncertainty[:, SLOTS] / SIGMA_LOAD  # the output noise carried to the loads
         assert np.all((ratio > 0.6) & (ratio < 1.4)), ratio
 
-        status, values = wait_for(lambda: _calibration_status(diagnostics), 30.0,
-                                  'the calibration status on /diagnostics')
+        status, values = wait_for(
+            lambda: _calibration_status(diagnostics),
+            30.0,
+            'the calibration status on /diagnostics',
+        )
         assert values['components'] == 'FZ, MX, MY'
         assert values['absent_components'] == 'FX, FY, MZ'
         assert 'FX, FY, MZ absent (published as 0, uncertainty NaN)' in status.message
@@ -98,10 +119,12 @@ def test_a_calibration_of_eight_outputs_stops_the_node_with_one_line(tmp_path):
     from live_cases import eight_output_calibration
 
     from balance_calib.calibration_file import save_calibration
+
     path = tmp_path / 'sensor8.yaml'
     save_calibration(path, eight_output_calibration())
-    node = NodeProcess('balance_calibrator', new_domain_id(), tmp_path / 'logs',
-                       {'calibration_file': str(path)})
+    node = NodeProcess(
+        'balance_calibrator', new_domain_id(), tmp_path / 'logs', {'calibration_file': str(path)}
+    )
     try:
         assert node.wait(30.0) == 1
         errors = [line for line in node.output().splitlines() if '[ERROR]' in line]

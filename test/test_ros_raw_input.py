@@ -1,15 +1,18 @@
-"""The calibrator's reader (nodes/_raw_input.py) over real DDS: a subscription read by its own thread in
-batches of what is waiting, never by the node's executor, stopped cleanly, not stopped by a bad batch."""
+"""The calibrator's reader (nodes/_raw_input.py) over real DDS: a subscription read by its own
+thread in batches of what is waiting, never by the node's executor, stopped cleanly, not stopped by
+a bad batch.
+"""
+
 import threading
 
-import pytest
 from geometry_msgs.msg import WrenchStamped
+import pytest
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message, serialize_message
+from ros_harness import new_domain_id, Probe, RELIABLE, wait_for
 from std_srvs.srv import Trigger
 
 from balance_calib.nodes._raw_input import RawInput
-from ros_harness import RELIABLE, Probe, new_domain_id, wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -34,23 +37,30 @@ def test_a_burst_arrives_whole_in_order_in_batches_while_the_executor_serves_a_s
     gate = threading.Event()
 
     def on_batch(batch):
-        gate.wait(10.0)           # hold the first wake-up so that the rest of the burst queues behind it
+        gate.wait(10.0)  # hold the first wake-up so that the rest of the burst queues behind it
         threads.add(threading.get_ident())
         batches.append(batch)
+
     reader = RawInput(node, WrenchStamped, 'burst', RELIABLE, on_batch, max_batch=64)
-    node.create_service(Trigger, '~/ping', lambda request, response: setattr(response, 'success', True) or response)
+    node.create_service(
+        Trigger, '~/ping', lambda request, response: setattr(response, 'success', True) or response
+    )
     probe.add_node(node)
     reader.start()
     publisher = probe.node.create_publisher(WrenchStamped, 'burst', RELIABLE)
     wait_for(lambda: publisher.get_subscription_count() >= 1, 10.0, 'the reader to connect')
     for k in range(500):
         publisher.publish(message(k))
-    assert probe.call(Trigger, '/reader_under_test/ping').success      # the executor is free meanwhile
+    assert probe.call(Trigger, '/reader_under_test/ping').success  # the executor is free meanwhile
     gate.set()
     wait_for(lambda: sum(map(len, batches)) >= 500, 20.0, 'all 500 samples')
-    values = [deserialize_message(data, WrenchStamped).wrench.force.x for batch in batches for data in batch]
+    values = [
+        deserialize_message(data, WrenchStamped).wrench.force.x
+        for batch in batches
+        for data in batch
+    ]
     assert values == [float(k) for k in range(500)]
-    assert max(map(len, batches)) == 64 and len(batches) < 100       # drained in batches, capped
+    assert max(map(len, batches)) == 64 and len(batches) < 100  # drained in batches, capped
     assert threads == {reader._thread.ident} and reader._thread.ident != threading.get_ident()
     reader.close()
     assert not reader._thread.is_alive()
@@ -68,6 +78,7 @@ def test_an_exception_in_one_batch_is_logged_and_the_stream_goes_on(probe):
                 raised.set()
                 raise ValueError('a batch the node cannot process')
             seen.append(value)
+
     reader = RawInput(node, WrenchStamped, 'stream', RELIABLE, on_batch)
     reader.start()
     publisher = probe.node.create_publisher(WrenchStamped, 'stream', RELIABLE)
@@ -93,7 +104,9 @@ def test_a_second_topic_is_read_by_the_same_thread_and_each_batch_reaches_its_ow
         def on_batch(batch):
             threads.add(threading.get_ident())
             seen.extend(deserialize_message(data, WrenchStamped).wrench.force.x for data in batch)
+
         return on_batch
+
     reader = RawInput(node, WrenchStamped, 'one', RELIABLE, into(first))
     also = reader.also_read('two', into(second), RELIABLE)
     assert also.topic_name == '/two' and reader.subscription.topic_name == '/one'
@@ -102,8 +115,11 @@ def test_a_second_topic_is_read_by_the_same_thread_and_each_batch_reaches_its_ow
         reader.also_read('three', into([]), RELIABLE)
     one = probe.node.create_publisher(WrenchStamped, 'one', RELIABLE)
     two = probe.node.create_publisher(WrenchStamped, 'two', RELIABLE)
-    wait_for(lambda: one.get_subscription_count() >= 1 and two.get_subscription_count() >= 1, 10.0,
-             'the reader to connect to both topics')
+    wait_for(
+        lambda: one.get_subscription_count() >= 1 and two.get_subscription_count() >= 1,
+        10.0,
+        'the reader to connect to both topics',
+    )
     for k in range(200):
         one.publish(message(k))
         two.publish(message(1000 + k))

@@ -1,16 +1,19 @@
-"""~/refit of a balance_calibrator process with the real refit pipeline, while samples stream at 200 Hz."""
+"""~/refit of a balance_calibrator process with the real refit pipeline, while samples stream at
+200 Hz.
+"""
+
 import time
 
+from geometry_msgs.msg import WrenchStamped
 import numpy as np
 import pytest
-from geometry_msgs.msg import WrenchStamped
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
+from ros_harness import new_domain_id, NodeProcess, Probe, RELIABLE, wait_for
 from std_srvs.srv import Trigger
 
 from balance_calib.calibration_file import load_calibration, save_calibration
 from balance_calib.config import CONFIG_DIR
-from ros_harness import RELIABLE, NodeProcess, Probe, new_domain_id, wait_for
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 SAMPLE_MV = np.array([0.3, -0.2, 0.5, 0.1, -0.4, 0.2])
@@ -27,9 +30,16 @@ def graph(tmp_path, bag):
     domain = new_domain_id()
     calibration_file = tmp_path / 'calibration.yaml'
     save_calibration(calibration_file, load_calibration(CONFIG_DIR / 'lmc6522.yaml'))
-    node = NodeProcess('balance_calibrator', domain, tmp_path / 'logs', {
-        'calibration_file': str(calibration_file), 'calibration_bags': [str(bag)],
-        'report_dir': str(tmp_path / 'reports')})
+    node = NodeProcess(
+        'balance_calibrator',
+        domain,
+        tmp_path / 'logs',
+        {
+            'calibration_file': str(calibration_file),
+            'calibration_bags': [str(bag)],
+            'report_dir': str(tmp_path / 'reports'),
+        },
+    )
     probe = Probe(domain)
     yield probe, node, calibration_file
     probe.close()
@@ -37,26 +47,44 @@ def graph(tmp_path, bag):
 
 
 class Stream:
-    """Raw samples at 200 Hz, each stamped with its sequence number (sec 1000 + n // 1000, n % 1000 µs)."""
+    """Raw samples at 200 Hz, each stamped with its sequence number (sec 1000 + n // 1000, n %
+    1000 µs).
+    """
 
     def __init__(self, probe):
         self.publisher = probe.node.create_publisher(WrenchStamped, '/balance/raw', RELIABLE)
         self.wrenches = probe.subscribe(WrenchStamped, '/balance/wrench')
         self.sent = 0
         self.probe = probe
-        wait_for(lambda: self.publisher.get_subscription_count() >= 1, 20.0, 'the calibrator to subscribe')
+        wait_for(
+            lambda: self.publisher.get_subscription_count() >= 1,
+            20.0,
+            'the calibrator to subscribe',
+        )
         self.timer = probe.node.create_timer(1 / 200.0, self.send)
 
     def send(self):
         msg = WrenchStamped()
-        msg.header.stamp.sec, msg.header.stamp.nanosec = 1000 + self.sent // 1000, (self.sent % 1000) * 1000
-        (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
-         msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = SAMPLE_MV.tolist()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = (
+            1000 + self.sent // 1000,
+            (self.sent % 1000) * 1000,
+        )
+        (
+            msg.wrench.force.x,
+            msg.wrench.force.y,
+            msg.wrench.force.z,
+            msg.wrench.torque.x,
+            msg.wrench.torque.y,
+            msg.wrench.torque.z,
+        ) = SAMPLE_MV.tolist()
         self.publisher.publish(msg)
         self.sent += 1
 
     def received_sequence(self):
-        return [(m.header.stamp.sec - 1000) * 1000 + m.header.stamp.nanosec // 1000 for m in self.wrenches]
+        return [
+            (m.header.stamp.sec - 1000) * 1000 + m.header.stamp.nanosec // 1000
+            for m in self.wrenches
+        ]
 
 
 def test_stream_keeps_flowing_through_a_real_refit(graph):
@@ -77,13 +105,19 @@ def test_stream_keeps_flowing_through_a_real_refit(graph):
     stream.timer.cancel()
     sent = stream.sent
     first = stream.received_sequence()[0]
-    # count in = count out: every sample since the link came up has its wrench, in order, none twice
-    wait_for(lambda: stream.received_sequence() == list(range(first, sent)), 20.0,
-             f'wrenches for samples {first}..{sent - 1}')
+    # count in = count out: every sample since the link came up has its wrench, in order, none
+    # twice
+    wait_for(
+        lambda: stream.received_sequence() == list(range(first, sent)),
+        20.0,
+        f'wrenches for samples {first}..{sent - 1}',
+    )
     # the refit's calibration replaced calibration_file and is the one in force now
     fitted = load_calibration(calibration_file)
     assert calibration_file.read_text() != before and fitted.fitted_at
-    values = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z] for m in stream.wrenches])
+    values = np.array(
+        [[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z] for m in stream.wrenches]
+    )
     assert not np.allclose(values[0], values[-1], rtol=1e-9, atol=0)
     assert node.process.poll() is None
 
@@ -100,7 +134,9 @@ def test_refit_of_a_corrupt_bag_names_it_and_keeps_the_calibration(graph, tmp_pa
     stream = Stream(probe)
     wait_for(lambda: len(stream.wrenches) >= 5, 20.0, 'wrenches before the refit')
     reply = probe.call(Trigger, '/balance_calibrator/refit', timeout_s=60.0)
-    assert not reply.success and 'garbage.mcap' in reply.message and 'stays in force' in reply.message
+    assert (
+        not reply.success and 'garbage.mcap' in reply.message and 'stays in force' in reply.message
+    )
     count = len(stream.wrenches)
     wait_for(lambda: len(stream.wrenches) >= count + 20, 10.0, 'wrenches after the failed refit')
     stream.timer.cancel()

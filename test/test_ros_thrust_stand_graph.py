@@ -1,11 +1,12 @@
 """The thrust stand as a graph: bridge_publisher (thrust_stand) -> balance_calibrator with
-config/thrust_stand.yaml -> thrust_analyzer, over DDS on loopback."""
+config/thrust_stand.yaml -> thrust_analyzer, over DDS on loopback.
+"""
+
 import math
 
-import pytest
 from diagnostic_msgs.msg import DiagnosticArray
-
-from ros_harness import NodeProcess, Probe, new_domain_id, wait_for
+import pytest
+from ros_harness import new_domain_id, NodeProcess, Probe, wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -15,8 +16,13 @@ def _status(messages):
         for status in array.status:
             if status.name == 'thrust_analyzer: thrust coefficient':
                 values = {kv.key: kv.value for kv in status.values}
-                steady = float(values.get('chamber_gauge_pressure_pa', 'nan')) > 4.5e5   # regulator at 0.5 MPa
-                if values.get('firing') == 'true' and values.get('cf_measured', 'nan') != 'nan' and steady:
+                # regulator at 0.5 MPa
+                steady = float(values.get('chamber_gauge_pressure_pa', 'nan')) > 4.5e5
+                if (
+                    values.get('firing') == 'true'
+                    and values.get('cf_measured', 'nan') != 'nan'
+                    and steady
+                ):
                     return values
     return None
 
@@ -27,17 +33,31 @@ def test_measured_thrust_coefficient_flows_from_strain_to_analyzer(tmp_path):
     nodes = []
     try:
         diagnostics = probe.subscribe(DiagnosticArray, '/diagnostics')
-        nodes.append(NodeProcess('balance_calibrator', domain, tmp_path,
-                                 {'calibration_file': 'thrust_stand', 'installation': 'balance'}))
+        nodes.append(
+            NodeProcess(
+                'balance_calibrator',
+                domain,
+                tmp_path,
+                {'calibration_file': 'thrust_stand', 'installation': 'balance'},
+            )
+        )
         nodes.append(NodeProcess('thrust_analyzer', domain, tmp_path, {'publish_period_s': 0.2}))
-        nodes.append(NodeProcess('bridge_publisher', domain, tmp_path,
-                                 {'mode': 'thrust_stand', 'rate_hz': 200.0, 'seed': 3, 'speed': 2.0}))
-        values = wait_for(lambda: _status(diagnostics), 60.0, 'a firing analysed by thrust_analyzer')
+        nodes.append(
+            NodeProcess(
+                'bridge_publisher',
+                domain,
+                tmp_path,
+                {'mode': 'thrust_stand', 'rate_hz': 200.0, 'seed': 3, 'speed': 2.0},
+            )
+        )
+        values = wait_for(
+            lambda: _status(diagnostics), 60.0, 'a firing analysed by thrust_analyzer'
+        )
         measured, theory = float(values['cf_measured']), float(values['cf_theory'])
         # the simulated stand delivers 0.75 of ideal thrust; without a tare the strain zero
         # (0.05 mV = 0.25 N) is read as thrust too, so allow 0.6-1.0 of theory
         assert 0.6 < measured / theory < 1.0, values
-        assert 1.0 < theory < 1.3            # the manual's nozzle at p_G ≈ 0.5 MPa: C_F ≈ 1.14
+        assert 1.0 < theory < 1.3  # the manual's nozzle at p_G ≈ 0.5 MPa: C_F ≈ 1.14
         assert math.isfinite(float(values['cf_measured_sigma']))
         for node in nodes:
             assert node.process.poll() is None, node.output()

@@ -1,21 +1,22 @@
 """launchless_scripts/windon: a wind-on run recorded over DDS into the bag `reduce` takes; a
 publisher waiting for subscribers that never come gives up with one line; the recorder's defaults
-cover every topic of the interface contract."""
+cover every topic of the interface contract.
+"""
 
 import csv
 import os
+from pathlib import Path
 import re
 import subprocess
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
+from ros_harness import new_domain_id, NodeProcess
 
 from balance_calib.aero.pipeline import reduce_bags
 from balance_calib.bags.reader import read_bags
 from balance_calib.nodes.balance_recorder import DEFAULT_TOPICS
-from ros_harness import NodeProcess, new_domain_id
 
 ROOT = Path(__file__).resolve().parent.parent
 SCRIPTS = ROOT / 'launchless_scripts'
@@ -31,7 +32,7 @@ def interface_topics(text: str) -> set[str]:
 
 
 def test_recorder_defaults_cover_every_topic_of_the_interface_contract():
-    if not INTERFACES.exists():     # outside the project's checkout of ../shared
+    if not INTERFACES.exists():  # outside the project's checkout of ../shared
         pytest.skip(f'{INTERFACES} not found')
     topics = interface_topics(INTERFACES.read_text())
     assert len(topics) >= 12, topics
@@ -63,9 +64,9 @@ def test_windon_records_a_bag_that_reduce_turns_into_the_true_coefficients(tmp_p
     )
     assert done.returncode == 0, done.stdout + done.stderr
     assert time.monotonic() - started < 60
-    assert (
-        'Traceback' not in done.stderr and '[WARN]' not in done.stderr + done.stdout
-    ), done.stderr
+    assert 'Traceback' not in done.stderr and '[WARN]' not in done.stderr + done.stdout, (
+        done.stderr
+    )
     command = done.stdout.strip().splitlines()[-1].split('reduce it with: ')[1].split()
     assert command[:3] == ['balance-calib', 'reduce', str(bag)]
     assert (bag / 'metadata.yaml').exists()
@@ -93,9 +94,19 @@ def test_windon_records_a_bag_that_reduce_turns_into_the_true_coefficients(tmp_p
     assert np.all(np.abs(alpha - ALPHAS_DEG) < 0.2), alpha
     reduced_body = np.array([[float(r[c]) for c in COEFFICIENTS] for r in rows])
     # the simulation's true coefficients, one value per hold (constant within it), in time order
-    truth = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
-                       m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z]
-                      for m in data.extra['/aero/truth'].messages])
+    truth = np.array(
+        [
+            [
+                m.wrench.force.x,
+                m.wrench.force.y,
+                m.wrench.force.z,
+                m.wrench.torque.x,
+                m.wrench.torque.y,
+                m.wrench.torque.z,
+            ]
+            for m in data.extra['/aero/truth'].messages
+        ]
+    )
     holds = truth[np.r_[True, np.any(np.diff(truth, axis=0) != 0, axis=1)]]
     assert len(holds) == len(ALPHAS_DEG)
     u = np.array(
@@ -112,9 +123,18 @@ def test_windon_records_a_bag_that_reduce_turns_into_the_true_coefficients(tmp_p
 
 @pytest.mark.ros
 def test_publisher_waiting_for_subscribers_gives_up_with_one_line(tmp_path):
-    publisher = NodeProcess('bridge_publisher', new_domain_id(), tmp_path, {
-        'mode': 'wind_on', 'aero_model': 'euler_replica_lmc6522', 'wait_for_subscribers': 1,
-        'wait_for_subscribers_timeout_s': 1.5, 'exit_when_done': True})
+    publisher = NodeProcess(
+        'bridge_publisher',
+        new_domain_id(),
+        tmp_path,
+        {
+            'mode': 'wind_on',
+            'aero_model': 'euler_replica_lmc6522',
+            'wait_for_subscribers': 1,
+            'wait_for_subscribers_timeout_s': 1.5,
+            'exit_when_done': True,
+        },
+    )
     started = time.monotonic()
     try:
         status = publisher.wait(30.0)

@@ -1,5 +1,7 @@
 """thrust_analyzer as a real process over DDS: inputs in, thrust coefficient out on /diagnostics,
-a report on request (~/report) and on shutdown (SIGINT)."""
+a report on request (~/report) and on shutdown (SIGINT).
+"""
+
 import json
 import os
 import signal
@@ -7,11 +9,10 @@ import subprocess
 import sys
 import time
 
-import pytest
-
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
+import pytest
+import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import FluidPressure
 from std_srvs.srv import Trigger
@@ -27,14 +28,31 @@ TIMEOUT_S = 20.0
 
 @pytest.fixture
 def analyzer(tmp_path, ros_domain):
-    env = {**os.environ, 'ROS_DOMAIN_ID': str(ros_domain),
-           'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+    env = {
+        **os.environ,
+        'ROS_DOMAIN_ID': str(ros_domain),
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+    }
     log = (tmp_path / 'analyzer.log').open('w')
     process = subprocess.Popen(
-        [sys.executable, '-m', 'balance_calib.nodes.thrust_analyzer', '--ros-args',
-         '-p', 'publish_period_s:=0.1', '-p', 'window_s:=0.5', '-p', 'stale_after_s:=1.0',
-         '-p', f'report_path:={tmp_path / "firing"}'],
-        env=env, stdout=log, stderr=subprocess.STDOUT)
+        [
+            sys.executable,
+            '-m',
+            'balance_calib.nodes.thrust_analyzer',
+            '--ros-args',
+            '-p',
+            'publish_period_s:=0.1',
+            '-p',
+            'window_s:=0.5',
+            '-p',
+            'stale_after_s:=1.0',
+            '-p',
+            f'report_path:={tmp_path / "firing"}',
+        ],
+        env=env,
+        stdout=log,
+        stderr=subprocess.STDOUT,
+    )
     yield process, tmp_path
     if process.poll() is None:
         process.send_signal(signal.SIGINT)
@@ -66,7 +84,9 @@ def spin_until(executor, predicate, what, process=None, timeout_s=TIMEOUT_S):
         if predicate():
             return
         if process is not None and process.poll() is not None:
-            pytest.fail(f'thrust_analyzer exited with {process.returncode} while waiting for {what}')
+            pytest.fail(
+                f'thrust_analyzer exited with {process.returncode} while waiting for {what}'
+            )
     pytest.fail(f'timed out after {timeout_s} s waiting for {what}')
 
 
@@ -75,12 +95,20 @@ def test_analyzer_reports_measured_and_theoretical_thrust_coefficient(analyzer, 
     process, tmp_path = analyzer
     node, executor = ros_node
     statuses = []
-    node.create_subscription(DiagnosticArray, '/diagnostics',
-                             lambda msg: statuses.extend(s for s in msg.status if s.name == STATUS_NAME), 10)
+    node.create_subscription(
+        DiagnosticArray,
+        '/diagnostics',
+        lambda msg: statuses.extend(s for s in msg.status if s.name == STATUS_NAME),
+        10,
+    )
 
     # before any input the analyzer says which topics it is waiting for
-    spin_until(executor, lambda: any(s.level == DiagnosticStatus.STALE for s in statuses), 'a STALE status',
-               process)
+    spin_until(
+        executor,
+        lambda: any(s.level == DiagnosticStatus.STALE for s in statuses),
+        'a STALE status',
+        process,
+    )
     assert '/balance/wrench' in statuses[-1].message
 
     wrench_pub = node.create_publisher(WrenchStamped, '/balance/wrench', 10)
@@ -104,20 +132,27 @@ def test_analyzer_reports_measured_and_theoretical_thrust_coefficient(analyzer, 
                 return values
         return None
 
-    spin_until(executor, lambda: firing_status() is not None, 'a thrust-coefficient status while firing',
-               process)
+    spin_until(
+        executor,
+        lambda: firing_status() is not None,
+        'a thrust-coefficient status while firing',
+        process,
+    )
     values = firing_status()
     nozzle = Nozzle()
     chamber_pa = GAUGE_PA + AMBIENT_PA
     theory = nozzle.performance(chamber_pa, AMBIENT_PA)
-    assert float(values['cf_measured']) == pytest.approx(THRUST_N / (chamber_pa * nozzle.throat_area_m2), rel=1e-8)
+    assert float(values['cf_measured']) == pytest.approx(
+        THRUST_N / (chamber_pa * nozzle.throat_area_m2), rel=1e-8
+    )
     assert float(values['cf_theory']) == pytest.approx(theory.cf, rel=1e-8)
     assert float(values['thrust_theory_n']) == pytest.approx(theory.thrust_n, rel=1e-8)
     assert float(values['chamber_pressure_pa']) == pytest.approx(chamber_pa)
     assert float(values['pe_over_pc']) == pytest.approx(theory.pe_over_pc, rel=1e-8)
     # constant inputs: only the calibration (1 %) and throat (2 x 0.4 %) uncertainties remain
     assert float(values['cf_measured_sigma']) == pytest.approx(
-        float(values['cf_measured']) * (0.01 ** 2 + (2 * 1e-5 / 2.5e-3) ** 2) ** 0.5, rel=1e-6)
+        float(values['cf_measured']) * (0.01**2 + (2 * 1e-5 / 2.5e-3) ** 2) ** 0.5, rel=1e-6
+    )
 
     # the report on request ...
     client = node.create_client(Trigger, '/thrust_analyzer/report')

@@ -1,4 +1,5 @@
 """`balance-calib nozzle` and `balance-calib line-fit`, run as a user runs them."""
+
 import json
 import shutil
 import subprocess
@@ -12,12 +13,23 @@ from balance_calib.thrust_stand.nozzle import Nozzle
 def balance_calib(*args, timeout=60):
     executable = shutil.which('balance-calib')
     command = [executable] if executable else [sys.executable, '-m', 'balance_calib.cli']
-    return subprocess.run(command + [str(a) for a in args], capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(
+        command + [str(a) for a in args], capture_output=True, text=True, timeout=timeout
+    )
 
 
 def test_nozzle_prints_the_manual_nozzle_as_json():
-    done = balance_calib('nozzle', '--throat-mm', 2.5, '--exit-mm', 3.3, '--chamber-pa', 601325,
-                         '--ambient-pa', 101325)
+    done = balance_calib(
+        'nozzle',
+        '--throat-mm',
+        2.5,
+        '--exit-mm',
+        3.3,
+        '--chamber-pa',
+        601325,
+        '--ambient-pa',
+        101325,
+    )
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
     expected = Nozzle().performance(601325.0, 101325.0)
@@ -28,8 +40,11 @@ def test_nozzle_prints_the_manual_nozzle_as_json():
     for key in ('mass_flow_kg_s', 'exit_velocity_m_s', 'c_star_m_s', 'isp_s'):
         assert result[key] == pytest.approx(getattr(expected, key), rel=1e-12)
 
-    subsonic = json.loads(balance_calib('nozzle', '--chamber-pa', 601325, '--ambient-pa', 101325,
-                                        '--subsonic').stdout)
+    subsonic = json.loads(
+        balance_calib(
+            'nozzle', '--chamber-pa', 601325, '--ambient-pa', 101325, '--subsonic'
+        ).stdout
+    )
     assert subsonic['pe_over_pc'] > result['critical_pressure_ratio'] > result['pe_over_pc']
 
 
@@ -41,19 +56,22 @@ def test_line_fit_prints_a_b_and_sigma(tmp_path):
     assert done.returncode == 0, done.stderr
     result = json.loads(done.stdout)
     assert result['a'] == pytest.approx(1.9) and result['b'] == pytest.approx(0.9)
-    assert result['sigma_a'] == pytest.approx(0.0155 ** 0.5)
+    assert result['sigma_a'] == pytest.approx(0.0155**0.5)
     assert result['n'] == 4 and result['sigma_source'] == 'eq27'
     assert result['formatted'] == 'a = 1.90 ± 0.12'
     # printed as a person reads it, not JSON-escaped (and still JSON)
     assert '"a = 1.90 ± 0.12"' in done.stdout and '\\u00b1' not in done.stdout
 
 
-@pytest.mark.parametrize('content, problem', [
-    (None, 'no such file'),
-    ('u,v\n1,2\n2,3\n3,5\n', 'missing column(s) x, y'),
-    ('x,y\n1,2\n2,oops\n3,4\n', "line 3: column y is 'oops'"),
-    ('x,y\n1,2\n2,3\n', '2 point(s)'),
-])
+@pytest.mark.parametrize(
+    'content, problem',
+    [
+        (None, 'no such file'),
+        ('u,v\n1,2\n2,3\n3,5\n', 'missing column(s) x, y'),
+        ('x,y\n1,2\n2,oops\n3,4\n', "line 3: column y is 'oops'"),
+        ('x,y\n1,2\n2,3\n', '2 point(s)'),
+    ],
+)
 def test_line_fit_bad_input_is_one_stderr_line_and_status_2(tmp_path, content, problem):
     path = tmp_path / 'points.csv'
     if content is not None:

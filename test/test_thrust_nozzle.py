@@ -1,17 +1,25 @@
 """Nozzle theory of the thrust-stand manual, eqs. (1)-(15)."""
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import numpy as np
 import pytest
 import scipy.optimize
-from hypothesis import given, settings, strategies as st
 
 from balance_calib.config import load_balance_config
-from balance_calib.thrust_stand.nozzle import (Nozzle, area_ratio_from_pressure_ratio, characteristic_velocity_m_s,
-                                               critical_pressure_ratio, mass_flow_kg_s, pressure_ratio_from_area_ratio,
-                                               thrust_coefficient)
+from balance_calib.thrust_stand.nozzle import (
+    area_ratio_from_pressure_ratio,
+    characteristic_velocity_m_s,
+    critical_pressure_ratio,
+    mass_flow_kg_s,
+    Nozzle,
+    pressure_ratio_from_area_ratio,
+    thrust_coefficient,
+)
 
 GAMMA = 1.402
 P_A = 101325.0
-P_C = 0.5e6 + P_A         # the manual's regulator fully open, about p_G = 0.5 MPa
+P_C = 0.5e6 + P_A  # the manual's regulator fully open, about p_G = 0.5 MPa
 
 
 @given(area_ratio=st.floats(1.01, 100.0), branch=st.sampled_from(['supersonic', 'subsonic']))
@@ -32,25 +40,35 @@ def test_eq4_solution_is_accurate_to_1e_10_relative(log_ratio):
     if area_ratio < 1.01:
         return  # the two roots merge at A_e/A_t = 1; outside the asked range
     branch = 'supersonic' if ratio < critical_pressure_ratio(GAMMA) else 'subsonic'
-    assert pressure_ratio_from_area_ratio(area_ratio, GAMMA, branch) == pytest.approx(ratio, rel=1e-10)
+    assert pressure_ratio_from_area_ratio(area_ratio, GAMMA, branch) == pytest.approx(
+        ratio, rel=1e-10
+    )
 
 
 def _mach_from_area_ratio(area_ratio, gamma, supersonic=True):
     # the textbook area-Mach relation, independent of eq. (4)'s pressure form
     def f(mach):
-        return (1 / mach * (2 / (gamma + 1) * (1 + (gamma - 1) / 2 * mach ** 2))
-                ** ((gamma + 1) / (2 * (gamma - 1))) - area_ratio)
-    return scipy.optimize.brentq(f, 1.0, 50.0) if supersonic else scipy.optimize.brentq(f, 1e-6, 1.0)
+        return (
+            1
+            / mach
+            * (2 / (gamma + 1) * (1 + (gamma - 1) / 2 * mach**2))
+            ** ((gamma + 1) / (2 * (gamma - 1)))
+            - area_ratio
+        )
+
+    return (
+        scipy.optimize.brentq(f, 1.0, 50.0) if supersonic else scipy.optimize.brentq(f, 1e-6, 1.0)
+    )
 
 
 def test_manual_nozzle_at_half_a_megapascal_matches_the_mach_number_route():
     performance = Nozzle().performance(P_C, P_A)
     assert performance.area_ratio == pytest.approx((3.3 / 2.5) ** 2)
     mach = _mach_from_area_ratio(performance.area_ratio, GAMMA)
-    ratio = (1 + (GAMMA - 1) / 2 * mach ** 2) ** (-GAMMA / (GAMMA - 1))
+    ratio = (1 + (GAMMA - 1) / 2 * mach**2) ** (-GAMMA / (GAMMA - 1))
     assert performance.pe_over_pc == pytest.approx(ratio, rel=1e-10)
     # thrust by eq. (1) from the exit state: m_dot u_e + (p_e - p_a) A_e, u_e = M_e a_e
-    t_exit = 293.15 / (1 + (GAMMA - 1) / 2 * mach ** 2)
+    t_exit = 293.15 / (1 + (GAMMA - 1) / 2 * mach**2)
     u_exit = mach * np.sqrt(GAMMA * 287.1 * t_exit)
     nozzle = Nozzle()
     m_dot = mass_flow_kg_s(P_C, nozzle.throat_area_m2)
@@ -67,8 +85,10 @@ def test_manual_nozzle_at_half_a_megapascal_matches_the_mach_number_route():
 def test_subsonic_branch_matches_the_subsonic_mach_number():
     area_ratio = 1.7424
     mach = _mach_from_area_ratio(area_ratio, GAMMA, supersonic=False)
-    ratio = (1 + (GAMMA - 1) / 2 * mach ** 2) ** (-GAMMA / (GAMMA - 1))
-    assert pressure_ratio_from_area_ratio(area_ratio, GAMMA, 'subsonic') == pytest.approx(ratio, rel=1e-10)
+    ratio = (1 + (GAMMA - 1) / 2 * mach**2) ** (-GAMMA / (GAMMA - 1))
+    assert pressure_ratio_from_area_ratio(area_ratio, GAMMA, 'subsonic') == pytest.approx(
+        ratio, rel=1e-10
+    )
 
 
 def test_cf_is_largest_where_the_exit_pressure_equals_ambient():
@@ -79,8 +99,9 @@ def test_cf_is_largest_where_the_exit_pressure_equals_ambient():
         ratio = pressure_ratio_from_area_ratio(area_ratio, GAMMA)
         return thrust_coefficient(ratio, pa_over_pc, area_ratio, GAMMA)
 
-    best = scipy.optimize.minimize_scalar(lambda e: -cf_of(e), bounds=(1.0001, 5.0), method='bounded',
-                                          options={'xatol': 1e-10})
+    best = scipy.optimize.minimize_scalar(
+        lambda e: -cf_of(e), bounds=(1.0001, 5.0), method='bounded', options={'xatol': 1e-10}
+    )
     optimum_area_ratio = area_ratio_from_pressure_ratio(pa_over_pc, GAMMA)
     assert best.x == pytest.approx(optimum_area_ratio, rel=1e-4)
     assert pressure_ratio_from_area_ratio(best.x, GAMMA) == pytest.approx(pa_over_pc, rel=1e-4)
@@ -105,10 +126,12 @@ def test_thrust_slope_with_exit_area_is_exit_minus_ambient_pressure():
 
 def test_specific_impulse_eq8_equals_eq15_and_c_star_eq13_equals_eq14():
     performance = Nozzle().performance(P_C, P_A, chamber_k=300.0)
-    assert performance.isp_s == pytest.approx(performance.thrust_n / (performance.mass_flow_kg_s * 9.80665),
-                                              rel=1e-12)
+    assert performance.isp_s == pytest.approx(
+        performance.thrust_n / (performance.mass_flow_kg_s * 9.80665), rel=1e-12
+    )
     assert characteristic_velocity_m_s(300.0) == pytest.approx(
-        P_C * Nozzle().throat_area_m2 / performance.mass_flow_kg_s, rel=1e-12)
+        P_C * Nozzle().throat_area_m2 / performance.mass_flow_kg_s, rel=1e-12
+    )
 
 
 def test_flow_regimes_and_bad_input():

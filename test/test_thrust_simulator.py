@@ -1,4 +1,5 @@
 """The simulated thrust stand that bridge_publisher runs in its thrust_stand mode."""
+
 import numpy as np
 import pytest
 
@@ -12,23 +13,27 @@ def test_steady_firing_thrust_is_efficiency_times_eq5():
     assert simulator.firing_thrust_n == pytest.approx(0.7 * ideal, rel=1e-12)
     start, end = simulator.firing_windows()[0]
     force = simulator.true_force_n(np.linspace(start + 0.5, end, 50))
-    np.testing.assert_allclose(force, simulator.firing_thrust_n, rtol=1e-4)   # p_c still settling at 1e-5
+    # p_c still settling at 1e-5
+    np.testing.assert_allclose(force, simulator.firing_thrust_n, rtol=1e-4)
 
 
 def test_signals_follow_the_manuals_sequence():
-    simulator = ThrustStandSimulator(seed=2, strain_noise_mv=0.0, gauge_noise_pa=0.0, ambient_noise_pa=0.0)
+    simulator = ThrustStandSimulator(
+        seed=2, strain_noise_mv=0.0, gauge_noise_pa=0.0, ambient_noise_pa=0.0
+    )
     kinds = [s.kind for s in simulator.segments]
     assert kinds[:5] == ['idle', 'firing', 'idle', 'firing', 'idle']
-    assert kinds.index('loaded') > kinds.index('firing')          # calibration after firing (fn. 12)
+    assert kinds.index('loaded') > kinds.index('firing')  # calibration after firing (fn. 12)
     assert kinds.count('loaded') == kinds.count('unloaded') == 6  # 0 ... 5 weights
     idle = simulator.sample(1.0)
     assert idle.chamber_gauge_pa == pytest.approx(0.0, abs=500.0)
     assert idle.ambient_pa == 101325.0
     loaded_five = [s for s in simulator.segments if s.kind == 'loaded'][-1]
     steady = simulator.sample(loaded_five.end_s - 0.1)
-    assert steady.chamber_gauge_pa == pytest.approx(0.5e6, rel=1e-6)   # calibrated pressurised (§4.2)
+    # calibrated pressurised (§4.2)
+    assert steady.chamber_gauge_pa == pytest.approx(0.5e6, rel=1e-6)
     expected_mv = loaded_five.applied_load_n / simulator.calibration_slope_n_per_mv
-    assert steady.strain_mv - simulator.zero_offset_mv > expected_mv   # plus the accumulated set
+    assert steady.strain_mv - simulator.zero_offset_mv > expected_mv  # plus the accumulated set
     assert steady.bridge_outputs_mv().tolist()[1:] == [0.0] * 5
 
 
@@ -44,7 +49,7 @@ def test_applied_load_events_bracket_each_point_with_nan():
     events = simulator.applied_load_events()
     assert len(events) == 24
     assert np.isnan(events[0][1]) and events[1][1] == pytest.approx(0.015 * 9.80665)
-    assert events[3][1] == 0.0    # the unloaded step is a zero point
+    assert events[3][1] == 0.0  # the unloaded step is a zero point
     times = [t for t, _ in events]
     assert times == sorted(times) and times[-1] < simulator.duration_s
 

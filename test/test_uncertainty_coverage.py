@@ -1,6 +1,8 @@
 """The standard uncertainty of each load covers the true error: on points from the schedule's
 support and on points with six loads at once (outside it), |predicted - true| <= 1.96 u in 93-97 %
-of samples, and u grows outside the support instead of quoting the in-sample σ."""
+of samples, and u grows outside the support instead of quoting the in-sample σ.
+"""
+
 import numpy as np
 import pytest
 
@@ -25,13 +27,16 @@ def iterative_fit():
     schedule = sy.support_schedule(rng, 21, 70)
     tares = sy.tares_for(rng, np.unique(schedule.series))
     applied, outputs = sy.iterative_campaign(rng, truth, schedule, tares, OUTPUT_NOISE_MV)
-    result = calibrate_table(sy.make_table(applied, outputs, schedule.series), method='iterative',
-                             statistics=False)
+    result = calibrate_table(
+        sy.make_table(applied, outputs, schedule.series), method='iterative', statistics=False
+    )
     return rng, truth, tares, result
 
 
 def _new_points(rng, truth, tares, applied):
-    """Fresh measurements: outputs of the true total loads plus output noise, in random calibration series."""
+    """Fresh measurements: outputs of the true total loads plus output noise, in random
+    calibration series.
+    """
     labels = np.array(sorted(tares))
     series = rng.choice(labels, len(applied))
     totals = applied + np.array([tares[int(s)] for s in series])
@@ -52,11 +57,14 @@ def test_iterative_uncertainty_covers_inside_and_outside_the_support(iterative_f
         coverage = _coverage(error, u)
         assert 0.93 <= coverage <= 0.97, (name, coverage)
         means[name] = np.mean(u / sy.capacity_si())
-    assert means['outside'] > 1.05 * means['inside']      # the design-row covariance grows off the support
+    # the design-row covariance grows off the support
+    assert means['outside'] > 1.05 * means['inside']
 
 
 def test_live_uncertainty_from_calibration_yaml_covers_six_loads_at_once(iterative_fit, tmp_path):
-    """What the live node publishes: total loads from outputs, u from the covariance in calibration.yaml."""
+    """What the live node publishes: total loads from outputs, u from the covariance in
+    calibration.yaml.
+    """
     rng, truth, tares, result = iterative_fit
     save_calibration(tmp_path / 'calibration.yaml', result.calibration)
     calibration = load_calibration(tmp_path / 'calibration.yaml')
@@ -75,10 +83,14 @@ def test_direct_prediction_interval_covers_new_observations_inside_and_outside(t
     schedule = sy.support_schedule(rng, 21, 60)
     tares = sy.tares_for(rng, np.unique(schedule.series))
     applied, outputs = sy.direct_campaign(rng, truth, schedule, tares, noise)
-    fit = calibrate_table(sy.make_table(applied, outputs, schedule.series), method='direct',
-                          statistics=False).fits['direct']
+    fit = calibrate_table(
+        sy.make_table(applied, outputs, schedule.series), method='direct', statistics=False
+    ).fits['direct']
     means = {}
-    for name, points in (('inside', sy.support_schedule(rng, 21, 100).applied_si), ('outside', sy.six_at_once(rng, 1600))):
+    for name, points in (
+        ('inside', sy.support_schedule(rng, 21, 100).applied_si),
+        ('outside', sy.six_at_once(rng, 1600)),
+    ):
         series = rng.choice(np.array(sorted(tares)), len(points))
         new = sy.Schedule(points, series)
         recorded, new_outputs = sy.direct_campaign(rng, truth, new, tares, noise)
@@ -90,19 +102,31 @@ def test_direct_prediction_interval_covers_new_observations_inside_and_outside(t
 
 
 def test_memo_balance_six_loads_at_once_the_uncertainty_says_the_fit_errs_there():
-    """LMC6522's cubic matrix as the truth, its Appendix schedule refitted (as refit does): with six
-    loads at once the fitted cubic errs by ~0.2-2 % FS while in-sample σ is < 0.08 %; the covariance
-    stored in the calibration makes u grow by the same order, so the error stays covered."""
+    """LMC6522's cubic matrix as the truth, its Appendix schedule refitted (as refit does): with
+    six loads at once the fitted cubic errs by ~0.2-2 % FS while in-sample σ is < 0.08 %; the
+    covariance stored in the calibration makes u grow by the same order, so the error stays
+    covered.
+    """
     from balance_calib.config import load_balance_config
     from balance_calib.model.inverse import outputs_for_loads
     from balance_calib.refit.pipeline import calibrate_points, campaign_points
-    from balance_calib.simulation.balance_sim import (SimulationSettings, noise_mv_for_load_sigma,
-                                                      simulate_campaign, table17_noise)
+    from balance_calib.simulation.balance_sim import (
+        noise_mv_for_load_sigma,
+        simulate_campaign,
+        SimulationSettings,
+        table17_noise,
+    )
+
     config = load_balance_config('lmc6522')
-    settings = SimulationSettings(noise_sigma_pct_fs=table17_noise(config), seed=5, electrical_zero_mv=0.0,
-                                  slow_drift_mv_per_hour=0.0)
-    calibration = calibrate_points(campaign_points(simulate_campaign(config, settings=settings)), config,
-                                   diagnose=False).calibration
+    settings = SimulationSettings(
+        noise_sigma_pct_fs=table17_noise(config),
+        seed=5,
+        electrical_zero_mv=0.0,
+        slow_drift_mv_per_hour=0.0,
+    )
+    calibration = calibrate_points(
+        campaign_points(simulate_campaign(config, settings=settings)), config, diagnose=False
+    ).calibration
     model = calibration.model('cubic').without_constant()
     truth = config.matrices['cubic'].without_constant()
     noise_mv = noise_mv_for_load_sigma(truth, config.capacity, table17_noise(config))
@@ -114,19 +138,26 @@ def test_memo_balance_six_loads_at_once_the_uncertainty_says_the_fit_errs_there(
         outputs = outputs_for_loads(truth, loads) + rng.normal(0, 1, loads.shape) * noise_mv
         error = model.loads(outputs) - loads
         u = load_standard_uncertainty(model, outputs)
-        result[name] = (_coverage(error, u), np.sqrt(np.mean(error ** 2, axis=0)), np.sqrt(np.mean(u ** 2, axis=0)))
+        result[name] = (
+            _coverage(error, u),
+            np.sqrt(np.mean(error**2, axis=0)),
+            np.sqrt(np.mean(u**2, axis=0)),
+        )
     assert 0.93 <= result['single'][0] <= 0.97
-    assert result['six'][0] >= 0.93                       # conservative there (see notes: ~99 %)
-    assert np.max(result['six'][1] / config.capacity) > 0.005             # the fit errs by > 0.5 % FS ...
-    assert np.all(result['six'][2] > 5 * result['single'][2])             # ... and u says so
+    assert result['six'][0] >= 0.93  # conservative there (see notes: ~99 %)
+    assert np.max(result['six'][1] / config.capacity) > 0.005  # the fit errs by > 0.5 % FS ...
+    assert np.all(result['six'][2] > 5 * result['single'][2])  # ... and u says so
 
 
 def test_an_adopted_temperature_model_carries_its_own_covariance(campaigns):
-    """refit adopts cubic+temperature for an undeclared F_X temperature sensitivity: the live model it
-    writes has a covariance too, and its u on F_X is its own (smaller) scatter, not the base model's."""
+    """Refit adopts cubic+temperature for an undeclared F_X temperature sensitivity: the live model
+    it writes has a covariance too, and its u on F_X is its own (smaller) scatter, not the base
+    model's.
+    """
     from balance_calib.config import load_balance_config
     from balance_calib.model.uncertainty import has_uncertainty
     from balance_calib.refit.pipeline import calibrate_points
+
     config = load_balance_config('lmc6522')
     points = campaigns.points(seed=2, effects='temperature:sensitivity_per_k=0.0045|0|0|0|0|0')
     calibration = calibrate_points(points, config).calibration

@@ -4,10 +4,11 @@ options, every launchless script, every node executable and the `-p NAME:=` para
 The guides are prose around command lines; this keeps the command lines true when a command or a
 parameter is renamed. (What the commands then print is tested where each command is.)
 """
+
 import functools
+from pathlib import Path
 import re
 import subprocess
-from pathlib import Path
 
 import pytest
 
@@ -16,8 +17,13 @@ from balance_calib.cli import build_parser
 ROOT = Path(__file__).resolve().parent.parent
 GUIDES = sorted((ROOT / 'docs' / 'guide').glob('*.md'))
 SCRIPTS = ROOT / 'launchless_scripts'
-NODES = ('bridge_publisher', 'balance_calibrator', 'balance_recorder', 'thrust_analyzer',
-         'aero_coefficients')
+NODES = (
+    'bridge_publisher',
+    'balance_calibrator',
+    'balance_recorder',
+    'thrust_analyzer',
+    'aero_coefficients',
+)
 
 
 def _options(sub: str) -> set[str]:
@@ -43,8 +49,13 @@ def _command_lines(text: str) -> list[str]:
 
 def test_the_five_task_guides_are_there():
     names = {p.name for p in GUIDES}
-    assert names >= {'calibrate-from-bags.md', 'calibrate-from-tables.md', 'run-live.md',
-                     'reduce-windon.md', 'thrust-stand.md'}, names
+    assert names >= {
+        'calibrate-from-bags.md',
+        'calibrate-from-tables.md',
+        'run-live.md',
+        'reduce-windon.md',
+        'thrust-stand.md',
+    }, names
 
 
 @pytest.mark.parametrize('guide', GUIDES, ids=lambda p: p.name)
@@ -64,6 +75,7 @@ def test_every_command_line_of_a_guide_names_what_exists(guide):
             if re.search(rf'(^|\s){node}\s', line + ' '):
                 for parameter in re.findall(r'-p ([a-z_]+):=', line):
                     assert re.search(rf'\b{parameter}\b', _node_help(node)), (
-                        f'{guide.name}: {node} --help names no parameter {parameter}')
+                        f'{guide.name}: {node} --help names no parameter {parameter}'
+                    )
                 checked += 1
     assert checked > 0, f'{guide.name} names no command'

@@ -1,10 +1,13 @@
 """The new user's path: every command the README lists explains itself with --help and returns at
-once (nothing started: no venv setup, no DDS campaign), and sourcing _env.sh leaves the shell as it was."""
+once (nothing started: no venv setup, no DDS campaign), and sourcing _env.sh leaves the shell as it
+was.
+"""
+
 import argparse
 import os
+from pathlib import Path
 import re
 import subprocess
-from pathlib import Path
 
 import pytest
 
@@ -14,7 +17,13 @@ from balance_calib.nodes import _help
 
 ROOT = Path(__file__).resolve().parent.parent
 SCRIPTS = ROOT / 'launchless_scripts'
-NODES = ['bridge_publisher', 'balance_calibrator', 'balance_recorder', 'thrust_analyzer', 'aero_coefficients']
+NODES = [
+    'bridge_publisher',
+    'balance_calibrator',
+    'balance_recorder',
+    'thrust_analyzer',
+    'aero_coefficients',
+]
 # scripts whose options another issue's engineer documents (diagnosis_rates: issue 11)
 OPTIONS_DOCUMENTED_ELSEWHERE = {'diagnosis_rates'}
 
@@ -35,15 +44,21 @@ def parsers(parser, name):
 def test_every_command_and_option_has_a_complete_help_text(top):
     for name, parser in parsers(top, top.prog):
         description = (parser.description or '').strip()
-        assert len(description) > 30 and description[-1] in '.)', f'{name}: description {description!r}'
+        assert len(description) > 30 and description[-1] in '.)', (
+            f'{name}: description {description!r}'
+        )
         for action in parser._actions:
             if isinstance(action, (argparse._HelpAction, argparse._SubParsersAction)):
                 continue
-            assert action.help and len(action.help) > 8, f'{name} {action.option_strings or action.dest}: no help'
+            assert action.help and len(action.help) > 8, (
+                f'{name} {action.option_strings or action.dest}: no help'
+            )
 
 
 def _options_without_help(text: str) -> list[str]:
-    """Option lines of an argparse help with nothing after them, neither beside nor on the next line."""
+    """Option lines of an argparse help with nothing after them, neither beside nor on the next
+    line.
+    """
     lines = text.splitlines()
     missing = []
     for i, line in enumerate(lines):
@@ -54,13 +69,21 @@ def _options_without_help(text: str) -> list[str]:
     return missing
 
 
-@pytest.mark.parametrize('script', sorted(p.name for p in SCRIPTS.iterdir()
-                                          if p.is_file() and os.access(p, os.X_OK) and not p.name.startswith('_')))
+@pytest.mark.parametrize(
+    'script',
+    sorted(
+        p.name
+        for p in SCRIPTS.iterdir()
+        if p.is_file() and os.access(p, os.X_OK) and not p.name.startswith('_')
+    ),
+)
 def test_every_launchless_script_explains_itself(script):
     done = run([str(SCRIPTS / script), '--help'])
     assert done.returncode == 0, done.stderr
     text = done.stdout
-    assert len(text) > 150 and f'launchless_scripts/{script}' in text or text.startswith('usage:'), text
+    assert (
+        len(text) > 150 and f'launchless_scripts/{script}' in text or text.startswith('usage:')
+    ), text
     if script not in OPTIONS_DOCUMENTED_ELSEWHERE:
         assert _options_without_help(text) == [], text
 
@@ -71,11 +94,12 @@ def test_node_help_prints_its_parameters_and_starts_nothing(node):
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith(f'usage: {node} [--ros-args ...]')
     assert '--ros-args -p NAME:=VALUE' in done.stdout
-    assert '[INFO]' not in done.stdout + done.stderr          # no node came up and logged
+    assert '[INFO]' not in done.stdout + done.stderr  # no node came up and logged
 
 
 def test_node_parameters_are_all_described():
     import importlib
+
     for node in ('bridge_publisher', 'balance_calibrator'):
         module = importlib.import_module(f'balance_calib.nodes.{node}')
         rows = _help.parameter_table(module)
@@ -88,12 +112,17 @@ def test_node_parameters_are_all_described():
 
 
 def test_sourcing_env_leaves_the_interactive_shell_options_alone():
-    probe = ('source launchless_scripts/_env.sh; echo "status=$?"; set -o | grep -E "^(errexit|nounset|pipefail)"; '
-             'command -v balance-calib')
+    probe = (
+        'source launchless_scripts/_env.sh; echo "status=$?"; set -o | grep -E '
+        '"^(errexit|nounset|pipefail)"; command -v balance-calib'
+    )
     interactive = run(['bash', '--norc', '-i', '-c', probe])
     assert 'status=0' in interactive.stdout, interactive.stderr
-    assert re.findall(r'^(errexit|nounset|pipefail)\s+(\w+)', interactive.stdout, re.M) == \
-        [('errexit', 'off'), ('nounset', 'off'), ('pipefail', 'off')]
+    assert re.findall(r'^(errexit|nounset|pipefail)\s+(\w+)', interactive.stdout, re.M) == [
+        ('errexit', 'off'),
+        ('nounset', 'off'),
+        ('pipefail', 'off'),
+    ]
     assert interactive.stdout.strip().endswith('balance-calib')
     # inside a script (non-interactive) the same file turns fail-fast on
     script = run(['bash', '-c', 'source launchless_scripts/_env.sh; false; echo "not reached"'])
@@ -107,8 +136,13 @@ def test_every_command_the_readme_lists_exists_and_explains_itself():
     assert {'refit', 'simulate'} <= set(subcommands) and {'demo', 'test'} <= set(scripts)
     for name in subcommands:
         done = run(['balance-calib', name, '--help'])
-        assert done.returncode == 0 and done.stdout.startswith(f'usage: balance-calib {name}'), (name, done.stderr)
+        assert done.returncode == 0 and done.stdout.startswith(f'usage: balance-calib {name}'), (
+            name,
+            done.stderr,
+        )
     for name in scripts:
-        assert (SCRIPTS / name).is_file(), f'README lists launchless_scripts/{name}, which does not exist'
+        assert (SCRIPTS / name).is_file(), (
+            f'README lists launchless_scripts/{name}, which does not exist'
+        )
         done = run([str(SCRIPTS / name), '--help'])
         assert done.returncode == 0 and len(done.stdout) > 100, (name, done.stderr)

@@ -1,65 +1,101 @@
 """launchless_scripts/ros: the ros2 CLI habits (param, topic, service, bag info) over real DDS."""
+
 import os
+from pathlib import Path
 import signal
 import subprocess
-from pathlib import Path
 
+from mcap.reader import make_reader
 import numpy as np
 import pytest
+from ros_harness import new_domain_id, NodeProcess, ros, SCRIPTS
 import yaml
-from mcap.reader import make_reader
 
 from balance_calib.bags.reader import read_bags
 from balance_calib.config import load_balance_config
 from balance_calib.launchless.ros_tools import format_bag_info
-from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign
+from balance_calib.simulation.balance_sim import simulate_campaign, SimulationSettings
 from balance_calib.simulation.campaign_bag import write_campaign_bag
-from ros_harness import SCRIPTS, NodeProcess, new_domain_id, ros
+
 
 @pytest.mark.ros
 def test_param_topic_and_service_verbs_on_a_running_calibrator(tmp_path):
     domain = new_domain_id()
-    calibrator = NodeProcess('balance_calibrator', domain, tmp_path,
-                             {'diagnostics_period_s': 0.2, 'tare_samples': 20, 'tare_timeout_s': 1.0})
+    calibrator = NodeProcess(
+        'balance_calibrator',
+        domain,
+        tmp_path,
+        {'diagnostics_period_s': 0.2, 'tare_samples': 20, 'tare_timeout_s': 1.0},
+    )
     try:
-        # the new user's dead end of the issue: refit with calibration_bags empty -> set it, read it back
-        done = ros(domain, 'param', 'set', '/balance_calibrator', 'calibration_bags', '[bags/a, bags/b]',
-                   '--timeout', 60)
+        # the new user's dead end of the issue: refit with calibration_bags empty -> set it, read
+        # it back
+        done = ros(
+            domain,
+            'param',
+            'set',
+            '/balance_calibrator',
+            'calibration_bags',
+            '[bags/a, bags/b]',
+            '--timeout',
+            60,
+        )
         assert done.returncode == 0, done.stderr + calibrator.output()
         assert done.stdout.strip() == 'Set parameter successful'
-        done = ros(domain, 'param', 'get', '/balance_calibrator', 'calibration_bags', '--timeout', 60)
+        done = ros(
+            domain, 'param', 'get', '/balance_calibrator', 'calibration_bags', '--timeout', 60
+        )
         assert done.returncode == 0, done.stderr
         assert done.stdout.strip() == "String array value is: ['bags/a', 'bags/b']"
         # one path for a string-array parameter: a one-element list; a double stays a double
-        assert ros(domain, 'param', 'set', '/balance_calibrator', 'calibration_bags', 'bags/c').returncode == 0
-        assert ros(domain, 'param', 'get', '/balance_calibrator', 'calibration_bags').stdout.strip() == \
-            "String array value is: ['bags/c']"
-        assert ros(domain, 'param', 'set', '/balance_calibrator', 'envelope_margin', '2').returncode == 0
-        assert ros(domain, 'param', 'get', '/balance_calibrator', 'envelope_margin').stdout.strip() == \
-            'Double value is: 2.0'
+        assert (
+            ros(
+                domain, 'param', 'set', '/balance_calibrator', 'calibration_bags', 'bags/c'
+            ).returncode
+            == 0
+        )
+        assert (
+            ros(domain, 'param', 'get', '/balance_calibrator', 'calibration_bags').stdout.strip()
+            == "String array value is: ['bags/c']"
+        )
+        assert (
+            ros(domain, 'param', 'set', '/balance_calibrator', 'envelope_margin', '2').returncode
+            == 0
+        )
+        assert (
+            ros(domain, 'param', 'get', '/balance_calibrator', 'envelope_margin').stdout.strip()
+            == 'Double value is: 2.0'
+        )
         wrong = ros(domain, 'param', 'set', '/balance_calibrator', 'envelope_margin', 'wide')
         assert wrong.returncode == 1 and 'is not a double' in wrong.stderr
         listed = ros(domain, 'param', 'list', '/balance_calibrator')
-        assert {'calibration_bags', 'envelope_margin', 'model', 'installation'} <= set(listed.stdout.split())
+        assert {'calibration_bags', 'envelope_margin', 'model', 'installation'} <= set(
+            listed.stdout.split()
+        )
 
         echoed = ros(domain, 'topic', 'echo', '/diagnostics', '--count', '2', '--timeout', 60)
         assert echoed.returncode == 0, echoed.stderr
         documents = [d for d in yaml.safe_load_all(echoed.stdout) if d]
         assert len(documents) == 2
-        assert any(status['name'].startswith('balance_calibrator') for status in documents[0]['status'])
+        assert any(
+            status['name'].startswith('balance_calibrator') for status in documents[0]['status']
+        )
 
         rate = ros(domain, 'topic', 'hz', '/diagnostics', '--duration', '3', '--timeout', 60)
         assert rate.returncode == 0, rate.stderr
         hz = float(rate.stdout.split('average rate:')[1].split()[0])
-        assert 1.0 < hz < 25.0         # a 0.2 s period, within any scheduling a busy machine gives
+        assert 1.0 < hz < 25.0  # a 0.2 s period, within any scheduling a busy machine gives
 
         called = ros(domain, 'service', 'call', '/balance_calibrator/tare', '--timeout', 60)
-        assert called.returncode == 1          # no samples flowing: the tare must refuse
+        assert called.returncode == 1  # no samples flowing: the tare must refuse
         assert called.stdout.startswith('success: false\nmessage: ')
     finally:
         calibrator.stop()
     missing = ros(domain, 'param', 'get', '/no_such_node', 'x', '--timeout', 1)
-    assert missing.returncode == 1 and 'service /no_such_node/get_parameters is not available' in missing.stderr
+    assert (
+        missing.returncode == 1
+        and 'service /no_such_node/get_parameters is not available' in missing.stderr
+    )
 
 
 def test_bag_info_counts_what_the_writer_wrote(tmp_path):
@@ -80,7 +116,8 @@ def test_bag_info_counts_what_the_writer_wrote(tmp_path):
         line = next(line for line in info.splitlines() if f'Topic: {topic} ' in line)
         assert f'| Count: {count} |' in line
     assert 'Chunk compression: zstd' in info
-    # the raw samples: 3 per point plus the transition samples, per the simulation's own bookkeeping
+    # the raw samples: 3 per point plus the transition samples, per the simulation's own
+    # bookkeeping
     points = len(campaign.point)
     assert counts['/balance/raw'] >= 3 * points
     assert f'Duration:          {(max(log_times) - min(log_times)) / 1e9:.3f}s' in info
@@ -88,10 +125,11 @@ def test_bag_info_counts_what_the_writer_wrote(tmp_path):
 
 def _wait_for_service(domain, name, kind='Trigger', timeout=60.0):
     """Until `name` answers (the node is up): the lists after it must not grow any more."""
-    from rclpy.context import Context
-    import rclpy
     from rcl_interfaces.srv import ListParameters
+    import rclpy
+    from rclpy.context import Context
     from std_srvs.srv import Trigger
+
     context = Context()
     rclpy.init(context=context, domain_id=domain)
     try:
@@ -124,7 +162,7 @@ def test_node_list_info_and_a_stable_service_list(tmp_path):
     try:
         # right after start: discovery of the two nodes' endpoints is under way
         listings = [ros(domain, 'service', 'list', '--timeout', 20)]
-        _wait_for_service(domain, '/balance_calibrator/refit')       # both nodes are up
+        _wait_for_service(domain, '/balance_calibrator/refit')  # both nodes are up
         _wait_for_service(domain, '/balance_recorder/list_parameters', 'ListParameters')
         listings += [ros(domain, 'service', 'list', '--timeout', 20) for _ in range(3)]
         nodes = ros(domain, 'node', 'list', '--timeout', 20)
@@ -132,15 +170,21 @@ def test_node_list_info_and_a_stable_service_list(tmp_path):
     finally:
         recorder.stop()
         calibrator.stop()
-    expected = {f'/{node}/{name} [{kind}]' for node in ('balance_calibrator', 'balance_recorder')
-                for name, kind in STANDARD_SERVICES.items()}
-    expected |= {f'/balance_calibrator/{name} [std_srvs/srv/Trigger]'
-                 for name in ('tare', 'zero', 'clear_tare', 'refit')}
+    expected = {
+        f'/{node}/{name} [{kind}]'
+        for node in ('balance_calibrator', 'balance_recorder')
+        for name, kind in STANDARD_SERVICES.items()
+    }
+    expected |= {
+        f'/balance_calibrator/{name} [std_srvs/srv/Trigger]'
+        for name in ('tare', 'zero', 'clear_tare', 'refit')
+    }
     assert listings[0].returncode == 0 and set(listings[0].stdout.splitlines()) <= expected
-    for listing in listings[1:]:          # once the nodes are up: all of them, every time
+    for listing in listings[1:]:  # once the nodes are up: all of them, every time
         assert listing.returncode == 0, listing.stderr
         assert set(listing.stdout.splitlines()) == expected, sorted(
-            set(listing.stdout.splitlines()) ^ expected)
+            set(listing.stdout.splitlines()) ^ expected
+        )
     assert nodes.returncode == 0 and nodes.stdout.splitlines() == [
         '/balance_calibrator',
         '/balance_recorder',
@@ -159,8 +203,11 @@ def test_node_list_info_and_a_stable_service_list(tmp_path):
         '/balance/overload: std_msgs/msg/Bool',
         '/diagnostics: diagnostic_msgs/msg/DiagnosticArray',
     } <= set(sections['Publishers']), sections
-    assert {line.replace(' [', ': ').rstrip(']') for line in expected
-            if line.startswith('/balance_calibrator/')} == set(sections['Service Servers'])
+    assert {
+        line.replace(' [', ': ').rstrip(']')
+        for line in expected
+        if line.startswith('/balance_calibrator/')
+    } == set(sections['Service Servers'])
     missing = ros(domain, 'node', 'info', '/no_such_node', '--timeout', 1)
     assert missing.returncode == 1 and 'node /no_such_node is not on the graph' in missing.stderr
 
@@ -168,8 +215,9 @@ def test_node_list_info_and_a_stable_service_list(tmp_path):
 @pytest.mark.ros
 def test_topic_echo_into_a_pipe_closed_early_ends_without_a_traceback(tmp_path):
     domain = new_domain_id()
-    publisher = NodeProcess('bridge_publisher', domain, tmp_path, {'mode': 'wind_on', 'loop': True,
-                                                                    'rate_hz': 100.0})
+    publisher = NodeProcess(
+        'bridge_publisher', domain, tmp_path, {'mode': 'wind_on', 'loop': True, 'rate_hz': 100.0}
+    )
     try:
         echo = subprocess.Popen(
             [str(SCRIPTS / 'ros'), 'topic', 'echo', '/balance/raw', '--timeout', '60'],
@@ -178,7 +226,7 @@ def test_topic_echo_into_a_pipe_closed_early_ends_without_a_traceback(tmp_path):
             text=True,
             env=dict(os.environ, ROS_DOMAIN_ID=str(domain)),
         )
-        head = [echo.stdout.readline() for _ in range(3)]          # what `| head -3` reads
+        head = [echo.stdout.readline() for _ in range(3)]  # what `| head -3` reads
         echo.stdout.close()
         status = echo.wait(60)
         errors = echo.stderr.read()
@@ -234,7 +282,7 @@ def test_bag_play_into_bag_record_gives_back_the_campaign(tmp_path):
     for name in ('raw', 'applied_load', 'gravity', 'temperature'):
         a, b = getattr(before, name), getattr(after, name)
         assert len(a) == len(b) > 0, (name, len(a), len(b))
-        np.testing.assert_array_equal(a.stamps_ns, b.stamps_ns)        # header stamps as recorded
-        np.testing.assert_array_equal(a.values, b.values)              # NaN rows included
+        np.testing.assert_array_equal(a.stamps_ns, b.stamps_ns)  # header stamps as recorded
+        np.testing.assert_array_equal(a.values, b.values)  # NaN rows included
     bad = ros(domain, 'bag', 'play', tmp_path / 'nowhere')
     assert bad.returncode == 1 and 'nowhere: no such bag directory' in bad.stderr

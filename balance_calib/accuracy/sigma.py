@@ -1,4 +1,5 @@
 """Calibration accuracy, TM-663 §9: residuals (eqs. (38)-(43)) and σ (eqs. (44)-(49)) in % FS."""
+
 from __future__ import annotations
 
 from typing import Mapping, Sequence
@@ -10,7 +11,11 @@ from ..units import COMPONENTS
 
 def residuals_pct_fs(loads_measured, loads_fitted, full_scale) -> np.ndarray:
     """(exp - th) / F.S. x 100 for every point and component, eqs. (38)-(43). Shape (N, 6)."""
-    return (np.asarray(loads_measured, float) - np.asarray(loads_fitted, float)) / np.asarray(full_scale, float) * 100.0
+    return (
+        (np.asarray(loads_measured, float) - np.asarray(loads_fitted, float))
+        / np.asarray(full_scale, float)
+        * 100.0
+    )
 
 
 def sigma_pct_fs(residual_loads, full_scale) -> np.ndarray | float:
@@ -32,7 +37,7 @@ def sigma_pct_fs(residual_loads, full_scale) -> np.ndarray | float:
         σ in % of full scale.
     """
     residual_loads = np.asarray(residual_loads, dtype=float)
-    sigma = np.sqrt(np.mean(residual_loads ** 2, axis=0)) / np.asarray(full_scale, float) * 100.0
+    sigma = np.sqrt(np.mean(residual_loads**2, axis=0)) / np.asarray(full_scale, float) * 100.0
     return float(sigma) if residual_loads.ndim == 1 else sigma
 
 
@@ -56,12 +61,20 @@ def sample_std_pct_fs(residual_loads, full_scale) -> np.ndarray:
     return np.std(residual_loads, axis=0, ddof=1) / np.asarray(full_scale, float) * 100.0
 
 
-def sigma_by_component(residual_loads, full_scale, components: Sequence[str] = COMPONENTS) -> dict[str, float]:
-    return {c: float(s) for c, s in zip(components, sigma_pct_fs(residual_loads, full_scale))}
+def sigma_by_component(
+    residual_loads, full_scale, components: Sequence[str] = COMPONENTS
+) -> dict[str, float]:
+    return {
+        c: float(s)
+        for c, s in zip(components, np.atleast_1d(sigma_pct_fs(residual_loads, full_scale)))
+    }
 
 
-def format_sigma_table(rows: Mapping[str, Mapping[str, float]], components: Sequence[str] = COMPONENTS,
-                       digits: int = 3) -> str:
+def format_sigma_table(
+    rows: Mapping[str, Mapping[str, float]],
+    components: Sequence[str] = COMPONENTS,
+    digits: int = 3,
+) -> str:
     """Table 17 layout: one row per label (e.g. 'LMC6522/linear'), σ in % FS per component."""
     width = max([len(label) for label in rows] + [12])
     header = f'{"":{width}}  ' + '  '.join(f'{"σ" + c + " (%)":>9}' for c in components)

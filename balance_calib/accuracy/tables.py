@@ -6,6 +6,7 @@ table whose row r / column c entry is the coefficient of r·c (row "1" holds the
 linear terms), then the cubes as FXV**3 ... (the memo prints the moment cubes as ELV, EMV, ENV).
 Terms outside that layout (temperature, absolute-value, ... terms) follow as "term  value" lines.
 """
+
 from __future__ import annotations
 
 from ..model.balance_model import BalanceModel
@@ -32,7 +33,9 @@ def format_linear_table(model: BalanceModel) -> str:
     return '\n'.join(lines)
 
 
-def format_component_table(model: BalanceModel, component: str, memo_cube_names: bool = True) -> str:
+def format_component_table(
+    model: BalanceModel, component: str, memo_cube_names: bool = True
+) -> str:
     k = model.components.index(component)
     inputs = list(model.inputs)
     shown: set[str] = set()
@@ -45,10 +48,13 @@ def format_component_table(model: BalanceModel, component: str, memo_cube_names:
         shown.add(model.terms[j].name)
         return model.coefficients[k, j]
 
-    lines = [f'COEFFICIENTS OF {component}', f'{"":8}' + ''.join(f'{n:>11}' for n in ['1', *inputs])]
+    lines = [
+        f'COEFFICIENTS OF {component}',
+        f'{"":8}' + ''.join(f'{n:>11}' for n in ['1', *inputs]),
+    ]
     lines.append(f'{"1":8}' + ''.join(_cell(coefficient(n)) for n in ['1', *inputs]))
     for r, row in enumerate(inputs):
-        cells = [None] * (r + 1)   # blank under the diagonal (and the '1' column)
+        cells = [None] * (r + 1)  # blank under the diagonal (and the '1' column)
         cells += [coefficient(f'{row}*{col}') for col in inputs[r:]]
         lines.append(f'{row:8}' + ''.join(_cell(c) for c in cells))
     for name in inputs:
@@ -58,17 +64,27 @@ def format_component_table(model: BalanceModel, component: str, memo_cube_names:
             lines.append(f'{label:8}' + _cell(value))
     for j, term in enumerate(model.terms):
         if term.name not in shown:
-            lines.append(f'{term.name:8}' + _cell(model.coefficients[k, j]) + '   (beyond TM-663 §2)')
+            lines.append(
+                f'{term.name:8}' + _cell(model.coefficients[k, j]) + '   (beyond TM-663 §2)'
+            )
     return '\n'.join(lines)
 
 
 def format_coefficient_tables(model: BalanceModel) -> str:
     """The whole matrix in the memo's layout (linear as Table 10, others as Tables 11-12)."""
-    if all(t.degree <= 1 and not any(f.absolute for f in t.factors) and set(t.variables) <= set(model.inputs)
-           for t in model.terms):
+    if all(
+        t.degree <= 1
+        and not any(f.absolute for f in t.factors)
+        and set(t.variables) <= set(model.inputs)
+        for t in model.terms
+    ):
         return format_linear_table(model)
     return '\n\n'.join(format_component_table(model, c) for c in model.components)
 
 
 def is_memo_term(term: Term, inputs) -> bool:
-    return set(term.variables) <= set(inputs) and not any(f.absolute for f in term.factors) and term.degree <= 3
+    return (
+        set(term.variables) <= set(inputs)
+        and not any(f.absolute for f in term.factors)
+        and term.degree <= 3
+    )

@@ -15,6 +15,7 @@ deflected attitude), so `iterate_attitude` solves attitude = support + Δ(loads(
 point; with a stiff sting (|∂Δ/∂attitude| << 1) each pass gains many digits. In the wind-on
 reduction the balance measures the total load directly and one pass is exact.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -33,7 +34,12 @@ class Deflection:
     alpha_rad_per_nm: float = 0.0
     beta_rad_per_n: float = 0.0
     beta_rad_per_nm: float = 0.0
-    KEYS: ClassVar[tuple[str, ...]] = ('alpha_rad_per_n', 'alpha_rad_per_nm', 'beta_rad_per_n', 'beta_rad_per_nm')
+    KEYS: ClassVar[tuple[str, ...]] = (
+        'alpha_rad_per_n',
+        'alpha_rad_per_nm',
+        'beta_rad_per_n',
+        'beta_rad_per_nm',
+    )
 
     @property
     def matrix(self) -> np.ndarray:
@@ -44,7 +50,9 @@ class Deflection:
         return m
 
     def change(self, total_loads) -> np.ndarray:
-        """Attitude change (..., 3) rad for total loads (..., 6) N, N·m about the balance centre."""
+        """Attitude change (..., 3) rad for total loads (..., 6) N, N·m about the balance
+        centre.
+        """
         return np.asarray(total_loads, dtype=float) @ self.matrix.T
 
     def corrected(self, support_attitude, total_loads) -> np.ndarray:
@@ -52,8 +60,13 @@ class Deflection:
         return np.asarray(support_attitude, dtype=float) + self.change(total_loads)
 
 
-def iterate_attitude(support_attitude, deflection: Deflection, total_loads_at: Callable[[np.ndarray], np.ndarray],
-                     tolerance_rad: float = 1e-13, max_iterations: int = 100) -> np.ndarray:
+def iterate_attitude(
+    support_attitude,
+    deflection: Deflection,
+    total_loads_at: Callable[[np.ndarray], np.ndarray],
+    tolerance_rad: float = 1e-13,
+    max_iterations: int = 100,
+) -> np.ndarray:
     """Solve attitude = support + deflection(total_loads_at(attitude)) by fixed-point iteration.
 
     total_loads_at(attitude (..., 3)) -> loads (..., 6). Raises DeflectionDidNotConverge when the
@@ -66,5 +79,7 @@ def iterate_attitude(support_attitude, deflection: Deflection, total_loads_at: C
         if np.max(np.abs(updated - attitude), initial=0.0) <= tolerance_rad:
             return updated
         attitude = updated
-    raise DeflectionDidNotConverge(f'deflection did not converge in {max_iterations} iterations: '
-                                   f'the sting is too soft for the loads (check the deflection coefficients)')
+    raise DeflectionDidNotConverge(
+        f'deflection did not converge in {max_iterations} iterations: '
+        f'the sting is too soft for the loads (check the deflection coefficients)'
+    )

@@ -12,6 +12,7 @@ The data point of a hold averages its samples after the first `settle_samples`: 
 (`point_samples` = 0), or the first `point_samples` (holds shorter than that give no point).
 Holds with fewer than `min_samples` such samples are transients and give no point.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -26,11 +27,16 @@ class HoldSettings:
     q_tolerance_fraction: float = 0.01
     wind_off_q_pa: float = 1.0
     settle_samples: int = 0
-    point_samples: int = 0          # 0: the whole hold after settling
+    point_samples: int = 0  # 0: the whole hold after settling
     min_samples: int = 5
 
     def __post_init__(self):
-        for name in ('attitude_tolerance_rad', 'q_tolerance_pa', 'q_tolerance_fraction', 'wind_off_q_pa'):
+        for name in (
+            'attitude_tolerance_rad',
+            'q_tolerance_pa',
+            'q_tolerance_fraction',
+            'wind_off_q_pa',
+        ):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f'{name} must be a non-negative number, not {value}')
@@ -45,10 +51,15 @@ class HoldSettings:
 
     def new_hold(self, attitude, q_pa, previous_attitude, previous_q_pa) -> np.ndarray:
         """Whether each sample starts a new hold, given the sample before it (vectorised)."""
-        attitude, previous_attitude = np.asarray(attitude, float), np.asarray(previous_attitude, float)
+        attitude, previous_attitude = (
+            np.asarray(attitude, float),
+            np.asarray(previous_attitude, float),
+        )
         q, previous_q = np.asarray(q_pa, float), np.asarray(previous_q_pa, float)
         moved = np.any(np.abs(attitude - previous_attitude) > self.attitude_tolerance_rad, axis=-1)
-        q_moved = np.abs(q - previous_q) > np.maximum(self.q_tolerance_pa, self.q_tolerance_fraction * np.abs(previous_q))
+        q_moved = np.abs(q - previous_q) > np.maximum(
+            self.q_tolerance_pa, self.q_tolerance_fraction * np.abs(previous_q)
+        )
         return moved | q_moved | (self.wind_off(q) != self.wind_off(previous_q))
 
     def point_range(self, start: int, stop: int) -> tuple[int, int] | None:
@@ -66,7 +77,9 @@ def find_holds(support_attitude, q_pa, settings: HoldSettings) -> np.ndarray:
     q = np.asarray(q_pa, float)
     if len(q) == 0:
         return np.zeros((0, 2), dtype=int)
-    starts = np.concatenate([[0], 1 + np.flatnonzero(settings.new_hold(attitude[1:], q[1:], attitude[:-1], q[:-1]))])
+    starts = np.concatenate(
+        [[0], 1 + np.flatnonzero(settings.new_hold(attitude[1:], q[1:], attitude[:-1], q[:-1]))]
+    )
     stops = np.concatenate([starts[1:], [len(q)]])
     return np.column_stack([starts, stops])
 
@@ -83,12 +96,13 @@ class HoldTracker:
     settings: HoldSettings
     previous_attitude: np.ndarray | None = None
     previous_q: float | None = None
-    count: int = 0                  # samples in the current hold
+    count: int = 0  # samples in the current hold
 
     def add(self, attitude, q_pa: float) -> tuple[bool, bool]:
         attitude = np.asarray(attitude, float)
-        new = self.previous_attitude is None or bool(self.settings.new_hold(attitude, q_pa, self.previous_attitude,
-                                                                            self.previous_q))
+        new = self.previous_attitude is None or bool(
+            self.settings.new_hold(attitude, q_pa, self.previous_attitude, self.previous_q)
+        )
         self.count = 1 if new else self.count + 1
         self.previous_attitude, self.previous_q = attitude, float(q_pa)
         n = int(self.settings.point_samples)

@@ -3,6 +3,7 @@
 Lengths in m, weight in N, deflection in rad per N and rad per N·m. `weight_n` and
 `centre_of_gravity_m` are numbers, or `estimate` (from the run's wind-off attitude sweep).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -22,12 +23,14 @@ ESTIMATE = 'estimate'
 @dataclass(frozen=True)
 class ModelDescription:
     name: str
-    reference_area_m2: float                  # S
-    reference_chord_m: float                  # c, for C_m
-    reference_span_m: float                   # b, for C_l and C_n
-    moment_reference_centre_m: np.ndarray     # (3,) body axes (x forward, y starboard, z down) from the balance centre
-    weight_n: float | None                    # None: estimate from the wind-off sweep
-    centre_of_gravity_m: np.ndarray | None    # (3,) body axes from the balance centre; None: estimate
+    reference_area_m2: float  # S
+    reference_chord_m: float  # c, for C_m
+    reference_span_m: float  # b, for C_l and C_n
+    # (3,) body axes (x forward, y starboard, z down) from the balance centre
+    moment_reference_centre_m: np.ndarray
+    weight_n: float | None  # None: estimate from the wind-off sweep
+    # (3,) body axes from the balance centre; None: estimate
+    centre_of_gravity_m: np.ndarray | None
     deflection: Deflection
     path: Path | None = None
 
@@ -49,7 +52,7 @@ def resolve_model_path(name_or_path: str | Path) -> Path:
     path = Path(name_or_path)
     if path.exists():
         return path
-    dirs = [directory / 'models' for directory in shipped_config_dirs()]   # MODELS_DIR first
+    dirs = [directory / 'models' for directory in shipped_config_dirs()]  # MODELS_DIR first
     for directory in dirs:
         if (directory / f'{name_or_path}.yaml').exists():
             return directory / f'{name_or_path}.yaml'
@@ -58,7 +61,9 @@ def resolve_model_path(name_or_path: str | Path) -> Path:
 
 
 def load_model(name_or_path: str | Path) -> ModelDescription:
-    """Read a model file (a path, or the name of one in config/models). ConfigError names file and key."""
+    """Read a model file (a path, or the name of one in config/models). ConfigError names file
+    and key.
+    """
     path = resolve_model_path(name_or_path)
     try:
         data = yaml.safe_load(path.read_text())
@@ -91,7 +96,7 @@ def _number(data: Mapping, key: str, where: str, default=None) -> float:
 
 
 def _vector3(data: Mapping, key: str, where: str, allow_estimate: bool = False):
-    value: Any = data.get(key)     # what the YAML holds: checked below
+    value: Any = data.get(key)  # what the YAML holds: checked below
     if allow_estimate and value == ESTIMATE:
         return None
     try:
@@ -119,10 +124,21 @@ def model_from_dict(data: Any, path: Path | None = None) -> ModelDescription:
         raise ConfigError(f'{where}: deflection must be a mapping of coefficients')
     unknown = set(deflection_data) - set(Deflection.KEYS)
     if unknown:
-        raise ConfigError(f'{where}: deflection.{sorted(unknown)[0]} is not a known coefficient '
-                          f'({", ".join(Deflection.KEYS)})')
-    deflection = Deflection(*(_number(deflection_data, k, f'{where}: deflection', 0.0) for k in Deflection.KEYS))
-    return ModelDescription(str(data.get('name') or (path.stem if path else 'model')),
-                            _positive(data, 'reference_area_m2', where), _positive(data, 'reference_chord_m', where),
-                            _positive(data, 'reference_span_m', where),
-                            _vector3(data, 'moment_reference_centre_m', where), weight, cg, deflection, path)
+        raise ConfigError(
+            f'{where}: deflection.{sorted(unknown)[0]} is not a known coefficient '
+            f'({", ".join(Deflection.KEYS)})'
+        )
+    deflection = Deflection(
+        *(_number(deflection_data, k, f'{where}: deflection', 0.0) for k in Deflection.KEYS)
+    )
+    return ModelDescription(
+        str(data.get('name') or (path.stem if path else 'model')),
+        _positive(data, 'reference_area_m2', where),
+        _positive(data, 'reference_chord_m', where),
+        _positive(data, 'reference_span_m', where),
+        _vector3(data, 'moment_reference_centre_m', where),
+        weight,
+        cg,
+        deflection,
+        path,
+    )

@@ -3,6 +3,7 @@ calibration models (TM-663 §10.3-10.4, Figs. 12-13). The steps are those of the
 (`aero_coefficients`): the calibration without its constants evaluated on the full bridge outputs
 and turned into the installation's tunnel axes as `balance_calibrator` does, then run.py.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -12,15 +13,15 @@ from typing import Sequence
 import numpy as np
 
 from ..calibration_file import load_calibration
-from ..model.calibration import Calibration
-from ..coverage.run import RunCoverage, run_coverage
-from ..model.uncertainty import has_uncertainty
+from ..coverage.run import run_coverage, RunCoverage
 from ..model.active_calibration import activate, six_axis_loads
+from ..model.calibration import Calibration
+from ..model.uncertainty import has_uncertainty
 from ..tunnel_axes import Installation, parse_installation
-from .bag_io import DEFAULT_MAX_INPUT_AGE_S, RunSamples, read_run
+from .bag_io import DEFAULT_MAX_INPUT_AGE_S, read_run, RunSamples
 from .held_points import HoldSettings
-from .model_file import ModelDescription, load_model
-from .run import FALLBACK_SIGMA_PCT_FS, RunResult, offset_warnings, reduce_run, sigma_loads_tunnel
+from .model_file import load_model, ModelDescription
+from .run import FALLBACK_SIGMA_PCT_FS, offset_warnings, reduce_run, RunResult, sigma_loads_tunnel
 
 
 class ReduceError(ValueError):
@@ -29,7 +30,7 @@ class ReduceError(ValueError):
 
 @dataclass(frozen=True)
 class ModelRun:
-    name: str                  # calibration model: 'cubic', 'linear', ...
+    name: str  # calibration model: 'cubic', 'linear', ...
     result: RunResult
 
 
@@ -41,32 +42,44 @@ class Reduction:
     model: ModelDescription
     installation: Installation
     settings: HoldSettings
-    sigma_loads: np.ndarray        # (6,) tunnel axes
+    sigma_loads: np.ndarray  # (6,) tunnel axes
     sigma_source: str
     main: ModelRun
     compared: tuple[ModelRun, ...]
-    coverage: RunCoverage | None = None   # predicted u of the main model at every sample; None:
-                                          # the calibration carries no coefficient covariance
+    # predicted u of the main model at every sample; None: the calibration carries no coefficient
+    # covariance
+    coverage: RunCoverage | None = None
 
     @property
     def runs(self) -> tuple[ModelRun, ...]:
         return (self.main,) + tuple(r for r in self.compared)
 
 
-def calibration_sigma(calibration: Calibration, installation: Installation) -> tuple[np.ndarray, str]:
+def calibration_sigma(
+    calibration: Calibration, installation: Installation
+) -> tuple[np.ndarray, str]:
     sigma = [calibration.sigma_pct_fs.get(c) for c in calibration.components]
     if len(calibration.components) == 6 and all(s is not None and s > 0 for s in sigma):
-        return sigma_loads_tunnel(sigma, calibration.capacity, installation), 'the calibration\'s σ (% FS)'
-    return sigma_loads_tunnel([FALLBACK_SIGMA_PCT_FS] * 6, calibration.capacity, installation), \
-        f'none stated by the calibration: {FALLBACK_SIGMA_PCT_FS} % FS assumed'
+        return sigma_loads_tunnel(
+            sigma, calibration.capacity, installation
+        ), "the calibration's σ (% FS)"
+    return sigma_loads_tunnel(
+        [FALLBACK_SIGMA_PCT_FS] * 6, calibration.capacity, installation
+    ), f'none stated by the calibration: {FALLBACK_SIGMA_PCT_FS} % FS assumed'
 
 
-def readings_for(calibration: Calibration, model_name: str, installation: Installation, raw_mv) -> np.ndarray:
-    """Calibrated loads in the tunnel axes of §10.2, as balance_calibrator publishes them (no tare)."""
+def readings_for(
+    calibration: Calibration, model_name: str, installation: Installation, raw_mv
+) -> np.ndarray:
+    """Calibrated loads in the tunnel axes of §10.2, as balance_calibrator publishes them (no
+    tare).
+    """
     active = activate(calibration, model_name, installation)
     if active.requires:
-        raise ReduceError(f'calibration model {active.model_name!r} needs {", ".join(active.requires)} as well as '
-                          f'the bridge outputs; choose another with --calibration-model or --compare')
+        raise ReduceError(
+            f'calibration model {active.model_name!r} needs {", ".join(active.requires)} as '
+            'well as the bridge outputs; choose another with --calibration-model or --compare'
+        )
     return installation.to_tunnel(six_axis_loads(active.model, raw_mv))
 
 
@@ -77,7 +90,8 @@ IMPLAUSIBLE_OUTPUT_RATED = 1000.0
 def _without_implausible_outputs(samples: RunSamples, calibration: Calibration):
     """The samples less those whose bridge outputs are beyond IMPLAUSIBLE_OUTPUT_RATED x rated (a
     flipped exponent bit: through a cubic it overflows and spoils the hold's mean), and the
-    warning saying how many went (an empty list when none)."""
+    warning saying how many went (an empty list when none).
+    """
     raw = np.asarray(samples.raw_mv, float)
     limit = IMPLAUSIBLE_OUTPUT_RATED * np.abs(np.asarray(calibration.rated_output_mv, float))
     bad = np.any(np.abs(raw) > limit, axis=1)
@@ -90,30 +104,49 @@ def _without_implausible_outputs(samples: RunSamples, calibration: Calibration):
     def kept(values):
         return None if values is None else values[keep]
 
-    warning = (f'{int(bad.sum())} raw sample(s) with a bridge output beyond '
-               f'{IMPLAUSIBLE_OUTPUT_RATED:g}x its rated output left out (first: '
-               f'{calibration.bridge_outputs[k]} {raw[first, k]:.4g} mV)')
-    return replace(samples, stamps_ns=samples.stamps_ns[keep], raw_mv=raw[keep],
-                   support_attitude=samples.support_attitude[keep], q_pa=samples.q_pa[keep],
-                   truth_body=kept(samples.truth_body), truth_wind=kept(samples.truth_wind)), [warning]
+    warning = (
+        f'{int(bad.sum())} raw sample(s) with a bridge output beyond '
+        f'{IMPLAUSIBLE_OUTPUT_RATED:g}x its rated output left out (first: '
+        f'{calibration.bridge_outputs[k]} {raw[first, k]:.4g} mV)'
+    )
+    return replace(
+        samples,
+        stamps_ns=samples.stamps_ns[keep],
+        raw_mv=raw[keep],
+        support_attitude=samples.support_attitude[keep],
+        q_pa=samples.q_pa[keep],
+        truth_body=kept(samples.truth_body),
+        truth_wind=kept(samples.truth_wind),
+    ), [warning]
 
 
-def reduce_bags(bags: Sequence[str | Path], calibration_path: str, model_path: str, *, compare: Sequence[str] = (),
-                calibration_model: str = 'adopted', installation: str = 'upright',
-                settings: HoldSettings = HoldSettings(), max_input_age_s: float = DEFAULT_MAX_INPUT_AGE_S,
-                estimate_weight: bool = False, raw_topic: str = '/balance/raw',
-                attitude_topic: str = '/model/attitude',
-                dynamic_pressure_topic: str = '/tunnel/dynamic_pressure', electrical_zero_mv=None) -> Reduction:
+def reduce_bags(
+    bags: Sequence[str | Path],
+    calibration_path: str,
+    model_path: str,
+    *,
+    compare: Sequence[str] = (),
+    calibration_model: str = 'adopted',
+    installation: str = 'upright',
+    settings: HoldSettings = HoldSettings(),
+    max_input_age_s: float = DEFAULT_MAX_INPUT_AGE_S,
+    estimate_weight: bool = False,
+    raw_topic: str = '/balance/raw',
+    attitude_topic: str = '/model/attitude',
+    dynamic_pressure_topic: str = '/tunnel/dynamic_pressure',
+    electrical_zero_mv=None,
+) -> Reduction:
     """Everything `reduce` computes. Raises ReduceError (or ConfigError/BagError) naming the input.
 
-    electrical_zero_mv (6,): the bridge outputs with nothing on the balance (the calibrator's ~/zero),
-    subtracted from the raw outputs before the calibration (output space, exact for any model);
-    what remains constant is taken by the wind-off sweep's offsets in load space."""
+    electrical_zero_mv (6,): the bridge outputs with nothing on the balance (the calibrator's
+    ~/zero), subtracted from the raw outputs before the calibration (output space, exact for any
+    model); what remains constant is taken by the wind-off sweep's offsets in load space.
+    """
     try:
         calibration = load_calibration(calibration_path)
         model = load_model(model_path)
         parsed = parse_installation(installation)
-    except ValueError as err:       # ConfigError too
+    except ValueError as err:  # ConfigError too
         raise ReduceError(str(err)) from None
     if estimate_weight:
         model = model.with_estimated_weight()
@@ -121,31 +154,60 @@ def reduce_bags(bags: Sequence[str | Path], calibration_path: str, model_path: s
     names = [main_name] + [n for n in compare if n != main_name]
     for name in names:
         if name not in calibration.models:
-            raise ReduceError(f'{calibration_path}: no {name!r} model (it has {", ".join(calibration.models)})')
-    samples = read_run(bags, raw_topic=raw_topic, attitude_topic=attitude_topic,
-                       dynamic_pressure_topic=dynamic_pressure_topic, max_input_age_s=max_input_age_s)
+            raise ReduceError(
+                f'{calibration_path}: no {name!r} model (it has {", ".join(calibration.models)})'
+            )
+    samples = read_run(
+        bags,
+        raw_topic=raw_topic,
+        attitude_topic=attitude_topic,
+        dynamic_pressure_topic=dynamic_pressure_topic,
+        max_input_age_s=max_input_age_s,
+    )
     if len(samples.q_pa) == 0:
-        raise ReduceError(f'{", ".join(map(str, bags))}: no raw sample has an attitude and a dynamic pressure '
-                          f'within {max_input_age_s} s before it')
+        raise ReduceError(
+            f'{", ".join(map(str, bags))}: no raw sample has an attitude and a dynamic pressure '
+            f'within {max_input_age_s} s before it'
+        )
     samples, implausible = _without_implausible_outputs(samples, calibration)
     if len(samples.q_pa) == 0:
         raise ReduceError(f'{", ".join(map(str, bags))}: {implausible[0]}; no sample left')
     sigma, sigma_source = calibration_sigma(calibration, parsed)
     runs: list[ModelRun] = []
-    raw = samples.raw_mv if electrical_zero_mv is None \
+    raw = (
+        samples.raw_mv
+        if electrical_zero_mv is None
         else samples.raw_mv - np.asarray(electrical_zero_mv, float)
-    coverage = run_coverage(calibration, outputs_mv=raw, model=main_name) \
-        if has_uncertainty(calibration, main_name) else None
+    )
+    coverage = (
+        run_coverage(calibration, outputs_mv=raw, model=main_name)
+        if has_uncertainty(calibration, main_name)
+        else None
+    )
     for name in names:
         readings = readings_for(calibration, name, parsed, raw)
-        result = reduce_run(readings, samples.support_attitude, samples.q_pa, model, settings,
-                            sigma)
+        result = reduce_run(
+            readings, samples.support_attitude, samples.q_pa, model, settings, sigma
+        )
         capacity = parsed.to_tunnel(np.asarray(calibration.capacity, float))
         extra = offset_warnings(result.tares, capacity, name, electrical_zero_mv is not None)
         extra = (implausible if not runs else []) + extra
         runs.append(ModelRun(name, replace(result, warnings=result.warnings + tuple(extra))))
     if not runs[0].result.wind_on:
-        raise ReduceError(f'{", ".join(map(str, bags))}: no held wind-on attitude found '
-                          f'(q∞ ≥ {settings.wind_off_q_pa} Pa held for {settings.min_samples} samples or more)')
-    return Reduction(samples, calibration, str(calibration_path), model, parsed, settings, sigma, sigma_source,
-                     runs[0], tuple(runs[1:]), coverage)
+        raise ReduceError(
+            f'{", ".join(map(str, bags))}: no held wind-on attitude found '
+            f'(q∞ ≥ {settings.wind_off_q_pa} Pa held for {settings.min_samples} samples or more)'
+        )
+    return Reduction(
+        samples,
+        calibration,
+        str(calibration_path),
+        model,
+        parsed,
+        settings,
+        sigma,
+        sigma_source,
+        runs[0],
+        tuple(runs[1:]),
+        coverage,
+    )

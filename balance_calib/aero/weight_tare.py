@@ -20,6 +20,7 @@ differs from model(V_on - V_off) by the cross terms between air loads and weight
 The attitude at which the weight acts is the deflected one, which depends on the loads, which
 depend on the offsets: the fit iterates offsets -> attitudes -> fit until nothing changes.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -29,8 +30,18 @@ import numpy as np
 from .axes import gravity_direction, loads_from_body
 from .deflection import Deflection
 
-PARAMETERS = ('W', 'W*x_cg', 'W*y_cg', 'W*z_cg', 'offset_FX', 'offset_FY', 'offset_FZ', 'offset_MX',
-              'offset_MY', 'offset_MZ')
+PARAMETERS = (
+    'W',
+    'W*x_cg',
+    'W*y_cg',
+    'W*z_cg',
+    'offset_FX',
+    'offset_FY',
+    'offset_FZ',
+    'offset_MX',
+    'offset_MY',
+    'offset_MZ',
+)
 
 
 class WeightTareError(ValueError):
@@ -38,14 +49,16 @@ class WeightTareError(ValueError):
 
 
 def gravity_basis(attitude) -> np.ndarray:
-    """(..., 6, 4): the loads read per unit of (W, W·x_cg, W·y_cg, W·z_cg) at attitudes (..., 3)."""
+    """(..., 6, 4): the loads read per unit of (W, W·x_cg, W·y_cg, W·z_cg) at attitudes (...,
+    3).
+    """
     g = gravity_direction(attitude)
     zero = np.zeros_like(g)
     columns = [loads_from_body(g, zero)]
     for axis in range(3):
         unit = np.zeros(3)
         unit[axis] = 1.0
-        columns.append(loads_from_body(zero, np.cross(unit, g)))     # (W r) x g, one component of W r
+        columns.append(loads_from_body(zero, np.cross(unit, g)))  # (W r) x g, one component of W r
     return np.stack(columns, axis=-1)
 
 
@@ -60,12 +73,13 @@ class WeightTare:
     """Weight, centre of gravity and offsets: what the balance reads wind-off at any attitude."""
 
     weight_n: float
-    cg_m: np.ndarray               # (3,) body axes from the balance centre
-    offsets: np.ndarray            # (6,) N, N·m: the reading with nothing on the balance
-    covariance: np.ndarray         # (10, 10) of (W, W·cg, offsets) in PARAMETERS order; zeros where declared
-    source: str                    # 'estimated' | 'declared'
-    points: int = 0                # wind-off held points it came from
-    residual_rms: np.ndarray | None = None   # (6,) rms of the fit residuals per component
+    cg_m: np.ndarray  # (3,) body axes from the balance centre
+    offsets: np.ndarray  # (6,) N, N·m: the reading with nothing on the balance
+    # (10, 10) of (W, W·cg, offsets) in PARAMETERS order; zeros where declared
+    covariance: np.ndarray
+    source: str  # 'estimated' | 'declared'
+    points: int = 0  # wind-off held points it came from
+    residual_rms: np.ndarray | None = None  # (6,) rms of the fit residuals per component
 
     @property
     def parameters(self) -> np.ndarray:
@@ -99,23 +113,44 @@ class WeightTare:
 
 
 def declared_tare(weight_n: float, cg_m, offsets=np.zeros(6)) -> WeightTare:
-    return WeightTare(float(weight_n), np.asarray(cg_m, float), np.asarray(offsets, float), np.zeros((10, 10)),
-                      'declared')
+    return WeightTare(
+        float(weight_n),
+        np.asarray(cg_m, float),
+        np.asarray(offsets, float),
+        np.zeros((10, 10)),
+        'declared',
+    )
 
 
 def _parametrisation(weight_n, cg_m):
-    """p = p0 + P u for (W, W·cg) given what is declared: (p0 (4,), P (4, k), names of u)."""
+    """P = p0 + P u for (W, W·cg) given what is declared: (p0 (4,), P (4, k), names of u)."""
     if weight_n is not None and cg_m is not None:
-        return np.concatenate([[weight_n], weight_n * np.asarray(cg_m, float)]), np.zeros((4, 0)), []
+        return (
+            np.concatenate([[weight_n], weight_n * np.asarray(cg_m, float)]),
+            np.zeros((4, 0)),
+            [],
+        )
     if weight_n is not None:
-        return np.array([weight_n, 0.0, 0.0, 0.0]), np.vstack([np.zeros(3), np.eye(3)]), ['x_cg', 'y_cg', 'z_cg']
+        return (
+            np.array([weight_n, 0.0, 0.0, 0.0]),
+            np.vstack([np.zeros(3), np.eye(3)]),
+            ['x_cg', 'y_cg', 'z_cg'],
+        )
     if cg_m is not None:
         return np.zeros(4), np.concatenate([[1.0], np.asarray(cg_m, float)])[:, None], ['weight']
     return np.zeros(4), np.eye(4), ['weight', 'x_cg', 'y_cg', 'z_cg']
 
 
-def fit_weight_tare(readings, support_attitude, *, sigma_loads, deflection: Deflection = Deflection(),
-                    weight_n: float | None = None, cg_m=None, max_iterations: int = 50) -> WeightTare:
+def fit_weight_tare(
+    readings,
+    support_attitude,
+    *,
+    sigma_loads,
+    deflection: Deflection = Deflection(),
+    weight_n: float | None = None,
+    cg_m=None,
+    max_iterations: int = 50,
+) -> WeightTare:
     """Weight tare from wind-off held points.
 
     readings (K, 6): mean loads of each wind-off hold, N / N·m (calibration on the full outputs);
@@ -136,13 +171,17 @@ def fit_weight_tare(readings, support_attitude, *, sigma_loads, deflection: Defl
     k = embed.shape[1]
     names = unknown_names + [f'offset of {c}' for c in ('F_X', 'F_Y', 'F_Z', 'M_X', 'M_Y', 'M_Z')]
     if len(readings) * 6 < k + 6:
-        raise WeightTareError(f'{len(readings)} wind-off held point(s) cannot determine {k + 6} tare parameters')
+        raise WeightTareError(
+            f'{len(readings)} wind-off held point(s) cannot determine {k + 6} tare parameters'
+        )
     offsets = np.zeros(6)
     previous = None
     for _ in range(max_iterations):
         attitude = deflection.corrected(support, readings - offsets)
-        basis = gravity_basis(attitude)                          # (K, 6, 4)
-        design = np.concatenate([basis @ embed, np.broadcast_to(np.eye(6), (len(readings), 6, 6))], axis=-1)
+        basis = gravity_basis(attitude)  # (K, 6, 4)
+        design = np.concatenate(
+            [basis @ embed, np.broadcast_to(np.eye(6), (len(readings), 6, 6))], axis=-1
+        )
         target = readings - basis @ p0
         a = (design / sigma[None, :, None]).reshape(-1, k + 6)
         b = (target / sigma).ravel()
@@ -151,20 +190,31 @@ def fit_weight_tare(readings, support_attitude, *, sigma_loads, deflection: Defl
         u, s, vt = np.linalg.svd(a / scale, full_matrices=False)
         if s[-1] <= 1e-9 * s[0]:
             weakest = int(np.argmax(np.abs(vt[-1])))
-            raise WeightTareError(f'the wind-off sweep ({len(readings)} held points) does not determine the '
-                                  f'{names[weakest]}: add attitudes (other α, rolled φ) or declare it in the model file')
+            raise WeightTareError(
+                f'the wind-off sweep ({len(readings)} held points) does not determine the '
+                f'{names[weakest]}: add attitudes (other α, rolled φ) or declare it in the '
+                'model file'
+            )
         solution = (vt.T @ ((u.T @ b) / s)) / scale
         offsets = solution[k:]
-        if previous is not None and np.max(np.abs(solution - previous)) <= 1e-12 * (1 + np.max(np.abs(solution))):
+        if previous is not None and np.max(np.abs(solution - previous)) <= 1e-12 * (
+            1 + np.max(np.abs(solution))
+        ):
             break
         previous = solution
-    covariance_u = (vt.T / s ** 2) @ vt / np.outer(scale, scale)
+    covariance_u = (vt.T / s**2) @ vt / np.outer(scale, scale)
     full = np.zeros((10, k + 6))
     full[:4, :k] = embed
     full[4:, k:] = np.eye(6)
     covariance = full @ covariance_u @ full.T
     p = p0 + embed @ solution[:k]
     residual = target - design @ solution
-    return WeightTare(float(p[0]), p[1:] / p[0], offsets.copy(), covariance,
-                      'declared' if k == 0 else 'estimated', len(readings),
-                      np.sqrt(np.mean(residual ** 2, axis=0)))
+    return WeightTare(
+        float(p[0]),
+        p[1:] / p[0],
+        offsets.copy(),
+        covariance,
+        'declared' if k == 0 else 'estimated',
+        len(readings),
+        np.sqrt(np.mean(residual**2, axis=0)),
+    )

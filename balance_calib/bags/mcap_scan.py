@@ -11,25 +11,32 @@ messages per topic the summary says are missing.
 Memory: the file is mapped, not read; the payloads kept are the messages asked for; a chunk is
 copied and decompressed one at a time.
 """
+
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 import mmap
 import os
+from pathlib import Path
 import stat
 import struct
-import zlib
-from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Collection
+import zlib
 
 MAGIC = b'\x89MCAP0\r\n'
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x01, 0x02, 0x03, 0x04, 0x05
-_OP_CHUNK, _OP_MESSAGE_INDEX, _OP_CHUNK_INDEX, _OP_STATISTICS, _OP_DATA_END = 0x06, 0x07, 0x08, 0x0B, 0x0F
+_OP_CHUNK, _OP_MESSAGE_INDEX, _OP_CHUNK_INDEX, _OP_STATISTICS, _OP_DATA_END = (
+    0x06,
+    0x07,
+    0x08,
+    0x0B,
+    0x0F,
+)
 _RECORD_HEAD = struct.Struct('<BQ')
 _MESSAGE_HEAD = struct.Struct('<HIQQ')
-_FOOTER = struct.Struct('<BQQQI')          # opcode, length, summary_start, summary_offset_start, crc
-_MAX_RECORD = 1 << 34                      # a longer record length is damage, not data
-STILL_RECORDING = 'still being recorded'   # the loss line of a file read while it is written
+_FOOTER = struct.Struct('<BQQQI')  # opcode, length, summary_start, summary_offset_start, crc
+_MAX_RECORD = 1 << 34  # a longer record length is damage, not data
+STILL_RECORDING = 'still being recorded'  # the loss line of a file read while it is written
 
 
 class McapDamage(ValueError):
@@ -63,8 +70,8 @@ class Scan:
     # topic -> (log times ns, payloads)
     messages: dict[str, tuple[list[int], list[bytes]]] = field(default_factory=dict)
     sequences: dict[str, list[int]] = field(default_factory=dict)
-    counts: dict[str, int] = field(default_factory=dict)          # messages read per topic
-    expected: dict[str, int] | None = None                        # per topic from the summary
+    counts: dict[str, int] = field(default_factory=dict)  # messages read per topic
+    expected: dict[str, int] | None = None  # per topic from the summary
     losses: list[str] = field(default_factory=list)
 
 
@@ -75,9 +82,17 @@ def check_regular_file(path: Path) -> None:
     except OSError as error:
         raise McapDamage(f'{path}: cannot read ({error.strerror})') from None
     if not stat.S_ISREG(mode):
-        kind = ('a FIFO' if stat.S_ISFIFO(mode) else 'a device' if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
-                else 'a socket' if stat.S_ISSOCK(mode) else 'a directory' if stat.S_ISDIR(mode)
-                else 'not a regular file')
+        kind = (
+            'a FIFO'
+            if stat.S_ISFIFO(mode)
+            else 'a device'
+            if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+            else 'a socket'
+            if stat.S_ISSOCK(mode)
+            else 'a directory'
+            if stat.S_ISDIR(mode)
+            else 'not a regular file'
+        )
         raise McapDamage(f'{path}: is {kind}, not an MCAP file')
 
 
@@ -86,7 +101,7 @@ def _string(buffer, at: int) -> tuple[str, int]:
     end = at + 4 + length
     if end > len(buffer):
         raise ValueError('string runs past its record')
-    return bytes(buffer[at + 4:end]).decode('utf-8'), end
+    return bytes(buffer[at + 4 : end]).decode('utf-8'), end
 
 
 def _bytes(buffer, at: int, width: str = '<I') -> tuple[bytes, int]:
@@ -94,12 +109,13 @@ def _bytes(buffer, at: int, width: str = '<I') -> tuple[bytes, int]:
     start = at + struct.calcsize(width)
     if start + length > len(buffer):
         raise ValueError('byte array runs past its record')
-    return bytes(buffer[start:start + length]), start + length
+    return bytes(buffer[start : start + length]), start + length
 
 
 class _Reader:
-    def __init__(self, path: Path, wanted: Collection[str] | None, salvage: bool,
-                 unfinished: bool = False):
+    def __init__(
+        self, path: Path, wanted: Collection[str] | None, salvage: bool, unfinished: bool = False
+    ):
         self.path, self.wanted, self.salvage, self.unfinished = path, wanted, salvage, unfinished
         self.scan = Scan(path)
         self.schemas: dict[int, tuple[str, str, bytes]] = {}
@@ -120,7 +136,9 @@ class _Reader:
         encoding, _ = _string(content, at)
         name, schema_encoding, data = self.schemas.get(schema_id, ('', '', b''))
         if channel_id not in self.scan.channels:
-            self.scan.channels[channel_id] = Channel(channel_id, topic, name, schema_encoding, data, encoding)
+            self.scan.channels[channel_id] = Channel(
+                channel_id, topic, name, schema_encoding, data, encoding
+            )
 
     def _message(self, content, offset: int) -> None:
         if len(content) < _MESSAGE_HEAD.size:
@@ -134,7 +152,7 @@ class _Reader:
         if self.wanted is None or topic in self.wanted:
             times, payloads = self.scan.messages.setdefault(topic, ([], []))
             times.append(log_time)
-            payloads.append(bytes(content[_MESSAGE_HEAD.size:]))
+            payloads.append(bytes(content[_MESSAGE_HEAD.size :]))
             self.scan.sequences.setdefault(topic, []).append(sequence)
 
     def _records(self, buffer, base_offset: int) -> None:
@@ -148,7 +166,7 @@ class _Reader:
             start = at + 9
             if start + length > end:
                 raise ValueError(f'record at byte {base_offset + at} runs past the chunk end')
-            content = view[start:start + length]
+            content = view[start : start + length]
             if opcode == _OP_MESSAGE:
                 self._message(content, base_offset + at)
             elif opcode == _OP_SCHEMA:
@@ -162,15 +180,21 @@ class _Reader:
         compression, at = _string(content, 28)
         data, _ = _bytes(content, at, '<Q')
         if index is not None and index.compressed_size != len(data):
-            raise ValueError(f'compressed size {len(data)} where the chunk index says {index.compressed_size}')
+            raise ValueError(
+                f'compressed size {len(data)} where the chunk index says {index.compressed_size}'
+            )
         if compression == 'zstd':
             import zstandard
+
             try:
-                records = zstandard.ZstdDecompressor().decompress(data, max_output_size=uncompressed_size)
+                records = zstandard.ZstdDecompressor().decompress(
+                    data, max_output_size=uncompressed_size
+                )
             except zstandard.ZstdError as error:
                 raise ValueError(f'zstd: {error}') from None
         elif compression == 'lz4':
             import lz4.frame
+
             try:
                 records = lz4.frame.decompress(data)
             except RuntimeError as error:
@@ -180,12 +204,17 @@ class _Reader:
         else:
             raise ValueError(f'unknown chunk compression {compression!r}')
         if len(records) != uncompressed_size:
-            raise ValueError(f'decompressed to {len(records)} bytes where the chunk says {uncompressed_size}')
+            raise ValueError(
+                f'decompressed to {len(records)} bytes where the chunk says {uncompressed_size}'
+            )
         if crc and zlib.crc32(records) != crc:
             raise ValueError('CRC mismatch')
         # parse into a scratch state so that a chunk failing half-way adds nothing
-        saved = ({t: (list(v[0]), list(v[1])) for t, v in self.scan.messages.items()},
-                 {t: list(v) for t, v in self.scan.sequences.items()}, dict(self.scan.counts))
+        saved = (
+            {t: (list(v[0]), list(v[1])) for t, v in self.scan.messages.items()},
+            {t: list(v) for t, v in self.scan.sequences.items()},
+            dict(self.scan.counts),
+        )
         try:
             self._records(records, offset)
         except (ValueError, struct.error, UnicodeDecodeError):
@@ -207,7 +236,7 @@ class _Reader:
     def _read(self, data) -> Scan:
         path = self.path
         size = len(data)
-        if size < len(MAGIC) or data[:len(MAGIC)] != MAGIC:
+        if size < len(MAGIC) or data[: len(MAGIC)] != MAGIC:
             raise McapDamage(f'{path}: not an MCAP file ({size} bytes, no MCAP magic at offset 0)')
         summary = self._summary(data)
         indexes = summary['chunks'] if summary else {}
@@ -216,8 +245,10 @@ class _Reader:
         # flushed so far, maybe half-way through one: that end is where its writer is, not damage
         open_end = summary is None and self.unfinished
         if summary is None and not open_end:
-            problem = (f'{path}: truncated or damaged: no valid footer and summary at the end '
-                       f'(file is {size} bytes); the messages it should hold cannot be counted')
+            problem = (
+                f'{path}: truncated or damaged: no valid footer and summary at the end '
+                f'(file is {size} bytes); the messages it should hold cannot be counted'
+            )
             if not self.salvage:
                 raise McapDamage(problem + ' (--salvage reads what is intact)')
             self.scan.losses.append(problem)
@@ -226,23 +257,26 @@ class _Reader:
         seen_chunks = set()
         while at < data_end:
             try:
-                if open_end and (at + 9 > size
-                                 or at + 9 + _RECORD_HEAD.unpack_from(data, at)[1] > size):
+                if open_end and (
+                    at + 9 > size or at + 9 + _RECORD_HEAD.unpack_from(data, at)[1] > size
+                ):
                     break
                 if at + 9 > size:
                     raise ValueError('record header cut by the end of the file')
                 opcode, length = _RECORD_HEAD.unpack_from(data, at)
                 if length > _MAX_RECORD or at + 9 + length > size:
                     raise ValueError(f'record length {length} runs past the end of the file')
-                content = data[at + 9:at + 9 + length]
+                content = data[at + 9 : at + 9 + length]
                 if opcode == _OP_DATA_END:
                     break
                 if opcode == _OP_CHUNK:
                     index = indexes.get(at)
                     if summary is not None and index is None:
-                        raise ValueError('a chunk the summary\'s chunk index does not list')
+                        raise ValueError("a chunk the summary's chunk index does not list")
                     if index is not None and index.length != 9 + length:
-                        raise ValueError(f'chunk length {9 + length} where the chunk index says {index.length}')
+                        raise ValueError(
+                            f'chunk length {9 + length} where the chunk index says {index.length}'
+                        )
                     self._chunk(content, at, index)
                     seen_chunks.add(at)
                 elif opcode == _OP_MESSAGE:
@@ -252,7 +286,9 @@ class _Reader:
                 elif opcode == _OP_CHANNEL:
                     self._channel(content)
                 elif opcode not in (_OP_HEADER, _OP_MESSAGE_INDEX, 0x09, 0x0C):
-                    raise ValueError(f'unexpected record opcode 0x{opcode:02x} in the data section')
+                    raise ValueError(
+                        f'unexpected record opcode 0x{opcode:02x} in the data section'
+                    )
                 at += 9 + length
             except (ValueError, struct.error, UnicodeDecodeError) as error:
                 problem = f'{path}: damaged data at byte offset {at}: {error}'
@@ -261,8 +297,14 @@ class _Reader:
                 following = [offset for offset in resume if offset > at]
                 if at in indexes:
                     seen_chunks.add(at)
-                self.scan.losses.append(problem + (f'; skipped to the next chunk at byte {following[0]}'
-                                                   if following else '; nothing after it could be read'))
+                self.scan.losses.append(
+                    problem
+                    + (
+                        f'; skipped to the next chunk at byte {following[0]}'
+                        if following
+                        else '; nothing after it could be read'
+                    )
+                )
                 if not following:
                     break
                 at = following[0]
@@ -273,28 +315,33 @@ class _Reader:
             self.scan.losses.append(
                 f'{path}: {STILL_RECORDING}, or its recorder was stopped without closing it '
                 f'(no MCAP summary, no metadata.yaml yet): read the {read} messages on disk so '
-                f'far ({at} of {size} bytes); what its writer still buffers is not in it yet')
+                f'far ({at} of {size} bytes); what its writer still buffers is not in it yet'
+            )
         return self.scan
 
     def _summary(self, data: bytes) -> dict | None:
-        """Channels, chunk indexes and per-topic counts from the summary; None if it is unusable."""
+        """Channels, chunk indexes and per-topic counts from the summary; None if it is
+        unusable.
+        """
         size = len(data)
         footer_at = size - len(MAGIC) - _FOOTER.size
-        if footer_at < len(MAGIC) or data[-len(MAGIC):] != MAGIC:
+        if footer_at < len(MAGIC) or data[-len(MAGIC) :] != MAGIC:
             return None
         opcode, length, summary_start, _, crc = _FOOTER.unpack_from(data, footer_at)
         if opcode != _OP_FOOTER or length != 20 or summary_start >= footer_at:
             return None
         if summary_start == 0:
             return {'summary_start': 0, 'chunks': {}, 'counts': None}
-        if crc and zlib.crc32(data[summary_start:footer_at + _FOOTER.size - 4]) != crc:
-            raise McapDamage(f'{self.path}: summary section (byte offset {summary_start}) fails its CRC')
+        if crc and zlib.crc32(data[summary_start : footer_at + _FOOTER.size - 4]) != crc:
+            raise McapDamage(
+                f'{self.path}: summary section (byte offset {summary_start}) fails its CRC'
+            )
         chunks, counts, channel_topics = {}, None, {}
         at = summary_start
         try:
             while at < footer_at:
                 opcode, length = _RECORD_HEAD.unpack_from(data, at)
-                content = data[at + 9:at + 9 + length]
+                content = data[at + 9 : at + 9 + length]
                 if at + 9 + length > footer_at:
                     raise ValueError('summary record runs into the footer')
                 if opcode == _OP_SCHEMA:
@@ -304,11 +351,18 @@ class _Reader:
                     channel_id = struct.unpack_from('<H', content, 0)[0]
                     channel_topics[channel_id] = self.scan.channels[channel_id].topic
                 elif opcode == _OP_CHUNK_INDEX:
-                    _, _, start, length_, = struct.unpack_from('<QQQQ', content, 0)
+                    (
+                        _,
+                        _,
+                        start,
+                        length_,
+                    ) = struct.unpack_from('<QQQQ', content, 0)
                     (map_length,) = struct.unpack_from('<I', content, 32)
                     after = 36 + map_length + 8
                     (compression_length,) = struct.unpack_from('<I', content, after)
-                    compressed, uncompressed = struct.unpack_from('<QQ', content, after + 4 + compression_length)
+                    compressed, uncompressed = struct.unpack_from(
+                        '<QQ', content, after + 4 + compression_length
+                    )
                     chunks[start] = ChunkIndex(start, length_, compressed, uncompressed)
                 elif opcode == _OP_STATISTICS:
                     (map_length,) = struct.unpack_from('<I', content, 42)
@@ -318,7 +372,9 @@ class _Reader:
                         counts[channel_id] = count
                 at += 9 + length
         except (ValueError, struct.error, UnicodeDecodeError, KeyError) as error:
-            raise McapDamage(f'{self.path}: summary section damaged at byte offset {at} ({error})') from None
+            raise McapDamage(
+                f'{self.path}: summary section damaged at byte offset {at} ({error})'
+            ) from None
         by_topic = None
         if counts is not None:
             by_topic = {}
@@ -330,25 +386,37 @@ class _Reader:
     def _compare(self, summary: dict, seen_chunks: set) -> None:
         missing_chunks = sorted(set(summary['chunks']) - seen_chunks)
         if missing_chunks and not self.salvage:
-            raise McapDamage(f'{self.path}: chunk at byte offset {missing_chunks[0]} listed in the index was '
-                             f'not found in the data section ({len(missing_chunks)} chunk(s) missing)')
+            raise McapDamage(
+                f'{self.path}: chunk at byte offset {missing_chunks[0]} listed in the index was '
+                f'not found in the data section ({len(missing_chunks)} chunk(s) missing)'
+            )
         expected = summary['counts']
         self.scan.expected = expected
         if expected is None:
             return
-        short = {t: n - self.scan.counts.get(t, 0) for t, n in expected.items() if self.scan.counts.get(t, 0) != n}
+        short = {
+            t: n - self.scan.counts.get(t, 0)
+            for t, n in expected.items()
+            if self.scan.counts.get(t, 0) != n
+        }
         if not short:
             return
-        text = ', '.join(f'{t} {self.scan.counts.get(t, 0)} of {n}' for t, n in expected.items()
-                         if t in short)
-        problem = f'{self.path}: messages read do not match the summary\'s counts ({text})'
+        text = ', '.join(
+            f'{t} {self.scan.counts.get(t, 0)} of {n}' for t, n in expected.items() if t in short
+        )
+        problem = f"{self.path}: messages read do not match the summary's counts ({text})"
         if not self.salvage:
             raise McapDamage(problem + ' (--salvage reads what is intact)')
         self.scan.losses.append(problem)
 
 
-def scan_mcap(path: str | Path, wanted: Collection[str] | None = None, *, salvage: bool = False,
-              unfinished: bool = False) -> Scan:
+def scan_mcap(
+    path: str | Path,
+    wanted: Collection[str] | None = None,
+    *,
+    salvage: bool = False,
+    unfinished: bool = False,
+) -> Scan:
     """Read one MCAP file, checked; wanted topics keep their payloads (None: all).
 
     unfinished: the file may still be being written (a bag directory without metadata.yaml yet):

@@ -17,21 +17,27 @@ comes back as deserialized messages (rosbags). The MCAP files are walked record 
 checked against their own summary and index (bags/mcap_scan.py); the one Python loop left is the
 per-message append.
 """
+
 from __future__ import annotations
 
-import os
-import stat
 from dataclasses import dataclass, field, fields
+import os
 from pathlib import Path
+import stat
 from typing import Any, Callable, Collection, Iterable, Mapping, Sequence
 
 import numpy as np
-import yaml
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
+import yaml
 
 from balance_calib.bags.errors import BagError
-from balance_calib.bags.mcap_scan import (check_regular_file, McapDamage, Scan, scan_mcap,
-                                         STILL_RECORDING)
+from balance_calib.bags.mcap_scan import (
+    check_regular_file,
+    McapDamage,
+    Scan,
+    scan_mcap,
+    STILL_RECORDING,
+)
 
 ProgressCallback = Callable[[int, int], None]
 BagPath = str | os.PathLike
@@ -84,8 +90,17 @@ class StampedSeries:
     @classmethod
     def empty(cls, width: int) -> 'StampedSeries':
         shape = (0, width) if width > 1 else (0,)
-        return cls(*(_frozen(a) for a in (np.zeros(0, np.int64), np.zeros(0, np.int64),
-                                          np.zeros(shape), np.zeros(0, dtype=str))))
+        return cls(
+            *(
+                _frozen(a)
+                for a in (
+                    np.zeros(0, np.int64),
+                    np.zeros(0, np.int64),
+                    np.zeros(shape),
+                    np.zeros(0, dtype=str),
+                )
+            )
+        )
 
 
 @dataclass(frozen=True)
@@ -120,13 +135,19 @@ class BagData:
     gravity: GravitySeries
     temperature: StampedSeries
     extra: Mapping[str, TopicMessages] = field(default_factory=dict)
-    losses: tuple[str, ...] = ()              # with salvage: what could not be read, one line each
-    message_counts: Mapping[str, int] = field(default_factory=dict)   # read per topic (wanted ones)
+    losses: tuple[str, ...] = ()  # with salvage: what could not be read, one line each
+    message_counts: Mapping[str, int] = field(default_factory=dict)  # read per topic (wanted ones)
 
 
-def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicNames(),
-              required: Collection[str] = ('raw',), extra_topics: Iterable[str] = (),
-              progress: ProgressCallback | None = None, salvage: bool = False) -> BagData:
+def read_bags(
+    paths: BagPath | Sequence[BagPath],
+    *,
+    topics: TopicNames = TopicNames(),
+    required: Collection[str] = ('raw',),
+    extra_topics: Iterable[str] = (),
+    progress: ProgressCallback | None = None,
+    salvage: bool = False,
+) -> BagData:
     """Read one or more bags (rosbag2 directories or bare .mcap files) of one campaign.
 
     required names TopicNames fields ('raw', 'applied_load', 'gravity', 'temperature') that must
@@ -150,8 +171,10 @@ def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicN
         raise BagError('no bag given')
     unknown = set(required) - {f.name for f in fields(TopicNames)}
     if unknown:
-        raise ValueError(f'required names unknown streams {sorted(unknown)}; '
-                         f'choose from {[f.name for f in fields(TopicNames)]}')
+        raise ValueError(
+            f'required names unknown streams {sorted(unknown)}; '
+            f'choose from {[f.name for f in fields(TopicNames)]}'
+        )
     extra_topics = tuple(extra_topics)
     by_topic = {getattr(topics, name): name for name in _LAYOUTS}
     wanted = set(by_topic) | set(extra_topics)
@@ -175,10 +198,15 @@ def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicN
     still_recording = [line for line in losses if f': {STILL_RECORDING}' in line]
     for name in required:
         if counts[getattr(topics, name)] == 0:
-            raise BagError(_no_messages(sources, getattr(topics, name), recorded_topics)
-                           + ('; the bag is still being recorded and holds none on disk yet (its '
-                              'recorder writes them in chunks and metadata.yaml when it stops)'
-                              if still_recording else ''))
+            raise BagError(
+                _no_messages(sources, getattr(topics, name), recorded_topics)
+                + (
+                    '; the bag is still being recorded and holds none on disk yet (its '
+                    'recorder writes them in chunks and metadata.yaml when it stops)'
+                    if still_recording
+                    else ''
+                )
+            )
     total = sum(counts.values())
     # topic -> one (receive times, CDR payloads, source) per file
     collected: dict[str, list[tuple[list[int], list[bytes], Path]]] = {t: [] for t in wanted}
@@ -195,8 +223,9 @@ def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicN
                 progress(min(done, total), total)
     if progress is not None:
         progress(done, total)
-    typestore = _typestore_for([c for _, scan in scans for c in scan.channels.values()
-                                if c.topic in extra_topics])
+    typestore = _typestore_for(
+        [c for _, scan in scans for c in scan.channels.values() if c.topic in extra_topics]
+    )
 
     series = {}
     for topic, name in by_topic.items():
@@ -220,11 +249,18 @@ def read_bags(paths: BagPath | Sequence[BagPath], *, topics: TopicNames = TopicN
             messages = tuple(typestore.deserialize_cdr(payloads[i], msgtype) for i in order)
         except Exception as error:  # rosbags raises assorted errors on bad CDR
             files = ', '.join(str(s) for _, _, s in collected[topic])
-            raise BagError(f'{files}: cannot decode {topic} messages as {msgtype} '
-                           f'({error})') from None
+            raise BagError(
+                f'{files}: cannot decode {topic} messages as {msgtype} ({error})'
+            ) from None
         extra[topic] = TopicMessages(msgtype, _frozen(times[order]), messages)
-    return BagData(sources=sources, topics=topics, extra=extra, losses=tuple(losses),
-                   message_counts={t: n for t, n in counts.items() if n}, **series)
+    return BagData(
+        sources=sources,
+        topics=topics,
+        extra=extra,
+        losses=tuple(losses),
+        message_counts={t: n for t, n in counts.items() if n},
+        **series,
+    )
 
 
 # -- opening and checking -------------------------------------------------------------------------
@@ -234,7 +270,8 @@ _METADATA_MAX_BYTES = 16 * 1024 * 1024
 
 def _mcap_files(source: Path) -> list[Path]:
     """The MCAP files of a bag: a bare .mcap, those metadata.yaml lists in a rosbag2 directory, or
-    (a bag still being recorded: no metadata.yaml yet) the directory's .mcap files."""
+    (a bag still being recorded: no metadata.yaml yet) the directory's .mcap files.
+    """
     if not source.exists() and not source.is_symlink():
         raise BagError(f'{source}: no such file or directory')
     try:
@@ -255,14 +292,27 @@ def _mcap_files(source: Path) -> list[Path]:
         except McapDamage as error:
             raise BagError(str(error)) from None
         if metadata.stat().st_size > _METADATA_MAX_BYTES:
-            raise BagError(f'{metadata}: {metadata.stat().st_size} bytes, too large for bag metadata')
+            raise BagError(
+                f'{metadata}: {metadata.stat().st_size} bytes, too large for bag metadata'
+            )
         try:
-            info = yaml.safe_load(metadata.read_text(encoding='utf-8'))['rosbag2_bagfile_information']
+            info = yaml.safe_load(metadata.read_text(encoding='utf-8'))[
+                'rosbag2_bagfile_information'
+            ]
             storage = info.get('storage_identifier', 'mcap')
             names = [str(p) for p in (info.get('relative_file_paths') or [])]
-        except (yaml.YAMLError, UnicodeDecodeError, KeyError, TypeError, AttributeError, OSError) as error:
-            raise BagError(f'{metadata}: not rosbag2 metadata ({type(error).__name__}: '
-                           f'{str(error).splitlines()[0] if str(error) else ""})') from None
+        except (
+            yaml.YAMLError,
+            UnicodeDecodeError,
+            KeyError,
+            TypeError,
+            AttributeError,
+            OSError,
+        ) as error:
+            raise BagError(
+                f'{metadata}: not rosbag2 metadata ({type(error).__name__}: '
+                f'{str(error).splitlines()[0] if str(error) else ""})'
+            ) from None
         if storage != 'mcap':
             raise BagError(f'{metadata}: storage {storage!r}; only MCAP bags are read')
         if not names:
@@ -284,8 +334,9 @@ def _check_types(source: Path, scan: Scan, topics: TopicNames) -> None:
         topic = getattr(topics, name)
         for channel in scan.channels.values():
             if channel.topic == topic and channel.schema_name != msgtype:
-                raise BagError(f'{source}: topic {topic} has type {channel.schema_name}, '
-                               f'expected {msgtype}')
+                raise BagError(
+                    f'{source}: topic {topic} has type {channel.schema_name}, expected {msgtype}'
+                )
 
 
 def _sequence_gaps(source: Path, scan: Scan, salvage: bool) -> list[str]:
@@ -303,9 +354,11 @@ def _sequence_gaps(source: Path, scan: Scan, salvage: bool) -> list[str]:
             continue
         missing = int(np.sum(steps[gaps] - 1))
         first = int(gaps[0])
-        problem = (f'{source}: {topic}: {missing} message(s) missing (sequence jumps from '
-                   f'{int(numbers[first])} to {int(numbers[first + 1])} at log time '
-                   f'{scan.messages[topic][0][first + 1]} ns; {len(gaps)} gap(s))')
+        problem = (
+            f'{source}: {topic}: {missing} message(s) missing (sequence jumps from '
+            f'{int(numbers[first])} to {int(numbers[first + 1])} at log time '
+            f'{scan.messages[topic][0][first + 1]} ns; {len(gaps)} gap(s))'
+        )
         if not salvage:
             raise BagError(problem + ' (--salvage reads what is intact)')
         lost.append(problem)
@@ -314,8 +367,10 @@ def _sequence_gaps(source: Path, scan: Scan, salvage: bool) -> list[str]:
 
 def _no_messages(sources: Sequence[Path], topic: str, recorded: Sequence[str]) -> str:
     where = ', '.join(str(s) for s in sources)
-    return (f'{where}: no messages on {topic}, which is required '
-            f'(topics in the bag: {", ".join(recorded) or "none"})')
+    return (
+        f'{where}: no messages on {topic}, which is required '
+        f'(topics in the bag: {", ".join(recorded) or "none"})'
+    )
 
 
 def _typestore_for(connections):
@@ -325,7 +380,9 @@ def _typestore_for(connections):
     for channel in connections:
         if channel.schema_name not in typestore.fielddefs and channel.schema_encoding == 'ros2msg':
             try:
-                types.update(get_types_from_msg(channel.schema_data.decode('utf-8'), channel.schema_name))
+                types.update(
+                    get_types_from_msg(channel.schema_data.decode('utf-8'), channel.schema_name)
+                )
             except Exception:  # a definition rosbags cannot parse: decoding fails by name below
                 pass
     if types:
@@ -334,6 +391,7 @@ def _typestore_for(connections):
 
 
 # -- decoding -------------------------------------------------------------------------------------
+
 
 def _stamped_series(topic: str, parts, doubles: int, kept: int, kind) -> StampedSeries:
     """Decode and merge one topic's messages from all sources, sorted by receive time."""
@@ -354,9 +412,12 @@ def _stamped_series(topic: str, parts, doubles: int, kept: int, kind) -> Stamped
     values = np.concatenate(values)[order]
     if kept == 1:
         values = values[:, 0]
-    return kind(_frozen(times[order]), _frozen(np.concatenate(stamps)[order]),
-                _frozen(np.ascontiguousarray(values)),
-                _frozen(np.concatenate(frame_ids)[order]))
+    return kind(
+        _frozen(times[order]),
+        _frozen(np.concatenate(stamps)[order]),
+        _frozen(np.ascontiguousarray(values)),
+        _frozen(np.concatenate(frame_ids)[order]),
+    )
 
 
 def _gather(buffer: np.ndarray, starts: np.ndarray, width: int) -> np.ndarray:
@@ -415,7 +476,9 @@ def _frame_ids(buffer: np.ndarray, starts: np.ndarray, lengths_with_nul: np.ndar
         # void, not 'S': numpy's bytes type drops trailing NULs that belong to the string
         raw = np.ascontiguousarray(_gather(buffer, starts[rows], int(length))).view(f'V{length}')
         unique, inverse = np.unique(raw[:, 0], return_inverse=True)
-        names = np.array([bytes(u).decode('utf-8', errors='replace') for u in unique], dtype=object)
+        names = np.array(
+            [bytes(u).decode('utf-8', errors='replace') for u in unique], dtype=object
+        )
         frame_ids[rows] = names[inverse.ravel()]
     # object, not numpy's str type, which would drop trailing NULs too
     return frame_ids

@@ -11,15 +11,17 @@ metadata.yaml holds the same QoS profiles as a YAML list, the v9 layout that `ro
 The writer takes serialized CDR bytes, so it serves a live node (rclpy's raw subscriptions) and
 offline tools alike; nothing here imports rclpy.
 """
+
 from __future__ import annotations
 
 import os
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-import yaml
-from mcap.writer import CompressionType, Writer as McapWriter
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
 from rosbags.typesys import get_typestore, Stores
+import yaml
 
 from balance_calib import __version__
 from balance_calib.bags.errors import BagError
@@ -29,8 +31,17 @@ ROS_DISTRO = 'jazzy'
 _COMPRESSION = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4}
 # rmw's RMW_DURATION_INFINITE, as rosbag2 writes an unset deadline, lifespan or lease duration.
 INFINITE_DURATION = {'sec': 9223372036, 'nsec': 854775807}
-_QOS_KEYS = ('history', 'depth', 'reliability', 'durability', 'deadline', 'lifespan',
-             'liveliness', 'liveliness_lease_duration', 'avoid_ros_namespace_conventions')
+_QOS_KEYS = (
+    'history',
+    'depth',
+    'reliability',
+    'durability',
+    'deadline',
+    'lifespan',
+    'liveliness',
+    'liveliness_lease_duration',
+    'avoid_ros_namespace_conventions',
+)
 
 _typestore = None
 
@@ -64,11 +75,17 @@ def qos_profiles_yaml(profiles: Sequence[Mapping[str, Any]]) -> str:
     """
     if not profiles:
         return ''
-    defaults = {'history': 'unknown', 'depth': 0, 'reliability': 'reliable',
-                'durability': 'volatile', 'deadline': INFINITE_DURATION,
-                'lifespan': INFINITE_DURATION, 'liveliness': 'automatic',
-                'liveliness_lease_duration': INFINITE_DURATION,
-                'avoid_ros_namespace_conventions': False}
+    defaults = {
+        'history': 'unknown',
+        'depth': 0,
+        'reliability': 'reliable',
+        'durability': 'volatile',
+        'deadline': INFINITE_DURATION,
+        'lifespan': INFINITE_DURATION,
+        'liveliness': 'automatic',
+        'liveliness_lease_duration': INFINITE_DURATION,
+        'avoid_ros_namespace_conventions': False,
+    }
     ordered = [{key: profile.get(key, defaults[key]) for key in _QOS_KEYS} for profile in profiles]
     return _dump_yaml(ordered)
 
@@ -82,11 +99,18 @@ class BagWriter:
     Not thread-safe: write from one thread (a node's single-threaded executor does).
     """
 
-    def __init__(self, path: str | os.PathLike, *, compression: str = 'zstd',
-                 chunk_size_bytes: int = 1024 * 1024):
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        *,
+        compression: str = 'zstd',
+        chunk_size_bytes: int = 1024 * 1024,
+    ):
         if compression not in _COMPRESSION:
-            raise BagError(f'bag {path}: chunk compression must be one of {sorted(_COMPRESSION)},'
-                           f' not {compression!r}')
+            raise BagError(
+                f'bag {path}: chunk compression must be one of {sorted(_COMPRESSION)},'
+                f' not {compression!r}'
+            )
         self.path = Path(path)
         self.mcap_path = self.path / f'{self.path.name}_0.mcap'
         self.compression = compression
@@ -109,17 +133,26 @@ class BagWriter:
         except FileExistsError:
             raise BagError(f'bag {self.path} exists already; choose a new output path') from None
         self._stream = open(self.mcap_path, 'xb')
-        self._mcap = McapWriter(self._stream, chunk_size=self.chunk_size_bytes,
-                                compression=_COMPRESSION[self.compression])
+        self._mcap = McapWriter(
+            self._stream,
+            chunk_size=self.chunk_size_bytes,
+            compression=_COMPRESSION[self.compression],
+        )
         self._mcap.start(profile='ros2', library=f'balance_calib {__version__} (mcap-python)')
 
     @property
     def is_open(self) -> bool:
         return self._mcap is not None
 
-    def add_topic(self, name: str, msgtype: str, offered_qos_profiles_yaml: str = '', *,
-                  type_description_hash: str | None = None,
-                  message_definition: str | None = None) -> None:
+    def add_topic(
+        self,
+        name: str,
+        msgtype: str,
+        offered_qos_profiles_yaml: str = '',
+        *,
+        type_description_hash: str | None = None,
+        message_definition: str | None = None,
+    ) -> None:
         """Declare a topic before writing to it.
 
         msgtype is 'pkg/msg/Type'. The message definition (ros2msg text with dependencies) and
@@ -129,40 +162,56 @@ class BagWriter:
         self._require_open()
         if name in self._topics:
             if self._topics[name]['type'] != msgtype:
-                raise BagError(f'bag {self.path}: topic {name} already recorded as '
-                               f'{self._topics[name]["type"]}, cannot add it as {msgtype}')
+                raise BagError(
+                    f'bag {self.path}: topic {name} already recorded as '
+                    f'{self._topics[name]["type"]}, cannot add it as {msgtype}'
+                )
             return
         try:
             qos_profiles = yaml.safe_load(offered_qos_profiles_yaml) or []
         except yaml.YAMLError as error:
-            raise BagError(f'bag {self.path}: offered QoS of topic {name} is not YAML: '
-                           f'{error}') from None
+            raise BagError(
+                f'bag {self.path}: offered QoS of topic {name} is not YAML: {error}'
+            ) from None
         if not isinstance(qos_profiles, list):
             raise BagError(f'bag {self.path}: offered QoS of topic {name} must be a YAML list')
         if message_definition is None or type_description_hash is None:
             typestore = _jazzy_typestore()
             if msgtype not in typestore.fielddefs:
-                raise BagError(f'bag {self.path}: topic {name} has type {msgtype}, which ROS 2 '
-                               'Jazzy does not ship; pass its message_definition and '
-                               'type_description_hash')
+                raise BagError(
+                    f'bag {self.path}: topic {name} has type {msgtype}, which ROS 2 '
+                    'Jazzy does not ship; pass its message_definition and '
+                    'type_description_hash'
+                )
             if message_definition is None:
                 message_definition = typestore.generate_msgdef(msgtype, ros_version=2)[0]
             if type_description_hash is None:
                 type_description_hash = typestore.hash_rihs01(msgtype)
         if msgtype not in self._schema_ids:
             self._schema_ids[msgtype] = self._mcap.register_schema(
-                name=msgtype, encoding='ros2msg', data=message_definition.encode())
+                name=msgtype, encoding='ros2msg', data=message_definition.encode()
+            )
         self._channels[name] = self._mcap.register_channel(
-            topic=name, message_encoding='cdr', schema_id=self._schema_ids[msgtype],
-            metadata={'offered_qos_profiles': offered_qos_profiles_yaml,
-                      'topic_type_hash': type_description_hash})
-        self._topics[name] = {'name': name, 'type': msgtype, 'serialization_format': 'cdr',
-                              'offered_qos_profiles': qos_profiles,
-                              'type_description_hash': type_description_hash}
+            topic=name,
+            message_encoding='cdr',
+            schema_id=self._schema_ids[msgtype],
+            metadata={
+                'offered_qos_profiles': offered_qos_profiles_yaml,
+                'topic_type_hash': type_description_hash,
+            },
+        )
+        self._topics[name] = {
+            'name': name,
+            'type': msgtype,
+            'serialization_format': 'cdr',
+            'offered_qos_profiles': qos_profiles,
+            'type_description_hash': type_description_hash,
+        }
         self._counts[name] = 0
 
-    def write(self, topic: str, timestamp_ns: int, cdr_bytes: bytes,
-              publish_time_ns: int | None = None) -> None:
+    def write(
+        self, topic: str, timestamp_ns: int, cdr_bytes: bytes, publish_time_ns: int | None = None
+    ) -> None:
         """Append one serialized message; timestamp_ns is its receive (log) time, ns."""
         self._require_open()
         channel_id = self._channels.get(topic)
@@ -170,12 +219,16 @@ class BagWriter:
             raise BagError(f'bag {self.path}: topic {topic} was not added before writing')
         timestamp_ns = int(timestamp_ns)
         self._mcap.add_message(
-            channel_id=channel_id, log_time=timestamp_ns, data=bytes(cdr_bytes),
+            channel_id=channel_id,
+            log_time=timestamp_ns,
+            data=bytes(cdr_bytes),
             publish_time=timestamp_ns if publish_time_ns is None else int(publish_time_ns),
-            sequence=self._counts[topic] % 2**32)
+            sequence=self._counts[topic] % 2**32,
+        )
         self._counts[topic] += 1
-        self._first_ns = timestamp_ns if self._first_ns is None else min(self._first_ns,
-                                                                         timestamp_ns)
+        self._first_ns = (
+            timestamp_ns if self._first_ns is None else min(self._first_ns, timestamp_ns)
+        )
         self._last_ns = max(self._last_ns, timestamp_ns)
 
     def flush(self) -> None:
@@ -247,14 +300,19 @@ class BagWriter:
             'message_count': total,
             'topics_with_message_count': [
                 {'topic_metadata': topic, 'message_count': self._counts[name]}
-                for name, topic in self._topics.items()],
+                for name, topic in self._topics.items()
+            ],
             'compression_format': '',
             'compression_mode': '',
             'relative_file_paths': [relative_path],
-            'files': [{'path': relative_path,
-                       'starting_time': {'nanoseconds_since_epoch': start_ns},
-                       'duration': {'nanoseconds': duration_ns},
-                       'message_count': total}],
+            'files': [
+                {
+                    'path': relative_path,
+                    'starting_time': {'nanoseconds_since_epoch': start_ns},
+                    'duration': {'nanoseconds': duration_ns},
+                    'message_count': total,
+                }
+            ],
             'custom_data': None,
             'ros_distro': ROS_DISTRO,
         }

@@ -1,15 +1,17 @@
-"""The live calibrator's per-sample work in-process: the C kernel against the pure core, same process.
+"""The live calibrator's per-sample work in-process: the C kernel against the pure core, same
+process.
 
     python -m balance_calib.benchmarks.lone_kernel [--repeats 3000]
 
-CalibratorSession.on_samples (serialized samples in, serialized wrench and uncertainty out, counters,
-input monitor and overload included; no DDS) on the memo's cubic LMC6522 with a coefficient
-covariance, µs of thread CPU per sample:
+CalibratorSession.on_samples (serialized samples in, serialized wrench and uncertainty out,
+counters, input monitor and overload included; no DDS) on the memo's cubic LMC6522 with a
+coefficient covariance, µs of thread CPU per sample:
 - batches of 1, 2, 3, 10, 100 and 1000 samples, back to back (warm caches), best of the repeats;
 - lone samples with 1 ms of sleep before each (caches gone cold, as at 1 kHz), mean.
 Each figure with the kernel and with the pure core (lone_sample.available switched off), and their
 ratio. The samples are serialized before timing; the timer's own cost is printed first.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -32,8 +34,10 @@ def _messages(count: int, start_ns: int) -> list[bytes]:
 
 def _session(directory: str) -> CalibratorSession:
     values = {name: spec.default for name, spec in PARAMETERS.items()}
-    values.update(calibration_file=calibration_with_covariance(directory),
-                  tare_file=os.path.join(directory, 'tare.yaml'))
+    values.update(
+        calibration_file=calibration_with_covariance(directory),
+        tare_file=os.path.join(directory, 'tare.yaml'),
+    )
     return CalibratorSession(lambda name: values[name], 'benchmark', lambda level, line: None)
 
 
@@ -75,14 +79,19 @@ def measure(repeats: int) -> dict:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--repeats', type=int, default=3000, help='samples per batch size (default 3000)')
+    parser.add_argument(
+        '--repeats', type=int, default=3000, help='samples per batch size (default 3000)'
+    )
     args = parser.parse_args(argv)
     best = float('inf')
-    for _ in range(10_000):                   # the timer pair around nothing: the harness's own floor
+    for _ in range(10_000):  # the timer pair around nothing: the harness's own floor
         start = time.thread_time_ns()
         best = min(best, time.thread_time_ns() - start)
-    print(f'harness: the samples are serialized before timing; the timer pair itself costs {best / 1e3:.2f} µs '
-          f'(a lone sample\'s figure includes it once)')
+    print(
+        'harness: the samples are serialized before timing; the timer pair itself costs '
+        f'{best / 1e3:.2f} µs '
+        f"(a lone sample's figure includes it once)"
+    )
     results = measure(args.repeats)
     cases = list(dict.fromkeys(case for _, case in results))
     print(f'{"µs of CPU per sample":28s} {"kernel":>8s} {"pure core":>10s} {"ratio":>7s}')

@@ -12,9 +12,9 @@ Each goes through the refit pipeline (in-process; a few through the `balance-cal
 is classed:
 
     refused      a RefitError (CLI: exit 2 with one line on stderr naming a file)
-    accepted     written; then the calibration is compared with the simulation's truth: the loads it
-                 gives for the true outputs at the schedule's points must be within TOLERANCE_PCT_FS
-                 (RMS per component) of the true loads, else it is `silent_wrong`
+    accepted     written; then the calibration is compared with the simulation's truth: the loads
+                 it gives for the true outputs at the schedule's points must be within
+                 TOLERANCE_PCT_FS (RMS per component) of the true loads, else it is `silent_wrong`
     traceback    any other exception (CLI: anything else on stderr or another exit status)
     hang         no answer within the per-mutant time limit (CLI only: in-process runs are bounded
                  by the campaign's size)
@@ -24,26 +24,35 @@ With --memory, the peak resident memory of full refits (diagnosis on) of one cam
 split in two sessions 1 h and 16 h apart is measured, each in its own process. The fuzz test
 (test/test_refit_fuzz.py) runs a few hundred of the same mutants.
 """
+
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 import json
+from pathlib import Path
 import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable, Iterator
 
 import numpy as np
 
-TOLERANCE_PCT_FS = 0.1          # RMS load error an accepted calibration may have, % FS per component
-START_NS = 1_700_000_000 * 10 ** 9
-RAW, LOAD, GRAVITY, TEMPERATURE = ('/balance/raw', '/calibration/applied_load', '/calibration/gravity',
-                                   '/balance/temperature')
-TYPES = {RAW: 'geometry_msgs/msg/WrenchStamped', LOAD: 'geometry_msgs/msg/WrenchStamped',
-         GRAVITY: 'geometry_msgs/msg/Vector3Stamped', TEMPERATURE: 'sensor_msgs/msg/Temperature'}
+TOLERANCE_PCT_FS = 0.1  # RMS load error an accepted calibration may have, % FS per component
+START_NS = 1_700_000_000 * 10**9
+RAW, LOAD, GRAVITY, TEMPERATURE = (
+    '/balance/raw',
+    '/calibration/applied_load',
+    '/calibration/gravity',
+    '/balance/temperature',
+)
+TYPES = {
+    RAW: 'geometry_msgs/msg/WrenchStamped',
+    LOAD: 'geometry_msgs/msg/WrenchStamped',
+    GRAVITY: 'geometry_msgs/msg/Vector3Stamped',
+    TEMPERATURE: 'sensor_msgs/msg/Temperature',
+}
 KGF_N = 9.80665
 LBF_N = 4.4482216152605
 
@@ -70,11 +79,17 @@ class Clean:
 
 def small_campaign(balance: str = 'lmc6522', seed: int = 0, samples_per_point: int = 4):
     from ..config import load_balance_config
-    from ..simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
+    from ..simulation.balance_sim import simulate_campaign, SimulationSettings, table17_noise
+
     config = load_balance_config(balance)
-    settings = SimulationSettings(samples_per_point=samples_per_point, transition_samples=1,
-                                  point_duration_s=1.0, transition_s=0.5,
-                                  noise_sigma_pct_fs=table17_noise(config), seed=seed)
+    settings = SimulationSettings(
+        samples_per_point=samples_per_point,
+        transition_samples=1,
+        point_duration_s=1.0,
+        transition_s=0.5,
+        noise_sigma_pct_fs=table17_noise(config),
+        seed=seed,
+    )
     return simulate_campaign(config, settings=settings)
 
 
@@ -87,11 +102,21 @@ def campaign_events(campaign, start_ns: int = START_NS) -> list[Event]:
         previous_end = campaign.end_s[p - 1] if p > 0 else campaign.start_s[0] - 1.0
         transition_ns = start_ns + int(round(previous_end * 1e9)) + 1
         if campaign.orientation[p] != previous_orientation:
-            events.append(Event(transition_ns, 0, GRAVITY, transition_ns, np.asarray(campaign.gravity[p], float)))
+            events.append(
+                Event(
+                    transition_ns,
+                    0,
+                    GRAVITY,
+                    transition_ns,
+                    np.asarray(campaign.gravity[p], float),
+                )
+            )
             previous_orientation = campaign.orientation[p]
         events.append(Event(transition_ns, 1, LOAD, transition_ns, nan6.copy()))
         settled_ns = start_ns + int(round(campaign.start_s[p] * 1e9))
-        events.append(Event(settled_ns, 1, LOAD, settled_ns, np.asarray(campaign.applied_loads[p], float)))
+        events.append(
+            Event(settled_ns, 1, LOAD, settled_ns, np.asarray(campaign.applied_loads[p], float))
+        )
     for i in range(len(campaign.times_s)):
         ns = start_ns + int(round(campaign.times_s[i] * 1e9))
         events.append(Event(ns, 2, RAW, ns, np.asarray(campaign.raw_mv[i], float)))
@@ -116,6 +141,7 @@ def _payload(event: Event, frame: str) -> bytes:
 
 def _serialize(event: Event, frame: str) -> bytes:
     from ..bags.messages import temperature_cdr, vector_cdr, wrench_cdr
+
     if event.topic == GRAVITY:
         return vector_cdr(event.stamp_ns, frame, event.values)
     if event.topic == TEMPERATURE:
@@ -123,28 +149,50 @@ def _serialize(event: Event, frame: str) -> bytes:
     return wrench_cdr(event.stamp_ns, frame, event.values)
 
 
-def write_mcap(events, path: Path, *, frame: str = 'LMC6522', crcs: bool = True,
-               chunk_size: int = 16 * 1024, compression: str = 'zstd') -> Path:
+def write_mcap(
+    events,
+    path: Path,
+    *,
+    frame: str = 'LMC6522',
+    crcs: bool = True,
+    chunk_size: int = 16 * 1024,
+    compression: str = 'zstd',
+) -> Path:
     """A bare .mcap file (ros2 profile) with or without chunk and summary CRCs, small chunks."""
     from mcap.writer import CompressionType, Writer
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import get_typestore, Stores
+
     store = get_typestore(Stores.ROS2_JAZZY)
-    kinds = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE}
+    kinds = {
+        'zstd': CompressionType.ZSTD,
+        'lz4': CompressionType.LZ4,
+        'none': CompressionType.NONE,
+    }
     with open(path, 'wb') as stream:
-        writer = Writer(stream, chunk_size=chunk_size, compression=kinds[compression], enable_crcs=crcs)
+        writer = Writer(
+            stream, chunk_size=chunk_size, compression=kinds[compression], enable_crcs=crcs
+        )
         writer.start(profile='ros2', library='refit_reliability')
         schemas, channels, sequence = {}, {}, {}
         for topic, msgtype in TYPES.items():
             if msgtype not in schemas:
                 schemas[msgtype] = writer.register_schema(
-                    name=msgtype, encoding='ros2msg', data=store.generate_msgdef(msgtype, ros_version=2)[0].encode())
-            channels[topic] = writer.register_channel(topic=topic, message_encoding='cdr',
-                                                      schema_id=schemas[msgtype], metadata={})
+                    name=msgtype,
+                    encoding='ros2msg',
+                    data=store.generate_msgdef(msgtype, ros_version=2)[0].encode(),
+                )
+            channels[topic] = writer.register_channel(
+                topic=topic, message_encoding='cdr', schema_id=schemas[msgtype], metadata={}
+            )
             sequence[topic] = 0
         for event in events:
-            writer.add_message(channel_id=channels[event.topic], log_time=int(event.log_ns),
-                               data=_payload(event, frame), publish_time=int(event.log_ns),
-                               sequence=sequence[event.topic])
+            writer.add_message(
+                channel_id=channels[event.topic],
+                log_time=int(event.log_ns),
+                data=_payload(event, frame),
+                publish_time=int(event.log_ns),
+                sequence=sequence[event.topic],
+            )
             sequence[event.topic] += 1
         writer.finish()
     return path
@@ -152,16 +200,17 @@ def write_mcap(events, path: Path, *, frame: str = 'LMC6522', crcs: bool = True,
 
 # -- mutants --------------------------------------------------------------------------------------
 
+
 @dataclass
 class Mutant:
     name: str
-    kind: str                     # family, for the counts
+    kind: str  # family, for the counts
     paths: list[Path]
-    balance: str                  # --balance given
-    truth_balance: str            # the balance that made the data
+    balance: str  # --balance given
+    truth_balance: str  # the balance that made the data
     campaign: object
     config_path: Path | None = None
-    expect: str = 'either'        # 'refuse' when no correct calibration can come out
+    expect: str = 'either'  # 'refuse' when no correct calibration can come out
 
 
 def _copy_events(events) -> list[Event]:
@@ -181,7 +230,9 @@ def mutants(clean: Clean, workdir: Path, seed: int, count: int) -> Iterator[Muta
     campaign, balance = clean.campaign, clean.balance
     frame = campaign.balance
     other = 'b660h' if balance == 'lmc6522' else 'lmc6522'
-    loads_index = [i for i, e in enumerate(clean.events) if e.topic == LOAD and not np.all(np.isnan(e.values))]
+    loads_index = [
+        i for i, e in enumerate(clean.events) if e.topic == LOAD and not np.all(np.isnan(e.values))
+    ]
     raw_index = [i for i, e in enumerate(clean.events) if e.topic == RAW]
     base = workdir / f'{balance}-{seed}-clean.mcap'
     write_mcap(clean.events, base, frame=frame)
@@ -189,10 +240,34 @@ def mutants(clean: Clean, workdir: Path, seed: int, count: int) -> Iterator[Muta
     nocrc = workdir / f'{balance}-{seed}-nocrc.mcap'
     write_mcap(clean.events, nocrc, frame=frame, crcs=False)
     nocrc_bytes = nocrc.read_bytes()
-    kinds = ['clean', 'truncate', 'flip_crc', 'flip_nocrc', 'drop_raw', 'drop_marker', 'drop_gravity',
-             'swap_marker_stamps', 'reorder_raw', 'duplicate', 'kgf', 'lbf', 'volts', 'clip', 'wrong_weight',
-             'wrong_balance', 'negative_body', 'reversed_gravity', 'time_jump', 'split_pause', 'tiny',
-             'flip_summary', 'raw_clock_jump', 'lz4_flip_nocrc', 'clock_back', 'zero_stamps']
+    kinds = [
+        'clean',
+        'truncate',
+        'flip_crc',
+        'flip_nocrc',
+        'drop_raw',
+        'drop_marker',
+        'drop_gravity',
+        'swap_marker_stamps',
+        'reorder_raw',
+        'duplicate',
+        'kgf',
+        'lbf',
+        'volts',
+        'clip',
+        'wrong_weight',
+        'wrong_balance',
+        'negative_body',
+        'reversed_gravity',
+        'time_jump',
+        'split_pause',
+        'tiny',
+        'flip_summary',
+        'raw_clock_jump',
+        'lz4_flip_nocrc',
+        'clock_back',
+        'zero_stamps',
+    ]
     for n in range(count):
         kind = kinds[n % len(kinds)]
         name = f'{balance}-s{seed}-{n:03d}-{kind}'
@@ -205,26 +280,43 @@ def mutants(clean: Clean, workdir: Path, seed: int, count: int) -> Iterator[Muta
         if kind == 'clean':
             events = clean.events
         elif kind == 'truncate':
-            path.write_bytes(base_bytes[:int(rng.integers(9, len(base_bytes) - 1))])
+            path.write_bytes(base_bytes[: int(rng.integers(9, len(base_bytes) - 1))])
             expect = 'refuse'
         elif kind in ('flip_crc', 'flip_nocrc'):
             data = base_bytes if kind == 'flip_crc' else nocrc_bytes
-            path.write_bytes(_flip(data, rng, start=64, end=len(data) - 64, count=int(rng.integers(1, 20))))
+            path.write_bytes(
+                _flip(data, rng, start=64, end=len(data) - 64, count=int(rng.integers(1, 20)))
+            )
         elif kind == 'lz4_flip_nocrc':
             write_mcap(clean.events, path, frame=frame, crcs=False, compression='lz4')
             data = path.read_bytes()
-            path.write_bytes(_flip(data, rng, start=64, end=len(data) - 64, count=int(rng.integers(1, 5))))
+            path.write_bytes(
+                _flip(data, rng, start=64, end=len(data) - 64, count=int(rng.integers(1, 5)))
+            )
         elif kind == 'flip_summary':
             data = base_bytes if rng.random() < 0.5 else nocrc_bytes
-            path.write_bytes(_flip(data, rng, start=int(len(data) * 0.9), end=len(data) - 8,
-                                   count=int(rng.integers(1, 4))))
+            path.write_bytes(
+                _flip(
+                    data,
+                    rng,
+                    start=int(len(data) * 0.9),
+                    end=len(data) - 8,
+                    count=int(rng.integers(1, 4)),
+                )
+            )
         elif kind == 'tiny':
-            path.write_bytes([b'', b'\x89MCAP0\r\n', b'not a bag at all', base_bytes[:8]][int(rng.integers(0, 4))])
+            path.write_bytes(
+                [b'', b'\x89MCAP0\r\n', b'not a bag at all', base_bytes[:8]][
+                    int(rng.integers(0, 4))
+                ]
+            )
             expect = 'refuse'
         else:
             events = _copy_events(clean.events)
             if kind == 'drop_raw':
-                drop = set(rng.choice(raw_index, size=len(raw_index) // 10, replace=False).tolist())
+                drop = set(
+                    rng.choice(raw_index, size=len(raw_index) // 10, replace=False).tolist()
+                )
                 events = [e for i, e in enumerate(events) if i not in drop]
             elif kind == 'drop_marker':
                 drop = int(rng.choice(loads_index))
@@ -240,11 +332,15 @@ def mutants(clean: Clean, workdir: Path, seed: int, count: int) -> Iterator[Muta
             elif kind == 'reorder_raw':
                 chosen = rng.choice(raw_index, size=len(raw_index) // 5, replace=False)
                 for i in chosen:
-                    events[i].log_ns += int(rng.integers(-300, 300)) * 10 ** 6
+                    events[i].log_ns += int(rng.integers(-300, 300)) * 10**6
                 events.sort(key=lambda e: (e.log_ns, e.order))
             elif kind == 'duplicate':
-                chosen = set(rng.choice(len(events), size=len(events) // 10, replace=False).tolist())
-                events = [x for i, e in enumerate(events) for x in ((e, e) if i in chosen else (e,))]
+                chosen = set(
+                    rng.choice(len(events), size=len(events) // 10, replace=False).tolist()
+                )
+                events = [
+                    x for i, e in enumerate(events) for x in ((e, e) if i in chosen else (e,))
+                ]
             elif kind in ('kgf', 'lbf'):
                 for i in loads_index:
                     events[i].values = events[i].values / (KGF_N if kind == 'kgf' else LBF_N)
@@ -260,14 +356,18 @@ def mutants(clean: Clean, workdir: Path, seed: int, count: int) -> Iterator[Muta
                 for i in raw_index:
                     events[i].values[k] = np.clip(events[i].values[k], -limit, limit)
             elif kind == 'wrong_weight':
-                i = int(rng.choice([i for i in loads_index if np.max(np.abs(events[i].values)) > 0]))
+                i = int(
+                    rng.choice([i for i in loads_index if np.max(np.abs(events[i].values)) > 0])
+                )
                 k = int(np.argmax(np.abs(events[i].values) / _capacity(balance)))
                 events[i].values[k] *= float(rng.choice([0.9, 1.1, 0.5, 2.0]))
             elif kind == 'wrong_balance':
                 given_balance = other
                 expect = 'refuse'
             elif kind == 'negative_body':
-                config_path = _config_with_body(balance, workdir / f'{name}.yaml', -float(rng.uniform(100, 700)))
+                config_path = _config_with_body(
+                    balance, workdir / f'{name}.yaml', -float(rng.uniform(100, 700))
+                )
                 given_balance = str(config_path)
                 expect = 'refuse'
             elif kind == 'reversed_gravity':
@@ -282,7 +382,7 @@ def mutants(clean: Clean, workdir: Path, seed: int, count: int) -> Iterator[Muta
                     e.stamp_ns += jump
             elif kind == 'raw_clock_jump':
                 at = int(rng.integers(len(raw_index) // 4, 3 * len(raw_index) // 4))
-                for i in raw_index[at:at + 50]:
+                for i in raw_index[at : at + 50]:
                     events[i].stamp_ns += int(1e6 * 1e9)
             elif kind == 'clock_back':
                 # the publisher's clock steps back (NTP): every later stamp 5-60 s earlier
@@ -296,13 +396,23 @@ def mutants(clean: Clean, workdir: Path, seed: int, count: int) -> Iterator[Muta
                 for i in chosen:
                     events[int(i)].stamp_ns = 0
             elif kind == 'split_pause':
-                at = loads_index[int(rng.integers(len(loads_index) // 4, 3 * len(loads_index) // 4))]
+                at = loads_index[
+                    int(rng.integers(len(loads_index) // 4, 3 * len(loads_index) // 4))
+                ]
                 pause = int(float(rng.choice([600, 3600, 16 * 3600])) * 1e9)
-                later = [Event(e.log_ns + pause, e.order, e.topic, e.stamp_ns + pause, e.values)
-                         for e in events[at:]]
-                # the second session starts by saying where gravity points, as bridge_publisher does
+                later = [
+                    Event(e.log_ns + pause, e.order, e.topic, e.stamp_ns + pause, e.values)
+                    for e in events[at:]
+                ]
+                # the second session starts by saying where gravity points, as bridge_publisher
+                # does
                 last_gravity = [e for e in events[:at] if e.topic == GRAVITY][-1]
-                later.insert(0, Event(later[0].log_ns - 1, 0, GRAVITY, later[0].stamp_ns - 1, last_gravity.values))
+                later.insert(
+                    0,
+                    Event(
+                        later[0].log_ns - 1, 0, GRAVITY, later[0].stamp_ns - 1, last_gravity.values
+                    ),
+                )
                 second = workdir / f'{name}-b.mcap'
                 write_mcap(later, second, frame=frame)
                 events = events[:at]
@@ -314,12 +424,15 @@ def mutants(clean: Clean, workdir: Path, seed: int, count: int) -> Iterator[Muta
 
 def _capacity(balance: str) -> np.ndarray:
     from ..config import load_balance_config
+
     return load_balance_config(balance).capacity
 
 
 def _config_with_body(balance: str, path: Path, weight_n: float) -> Path:
     import yaml
+
     from ..config import resolve_config_path
+
     data = yaml.safe_load(resolve_config_path(balance).read_text())
     data['calibration_body']['weight_n'] = weight_n
     path.write_text(yaml.safe_dump(data, sort_keys=False))
@@ -328,26 +441,31 @@ def _config_with_body(balance: str, path: Path, weight_n: float) -> Path:
 
 # -- judging --------------------------------------------------------------------------------------
 
+
 def calibration_error_pct_fs(calibration, mutant: Mutant) -> np.ndarray:
     """RMS over the schedule's points of (calibrated - true) load for the true outputs, % FS."""
     from ..config import load_balance_config
     from ..model.inverse import outputs_for_loads
+
     truth_config = load_balance_config(mutant.truth_balance)
     truth = truth_config.matrices['cubic'].without_constant()
     outputs = outputs_for_loads(truth, mutant.campaign.true_loads)
     fitted = calibration.model(calibration.base_model).without_constant()
     error = (fitted.loads(outputs) - truth.loads(outputs)) / truth_config.capacity * 100.0
-    return np.sqrt(np.mean(error ** 2, axis=0))
+    return np.sqrt(np.mean(error**2, axis=0))
 
 
 def _names_a_file(text: str, mutant: Mutant) -> bool:
-    names = [p.name for p in mutant.paths] + ([mutant.config_path.name] if mutant.config_path else [])
+    names = [p.name for p in mutant.paths] + (
+        [mutant.config_path.name] if mutant.config_path else []
+    )
     return any(name in text for name in names)
 
 
 def judge_in_process(mutant: Mutant, out_dir: Path) -> tuple[str, str]:
     """(verdict, detail) for one mutant through run_refit in this process."""
     from ..refit.pipeline import RefitError, run_refit
+
     try:
         result = run_refit(mutant.paths, mutant.balance, out_dir, diagnose=False, plots=False)
     except RefitError as error:
@@ -357,6 +475,7 @@ def judge_in_process(mutant: Mutant, out_dir: Path) -> tuple[str, str]:
         return ('refused' if _names_a_file(text, mutant) else 'unnamed'), text
     except Exception as error:  # what the fuzz exists to find
         import traceback
+
         return 'traceback', ''.join(traceback.format_exception_only(type(error), error)).strip()
     error = calibration_error_pct_fs(result.calibration, mutant)
     if np.all(error < TOLERANCE_PCT_FS) and mutant.expect != 'refuse':
@@ -367,8 +486,19 @@ def judge_in_process(mutant: Mutant, out_dir: Path) -> tuple[str, str]:
 def judge_cli(mutant: Mutant, out_dir: Path, timeout_s: float = 120.0) -> tuple[str, str]:
     """(verdict, detail) for one mutant through `python -m balance_calib.cli refit`."""
     from ..calibration_file import load_calibration
-    command = [sys.executable, '-m', 'balance_calib.cli', 'refit', *map(str, mutant.paths),
-               '--balance', mutant.balance, '--out', str(out_dir), '--no-diagnosis']
+
+    command = [
+        sys.executable,
+        '-m',
+        'balance_calib.cli',
+        'refit',
+        *map(str, mutant.paths),
+        '--balance',
+        mutant.balance,
+        '--out',
+        str(out_dir),
+        '--no-diagnosis',
+    ]
     try:
         done = subprocess.run(command, capture_output=True, text=True, timeout=timeout_s)
     except subprocess.TimeoutExpired:
@@ -386,11 +516,26 @@ def judge_cli(mutant: Mutant, out_dir: Path, timeout_s: float = 120.0) -> tuple[
     return 'silent_wrong', f'accepted with RMS error up to {error.max():.3g} % FS'
 
 
-def run_mutants(total: int, cli: int, workdir: Path, *, seeds=(0,), balances=('lmc6522', 'b660h'),
-                on_result: Callable | None = None) -> dict:
+def run_mutants(
+    total: int,
+    cli: int,
+    workdir: Path,
+    *,
+    seeds=(0,),
+    balances=('lmc6522', 'b660h'),
+    on_result: Callable | None = None,
+) -> dict:
     """Generate and judge `total` mutants, `cli` of them through the CLI. Returns the counts."""
     per = int(np.ceil(total / (len(seeds) * len(balances))))
-    counts = {'tried': 0, 'refused': 0, 'accepted': 0, 'silent_wrong': 0, 'traceback': 0, 'hang': 0, 'unnamed': 0}
+    counts = {
+        'tried': 0,
+        'refused': 0,
+        'accepted': 0,
+        'silent_wrong': 0,
+        'traceback': 0,
+        'hang': 0,
+        'unnamed': 0,
+    }
     by_kind: dict[str, dict[str, int]] = {}
     failures = []
     n = 0
@@ -419,7 +564,7 @@ def run_mutants(total: int, cli: int, workdir: Path, *, seeds=(0,), balances=('l
 
 # -- memory of split campaigns --------------------------------------------------------------------
 
-_MEMORY_CHILD = r'''
+_MEMORY_CHILD = r"""
 import json, resource, sys, time
 from pathlib import Path
 from balance_calib.refit.pipeline import run_refit
@@ -439,10 +584,12 @@ print(json.dumps({'peak_rss_mb': peak_mb(),
                   'seconds': time.monotonic() - started,
                   'sigma': result.report['sigma_pct_fs']['after'],
                   'sessions': result.report.get('sessions')}))
-'''
+"""
 
 
-def split_campaign_memory(workdir: Path, pauses_s=(0.0, 3600.0, 16 * 3600.0), samples_per_point: int = 10) -> dict:
+def split_campaign_memory(
+    workdir: Path, pauses_s=(0.0, 3600.0, 16 * 3600.0), samples_per_point: int = 10
+) -> dict:
     """Peak RSS of full refits (diagnosis on) of one LMC6522 campaign split in two sessions."""
     campaign = small_campaign('lmc6522', 11, samples_per_point)
     events = campaign_events(campaign)
@@ -452,14 +599,33 @@ def split_campaign_memory(workdir: Path, pauses_s=(0.0, 3600.0, 16 * 3600.0), sa
     for pause in pauses_s:
         pause_ns = int(pause * 1e9)
         first = write_mcap(events[:at], workdir / f'split-{pause:.0f}-a.mcap')
-        later = [Event(e.log_ns + pause_ns, e.order, e.topic, e.stamp_ns + pause_ns, e.values) for e in events[at:]]
+        later = [
+            Event(e.log_ns + pause_ns, e.order, e.topic, e.stamp_ns + pause_ns, e.values)
+            for e in events[at:]
+        ]
         last_gravity = [e for e in events[:at] if e.topic == GRAVITY][-1]
-        later.insert(0, Event(later[0].log_ns - 1, 0, GRAVITY, later[0].stamp_ns - 1, last_gravity.values))
+        later.insert(
+            0, Event(later[0].log_ns - 1, 0, GRAVITY, later[0].stamp_ns - 1, last_gravity.values)
+        )
         second = write_mcap(later, workdir / f'split-{pause:.0f}-b.mcap')
-        done = subprocess.run([sys.executable, '-c', _MEMORY_CHILD, 'lmc6522', str(workdir / f'out-split-{pause:.0f}'),
-                               str(first), str(second)], capture_output=True, text=True, timeout=900)
+        done = subprocess.run(
+            [
+                sys.executable,
+                '-c',
+                _MEMORY_CHILD,
+                'lmc6522',
+                str(workdir / f'out-split-{pause:.0f}'),
+                str(first),
+                str(second),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
         if done.returncode != 0:
-            results[pause] = {'error': done.stderr.strip().splitlines()[-1] if done.stderr.strip() else 'failed'}
+            results[pause] = {
+                'error': done.stderr.strip().splitlines()[-1] if done.stderr.strip() else 'failed'
+            }
         else:
             results[pause] = json.loads(done.stdout.strip().splitlines()[-1])
     return results
@@ -470,7 +636,9 @@ def main(argv=None) -> None:
     parser.add_argument('--mutants', type=int, default=416)
     parser.add_argument('--cli', type=int, default=8, help='how many of them through the CLI')
     parser.add_argument('--seeds', type=int, default=2)
-    parser.add_argument('--memory', action='store_true', help='also the split-campaign peak memory')
+    parser.add_argument(
+        '--memory', action='store_true', help='also the split-campaign peak memory'
+    )
     parser.add_argument('--verbose', action='store_true')
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix='refit-reliability-') as tmp:
@@ -478,14 +646,22 @@ def main(argv=None) -> None:
 
         def show(mutant, verdict, detail, via_cli):
             if args.verbose or verdict in ('silent_wrong', 'traceback', 'hang', 'unnamed'):
-                print(f'{mutant.name:40s} {"cli" if via_cli else "   "} {verdict:12s} {detail[:150]}', flush=True)
+                print(
+                    f'{mutant.name:40s} {"cli" if via_cli else "   "} {verdict:12s} '
+                    f'{detail[:150]}',
+                    flush=True,
+                )
 
-        summary = run_mutants(args.mutants, args.cli, Path(tmp), seeds=tuple(range(args.seeds)), on_result=show)
+        summary = run_mutants(
+            args.mutants, args.cli, Path(tmp), seeds=tuple(range(args.seeds)), on_result=show
+        )
         c = summary['counts']
-        print(f'{c["tried"]} tried, {c["refused"]} refused cleanly, {c["accepted"]} accepted correctly, '
-              f'{c["silent_wrong"]} silent-wrong, {c["traceback"]} tracebacks, {c["hang"]} hangs, '
-              f'{c["unnamed"]} errors naming no file '
-              f'({args.cli} through the CLI; {time.monotonic() - started:.0f} s)')
+        print(
+            f'{c["tried"]} tried, {c["refused"]} refused cleanly, {c["accepted"]} accepted '
+            f'correctly, {c["silent_wrong"]} silent-wrong, {c["traceback"]} tracebacks, '
+            f'{c["hang"]} hangs, {c["unnamed"]} errors naming no file ({args.cli} through the '
+            f'CLI; {time.monotonic() - started:.0f} s)'
+        )
         print('by kind (verdict: count):')
         for kind, verdicts in summary['by_kind'].items():
             print(f'  {kind:20s} ' + ', '.join(f'{v} {n}' for v, n in sorted(verdicts.items())))

@@ -8,13 +8,14 @@ Writes one simulated LMC6522 campaign (328 points) as an MCAP bag, then measures
   refit        run_refit: read + cut + zero/tare + 3 fits + diagnosis + report + plots
 and prints the ratios. Target (issue 3): refit within 3x the bag-read time.
 """
+
 from __future__ import annotations
 
 import argparse
 import os
+from pathlib import Path
 import platform
 import tempfile
-from pathlib import Path
 
 from .timing import best_of as _best_of
 
@@ -27,21 +28,33 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
 
     from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import get_typestore, Stores
 
     from balance_calib.config import load_balance_config
     from balance_calib.refit.pipeline import run_refit
-    from balance_calib.simulation.balance_sim import SimulationSettings, simulate_campaign, table17_noise
+    from balance_calib.simulation.balance_sim import (
+        simulate_campaign,
+        SimulationSettings,
+        table17_noise,
+    )
     from balance_calib.simulation.campaign_bag import write_campaign_bag
 
     config = load_balance_config('lmc6522')
     samples = int(args.seconds_per_point * args.rate)
-    settings = SimulationSettings(samples_per_point=samples, transition_samples=max(1, samples // 4),
-                                  point_duration_s=args.seconds_per_point, transition_s=args.seconds_per_point / 4,
-                                  noise_sigma_pct_fs=table17_noise(config), seed=1)
+    settings = SimulationSettings(
+        samples_per_point=samples,
+        transition_samples=max(1, samples // 4),
+        point_duration_s=args.seconds_per_point,
+        transition_s=args.seconds_per_point / 4,
+        noise_sigma_pct_fs=table17_noise(config),
+        seed=1,
+    )
     with tempfile.TemporaryDirectory() as tmp:
-        bag = write_campaign_bag(simulate_campaign(config, settings=settings), Path(tmp) / 'campaign',
-                                 temperature_every=int(args.rate))  # 1 Hz temperature
+        bag = write_campaign_bag(
+            simulate_campaign(config, settings=settings),
+            Path(tmp) / 'campaign',
+            temperature_every=int(args.rate),
+        )  # 1 Hz temperature
         size_mb = sum(f.stat().st_size for f in bag.iterdir()) / 1e6
         store = get_typestore(Stores.ROS2_JAZZY)
 
@@ -58,16 +71,29 @@ def main(argv=None) -> None:
         t_raw = _best_of(read_raw, args.repeat)
         t_decode = _best_of(read_decode, args.repeat)
         t_refit = _best_of(lambda: run_refit([bag], 'lmc6522', Path(tmp) / 'out'), args.repeat)
-        t_refit_noplots = _best_of(lambda: run_refit([bag], 'lmc6522', Path(tmp) / 'out2', plots=False), args.repeat)
+        t_refit_noplots = _best_of(
+            lambda: run_refit([bag], 'lmc6522', Path(tmp) / 'out2', plots=False), args.repeat
+        )
 
-    print(f'machine: {platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}')
-    print(f'bag: 328 points x {args.seconds_per_point:g} s at {args.rate:g} Hz = {messages} messages, {size_mb:.1f} MB (MCAP, zstd chunks)')
+    print(
+        f'machine: {platform.machine()}, {os.cpu_count()} cores, Python '
+        f'{platform.python_version()}'
+    )
+    print(
+        f'bag: 328 points x {args.seconds_per_point:g} s at {args.rate:g} Hz = {messages} '
+        f'messages, {size_mb:.1f} MB (MCAP, zstd chunks)'
+    )
     print(f'rosbags read (bytes only)           {t_raw:7.2f} s')
     print(f'rosbags read + deserialize          {t_decode:7.2f} s')
-    print(f'refit (all, incl. 3 PNG plots)      {t_refit:7.2f} s   = {t_refit / t_decode:.2f} x read+deserialize, '
-          f'{t_refit / t_raw:.2f} x bytes-only read')
-    print(f'refit without plots                 {t_refit_noplots:7.2f} s   = {t_refit_noplots / t_decode:.2f} x read+deserialize, '
-          f'{t_refit_noplots / t_raw:.2f} x bytes-only read')
+    print(
+        f'refit (all, incl. 3 PNG plots)      {t_refit:7.2f} s   = {t_refit / t_decode:.2f} x '
+        f'read+deserialize, {t_refit / t_raw:.2f} x bytes-only read'
+    )
+    print(
+        f'refit without plots                 {t_refit_noplots:7.2f} s   = '
+        f'{t_refit_noplots / t_decode:.2f} x read+deserialize, {t_refit_noplots / t_raw:.2f} x '
+        'bytes-only read'
+    )
     print('target: refit within 3x the bag-read time')
 
 

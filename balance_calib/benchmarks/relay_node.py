@@ -3,8 +3,9 @@
 /balance/raw -> /balance/wrench with the same QoS as balance_calibrator (reliable, depth 1000),
 no calibration: what rclpy and DDS alone cost.
 """
-import rclpy
+
 from geometry_msgs.msg import WrenchStamped
+import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -21,8 +22,16 @@ class Relay(Node):
         out = WrenchStamped()
         out.header.stamp = raw.header.stamp
         out.header.frame_id = 'tunnel'
-        out.wrench.force.x, out.wrench.force.y, out.wrench.force.z = raw.wrench.force.x, raw.wrench.force.y, raw.wrench.force.z
-        out.wrench.torque.x, out.wrench.torque.y, out.wrench.torque.z = raw.wrench.torque.x, raw.wrench.torque.y, raw.wrench.torque.z
+        out.wrench.force.x, out.wrench.force.y, out.wrench.force.z = (
+            raw.wrench.force.x,
+            raw.wrench.force.y,
+            raw.wrench.force.z,
+        )
+        out.wrench.torque.x, out.wrench.torque.y, out.wrench.torque.z = (
+            raw.wrench.torque.x,
+            raw.wrench.torque.y,
+            raw.wrench.torque.z,
+        )
         self.publisher.publish(out)
 
 

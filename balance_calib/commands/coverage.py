@@ -1,5 +1,7 @@
 """balance-calib coverage CAL.yaml (BAG ... | LOADS.csv) [--out DIR] (interfaces.md, "Coverage
-of a run, and design of calibration points")."""
+of a run, and design of calibration points").
+"""
+
 from __future__ import annotations
 
 import json
@@ -10,40 +12,50 @@ SIX = ('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ')
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
-        'coverage', help='does a calibration cover a run? predicted uncertainty at every load',
+        'coverage',
+        help='does a calibration cover a run? predicted uncertainty at every load',
         description='At every load of a run (the /balance/wrench of wind-on bags, or a CSV '
-                    'FX,FY,FZ,MX,MY,MZ in N and N·m, balance axes) the standard uncertainty '
-                    '(k = 1) the calibration predicts from its coefficient covariance (as '
-                    'balance_calibrator publishes it on /balance/wrench_uncertainty), and the '
-                    'share of the run outside the support of the calibration\'s schedule, per '
-                    'component against the calibration\'s σ. Prints the summary; with --out '
-                    'writes coverage.json and coverage.png. A bag\'s wrenches are what the '
-                    'calibrator published: a live tare has taken the model\'s weight out of them.')
+        'FX,FY,FZ,MX,MY,MZ in N and N·m, balance axes) the standard uncertainty '
+        '(k = 1) the calibration predicts from its coefficient covariance (as '
+        'balance_calibrator publishes it on /balance/wrench_uncertainty), and the '
+        "share of the run outside the support of the calibration's schedule, per "
+        "component against the calibration's σ. Prints the summary; with --out "
+        "writes coverage.json and coverage.png. A bag's wrenches are what the "
+        "calibrator published: a live tare has taken the model's weight out of them.",
+    )
     parser.add_argument('calibration', help='calibration.yaml written by refit or fit')
-    parser.add_argument('run', nargs='+',
-                        help='wind-on bags (rosbag2 directories or .mcap files) or one LOADS.csv')
+    parser.add_argument(
+        'run', nargs='+', help='wind-on bags (rosbag2 directories or .mcap files) or one LOADS.csv'
+    )
     parser.add_argument('--out', help='directory for coverage.json and coverage.png')
-    parser.add_argument('--model', default='adopted',
-                        help='calibration model (default: the adopted one)')
-    parser.add_argument('--installation', default='upright',
-                        help='bags: how the balance was installed, to turn /balance/wrench '
-                             '(tunnel axes) back into balance axes: upright, inverted or a '
-                             'signed permutation (default upright)')
-    parser.add_argument('--wrench-topic', default='/balance/wrench',
-                        help='bags: topic of the calibrated loads (default /balance/wrench)')
+    parser.add_argument(
+        '--model', default='adopted', help='calibration model (default: the adopted one)'
+    )
+    parser.add_argument(
+        '--installation',
+        default='upright',
+        help='bags: how the balance was installed, to turn /balance/wrench '
+        '(tunnel axes) back into balance axes: upright, inverted or a '
+        'signed permutation (default upright)',
+    )
+    parser.add_argument(
+        '--wrench-topic',
+        default='/balance/wrench',
+        help='bags: topic of the calibrated loads (default /balance/wrench)',
+    )
     parser.set_defaults(func=run)
 
 
 def run(args) -> int:
     from ..bags.errors import BagError
     from ..calibration_file import ConfigError, load_calibration, write_text_atomically
-    from .errors import CommandError
     from ..coverage.plots import coverage_figure
     from ..coverage.run import run_coverage, summary_table
-    from ..coverage.run_inputs import RunInputError, read_loads_csv, read_wrench_bags
+    from ..coverage.run_inputs import read_loads_csv, read_wrench_bags, RunInputError
     from ..model.inverse import InverseDidNotConverge
     from ..model.uncertainty import UncertaintyUnavailable
     from ..tunnel_axes import parse_installation
+    from .errors import CommandError
 
     try:
         calibration = load_calibration(args.calibration)
@@ -53,14 +65,23 @@ def run(args) -> int:
             loads = read_loads_csv(first, calibration.components)
         else:
             if tuple(calibration.components) != SIX:
-                raise CommandError(f'{args.calibration}: bags carry six-component wrenches; this '
-                                   f'calibration has components '
-                                   f'{", ".join(calibration.components)}: give a LOADS.csv')
-            time_s, loads = read_wrench_bags(args.run, parse_installation(args.installation),
-                                             args.wrench_topic)
+                raise CommandError(
+                    f'{args.calibration}: bags carry six-component wrenches; this '
+                    f'calibration has components '
+                    f'{", ".join(calibration.components)}: give a LOADS.csv'
+                )
+            time_s, loads = read_wrench_bags(
+                args.run, parse_installation(args.installation), args.wrench_topic
+            )
         coverage = run_coverage(calibration, loads, model=args.model)
-    except (ConfigError, RunInputError, BagError, UncertaintyUnavailable, InverseDidNotConverge,
-            ValueError) as err:
+    except (
+        ConfigError,
+        RunInputError,
+        BagError,
+        UncertaintyUnavailable,
+        InverseDidNotConverge,
+        ValueError,
+    ) as err:
         raise CommandError(' '.join(str(err).split())) from None
     summary = coverage.summary()
     print(summary_table(summary, coverage.components))

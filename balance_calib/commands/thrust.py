@@ -1,12 +1,14 @@
 """`balance-calib nozzle` and `balance-calib line-fit`: the thrust-stand lab manual's two hand
-calculations (ideal nozzle, eqs. (1)-(15); calibration line, eqs. (25)-(27)) as JSON."""
+calculations (ideal nozzle, eqs. (1)-(15); calibration line, eqs. (25)-(27)) as JSON.
+"""
+
 from __future__ import annotations
 
 import csv
 import json
 import math
-import sys
 from pathlib import Path
+import sys
 
 from .errors import CommandError
 
@@ -15,29 +17,56 @@ LINE_FIT_MIN_POINTS = 3
 
 def register(subparsers) -> None:
     nozzle = subparsers.add_parser(
-        'nozzle', help='ideal nozzle performance (thrust-stand manual eqs. 1-15) as JSON',
-        description='Ideal isentropic nozzle at chamber pressure PC and ambient PA (both absolute, Pa; '
-                    'p_c = p_G + p_a).')
-    nozzle.add_argument('--throat-mm', type=float, default=2.5, help='throat diameter D_t, mm (2.5)')
+        'nozzle',
+        help='ideal nozzle performance (thrust-stand manual eqs. 1-15) as JSON',
+        description=(
+            'Ideal isentropic nozzle at chamber pressure PC and ambient PA (both absolute, Pa; '
+            'p_c = p_G + p_a).'
+        ),
+    )
+    nozzle.add_argument(
+        '--throat-mm', type=float, default=2.5, help='throat diameter D_t, mm (2.5)'
+    )
     nozzle.add_argument('--exit-mm', type=float, default=3.3, help='exit diameter D_e, mm (3.3)')
-    nozzle.add_argument('--chamber-pa', type=float, required=True, help='absolute chamber pressure p_c, Pa')
-    nozzle.add_argument('--ambient-pa', type=float, default=101325.0, help='ambient pressure p_a, Pa (101325)')
-    nozzle.add_argument('--gamma', type=float, default=1.402, help='ratio of specific heats (1.402)')
-    nozzle.add_argument('--gas-constant', type=float, default=287.1, help='gas constant R, J/(kg K) (287.1)')
-    nozzle.add_argument('--chamber-k', type=float, default=293.15, help='chamber temperature T_c, K (293.15)')
-    nozzle.add_argument('--subsonic', action='store_true',
-                        help="take eq. (4)'s subsonic root for p_e/p_c instead of the supersonic one")
+    nozzle.add_argument(
+        '--chamber-pa', type=float, required=True, help='absolute chamber pressure p_c, Pa'
+    )
+    nozzle.add_argument(
+        '--ambient-pa', type=float, default=101325.0, help='ambient pressure p_a, Pa (101325)'
+    )
+    nozzle.add_argument(
+        '--gamma', type=float, default=1.402, help='ratio of specific heats (1.402)'
+    )
+    nozzle.add_argument(
+        '--gas-constant', type=float, default=287.1, help='gas constant R, J/(kg K) (287.1)'
+    )
+    nozzle.add_argument(
+        '--chamber-k', type=float, default=293.15, help='chamber temperature T_c, K (293.15)'
+    )
+    nozzle.add_argument(
+        '--subsonic',
+        action='store_true',
+        help="take eq. (4)'s subsonic root for p_e/p_c instead of the supersonic one",
+    )
     nozzle.set_defaults(func=run_nozzle)
 
     line = subparsers.add_parser(
-        'line-fit', help='least-squares line y = a x + b with σ_a (manual eqs. 25-27) as JSON',
-        description='Fit y = a x + b to a CSV with columns x,y and optional sx,sy (per-point σ) and direction '
-                    '(+1 loading, -1 unloading; default: from the order of y). Without sx, sy the σ come from '
-                    'the scatter about the line. The residual is then examined for hysteresis, nonlinearity and '
-                    'zero drift (adopted when the data support them, cross-validated) and for structure none of '
-                    'them explains (unexplained); sigma_pct_fs before/after, FS = the largest |y|.')
-    line.add_argument('csv_file', metavar='FILE.csv',
-                      help='points in the order they were taken: columns x,y; optional sx,sy and direction')
+        'line-fit',
+        help='least-squares line y = a x + b with σ_a (manual eqs. 25-27) as JSON',
+        description=(
+            'Fit y = a x + b to a CSV with columns x,y and optional sx,sy (per-point σ) and '
+            'direction (+1 loading, -1 unloading; default: from the order of y). Without sx, sy '
+            'the σ come from the scatter about the line. The residual is then examined for '
+            'hysteresis, nonlinearity and zero drift (adopted when the data support them, '
+            'cross-validated) and for structure none of them explains (unexplained); '
+            'sigma_pct_fs before/after, FS = the largest |y|.'
+        ),
+    )
+    line.add_argument(
+        'csv_file',
+        metavar='FILE.csv',
+        help='points in the order they were taken: columns x,y; optional sx,sy and direction',
+    )
     line.set_defaults(func=run_line_fit)
 
 
@@ -47,7 +76,7 @@ def _finite_positive(name: str, value: float) -> None:
 
 
 def run_nozzle(args) -> int:
-    from balance_calib.thrust_stand.nozzle import Nozzle, critical_pressure_ratio
+    from balance_calib.thrust_stand.nozzle import critical_pressure_ratio, Nozzle
 
     for name in ('throat_mm', 'exit_mm', 'chamber_pa', 'gas_constant', 'chamber_k'):
         _finite_positive('--' + name.replace('_', '-'), getattr(args, name))
@@ -56,14 +85,22 @@ def run_nozzle(args) -> int:
     if not (math.isfinite(args.gamma) and args.gamma > 1):
         raise CommandError(f'--gamma must be > 1, got {args.gamma}')
     if args.exit_mm < args.throat_mm:
-        raise CommandError(f'--exit-mm {args.exit_mm} is smaller than --throat-mm {args.throat_mm}: '
-                           'not a converging-diverging nozzle')
+        raise CommandError(
+            f'--exit-mm {args.exit_mm} is smaller than --throat-mm {args.throat_mm}: '
+            'not a converging-diverging nozzle'
+        )
     if args.chamber_pa <= args.ambient_pa:
-        raise CommandError(f'--chamber-pa {args.chamber_pa:g} does not exceed --ambient-pa {args.ambient_pa:g}: '
-                           'no flow (the chamber pressure is absolute, p_G + p_a)')
+        raise CommandError(
+            f'--chamber-pa {args.chamber_pa:g} does not exceed --ambient-pa {args.ambient_pa:g}: '
+            'no flow (the chamber pressure is absolute, p_G + p_a)'
+        )
     nozzle = Nozzle(args.throat_mm * 1e-3, args.exit_mm * 1e-3, args.gamma, args.gas_constant)
-    performance = nozzle.performance(args.chamber_pa, args.ambient_pa, args.chamber_k,
-                                     'subsonic' if args.subsonic else 'supersonic')
+    performance = nozzle.performance(
+        args.chamber_pa,
+        args.ambient_pa,
+        args.chamber_k,
+        'subsonic' if args.subsonic else 'supersonic',
+    )
     result = {
         **performance.as_dict(),
         'throat_area_m2': nozzle.throat_area_m2,
@@ -72,7 +109,7 @@ def run_nozzle(args) -> int:
         'gamma': args.gamma,
         'gas_constant_j_kg_k': args.gas_constant,
     }
-    json.dump(result, sys.stdout, indent=2, ensure_ascii=False)    # ± and σ as they are
+    json.dump(result, sys.stdout, indent=2, ensure_ascii=False)  # ± and σ as they are
     sys.stdout.write('\n')
     return 0
 
@@ -86,26 +123,35 @@ def _read_points(path: Path) -> dict[str, list[float]]:
             header = [name.strip() for name in (reader.fieldnames or [])]
             missing = [name for name in ('x', 'y') if name not in header]
             if missing:
-                raise CommandError(f'{path}: missing column(s) {", ".join(missing)} '
-                                   f'(header is {",".join(header) or "empty"}; need x,y and optionally sx,sy)')
+                raise CommandError(
+                    f'{path}: missing column(s) {", ".join(missing)} '
+                    f'(header is {",".join(header) or "empty"}; need x,y and optionally sx,sy)'
+                )
             reader.fieldnames = header
             wanted = [name for name in ('x', 'y', 'sx', 'sy', 'direction') if name in header]
             columns: dict[str, list[float]] = {name: [] for name in wanted}
             for row in reader:
                 if all((value or '').strip() == '' for value in row.values()):
-                    continue                                    # blank line
+                    continue  # blank line
                 for name in wanted:
                     text = (row.get(name) or '').strip()
                     try:
                         value = float(text)
                     except ValueError:
-                        raise CommandError(f'{path}: line {reader.line_num}: column {name} is {text!r}, '
-                                           'not a number') from None
-                    if not math.isfinite(value) or (name in ('sx', 'sy') and value < 0) \
-                            or (name == 'direction' and value not in (-1.0, 1.0)):
-                        raise CommandError(f'{path}: line {reader.line_num}: column {name} = {text} '
-                                           'is not allowed' + (' (+1 loading, -1 unloading)' if name == 'direction'
-                                                                else ''))
+                        raise CommandError(
+                            f'{path}: line {reader.line_num}: column {name} is {text!r}, '
+                            'not a number'
+                        ) from None
+                    if (
+                        not math.isfinite(value)
+                        or (name in ('sx', 'sy') and value < 0)
+                        or (name == 'direction' and value not in (-1.0, 1.0))
+                    ):
+                        raise CommandError(
+                            f'{path}: line {reader.line_num}: column {name} = {text} '
+                            'is not allowed'
+                            + (' (+1 loading, -1 unloading)' if name == 'direction' else '')
+                        )
                     columns[name].append(value)
     except (OSError, UnicodeDecodeError, csv.Error) as error:
         raise CommandError(f'{path}: cannot read: {error}') from None
@@ -121,29 +167,47 @@ def run_line_fit(args) -> int:
     columns = _read_points(path)
     n = len(columns['x'])
     if n < LINE_FIT_MIN_POINTS:
-        raise CommandError(f'{path}: {n} point(s); a line with an uncertainty needs at least {LINE_FIT_MIN_POINTS}')
+        raise CommandError(
+            f'{path}: {n} point(s); a line with an uncertainty needs at least '
+            f'{LINE_FIT_MIN_POINTS}'
+        )
     try:
         fit = fit_line(columns['x'], columns['y'], columns.get('sx'), columns.get('sy'))
-        examined = examine_line(columns['x'], columns['y'], columns.get('direction'), columns.get('sx'),
-                                columns.get('sy'))
+        examined = examine_line(
+            columns['x'],
+            columns['y'],
+            columns.get('direction'),
+            columns.get('sx'),
+            columns.get('sy'),
+        )
     except ValueError as error:
         raise CommandError(f'{path}: {error}') from None
 
     def formatted(name, value, error):
         try:
             return format_value_error(value, error, name=name)
-        except ValueError:          # an exact fit has no error to round to
+        except ValueError:  # an exact fit has no error to round to
             return f'{name} = {value:.10g} ± 0'
 
     result = {
-        'a': fit.slope, 'b': fit.intercept, 'sigma_a': fit.sigma_slope, 'sigma_b': fit.sigma_intercept,
-        'n': fit.n, 'residual_std': fit.residual_std, 'sigma_source': fit.sigma_source,
-        'sums': {'x': fit.sums.sum_x, 'y': fit.sums.sum_y, 'xy': fit.sums.sum_xy, 'xx': fit.sums.sum_xx},
+        'a': fit.slope,
+        'b': fit.intercept,
+        'sigma_a': fit.sigma_slope,
+        'sigma_b': fit.sigma_intercept,
+        'n': fit.n,
+        'residual_std': fit.residual_std,
+        'sigma_source': fit.sigma_source,
+        'sums': {
+            'x': fit.sums.sum_x,
+            'y': fit.sums.sum_y,
+            'xy': fit.sums.sum_xy,
+            'xx': fit.sums.sum_xx,
+        },
         'formatted': formatted('a', fit.slope, fit.sigma_slope),
         'formatted_b': formatted('b', fit.intercept, fit.sigma_intercept),
         # the residual examined (interfaces.md, "One-axis calibration with its residual examined")
         **examined.to_report(),
     }
-    json.dump(result, sys.stdout, indent=2, ensure_ascii=False)    # ± and σ as they are
+    json.dump(result, sys.stdout, indent=2, ensure_ascii=False)  # ± and σ as they are
     sys.stdout.write('\n')
     return 0

@@ -20,6 +20,7 @@ combined_limit (a stated limit, default 1.5: all six components at 61 % of capac
 Added points go in blocks of at most BLOCK_POINTS of one orientation, each bracketed by zero
 points in that orientation (TM-663 §5(4)).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -34,12 +35,12 @@ from ..model.uncertainty import load_standard_uncertainty, unscaled_covariance, 
 from ..tare.calibration_body import tare_loads
 from ..units import STANDARD_GRAVITY_M_S2
 
-DEFAULT_COMBINED_LIMIT = 1.5       # ‖total load / capacity‖₂ of a candidate
-STRETCH = (1.0, 1.2)               # candidates: envelope loads times these
-BLOCK_POINTS = 6                   # loaded points between two zero points
-MAX_CANDIDATES = 4000              # envelope loads beyond this are thinned evenly
+DEFAULT_COMBINED_LIMIT = 1.5  # ‖total load / capacity‖₂ of a candidate
+STRETCH = (1.0, 1.2)  # candidates: envelope loads times these
+BLOCK_POINTS = 6  # loaded points between two zero points
+MAX_CANDIDATES = 4000  # envelope loads beyond this are thinned evenly
 EXCHANGE_PASSES = 4
-ROUND_KGF = 1e-3                   # weights hung to 1 gf (and 1 gf·m)
+ROUND_KGF = 1e-3  # weights hung to 1 gf (and 1 gf·m)
 
 
 class DesignError(ValueError):
@@ -48,10 +49,10 @@ class DesignError(ValueError):
 
 @dataclass(frozen=True)
 class Design:
-    schedule: LoadSchedule             # the balance's points, then the added blocks
-    added_loads: np.ndarray            # (n_added, n) total loads of the added points, N / N·m
-    predicted_before: np.ndarray       # (E, n) predicted u at the envelope, N / N·m
-    predicted_after: np.ndarray        # (E, n)
+    schedule: LoadSchedule  # the balance's points, then the added blocks
+    added_loads: np.ndarray  # (n_added, n) total loads of the added points, N / N·m
+    predicted_before: np.ndarray  # (E, n) predicted u at the envelope, N / N·m
+    predicted_after: np.ndarray  # (E, n)
     components: tuple[str, ...]
     capacity: np.ndarray
 
@@ -59,14 +60,18 @@ class Design:
         """design.json (interfaces.md)."""
         before = _rms_pct(self.predicted_before, self.capacity)
         after = _rms_pct(self.predicted_after, self.capacity)
-        return {'added': int(len(self.added_loads)),
-                'predicted_u_pct_fs': {'before': dict(zip(self.components, before)),
-                                       'after': dict(zip(self.components, after))},
-                'worst_component': self.components[int(np.argmax(after))]}
+        return {
+            'added': int(len(self.added_loads)),
+            'predicted_u_pct_fs': {
+                'before': dict(zip(self.components, before)),
+                'after': dict(zip(self.components, after)),
+            },
+            'worst_component': self.components[int(np.argmax(after))],
+        }
 
 
 def _rms_pct(u: np.ndarray, capacity: np.ndarray) -> list[float]:
-    rms = np.sqrt(np.mean(u ** 2, axis=0)) / capacity * 100.0
+    rms = np.sqrt(np.mean(u**2, axis=0)) / capacity * 100.0
     return [round(float(v), 6) for v in rms]
 
 
@@ -82,9 +87,11 @@ def check_envelope(envelope_loads, capacity, components, where: str = 'envelope'
     over = np.abs(loads) > np.asarray(capacity, float)
     if over.any():
         row, k = np.argwhere(over)[0]
-        raise DesignError(f'{where}: row {row + 1}: {components[k]} = {loads[row, k]:.6g} is '
-                          f'beyond the balance\'s capacity {capacity[k]:.6g} '
-                          f'({int(over.any(axis=1).sum())} of {len(loads)} loads are)')
+        raise DesignError(
+            f'{where}: row {row + 1}: {components[k]} = {loads[row, k]:.6g} is '
+            f"beyond the balance's capacity {capacity[k]:.6g} "
+            f'({int(over.any(axis=1).sum())} of {len(loads)} loads are)'
+        )
     return loads
 
 
@@ -101,64 +108,81 @@ def _schedule(config: BalanceConfig) -> LoadSchedule:
     return config.schedule
 
 
-def rig_loading(config: BalanceConfig, total_loads,
-                combined_limit: float = DEFAULT_COMBINED_LIMIT):
+def rig_loading(
+    config: BalanceConfig, total_loads, combined_limit: float = DEFAULT_COMBINED_LIMIT
+):
     """How the rig applies each total load (C, n), N / N·m: (feasible (C,) bool, orientation (C,)
     I_g, applied (C, n) the weights to hang). The orientation is, among those the schedule uses,
     the one needing the lightest weights (largest fraction of capacity); feasible when those and
-    the total load are within capacity and ‖total / capacity‖₂ ≤ combined_limit."""
+    the total load are within capacity and ‖total / capacity‖₂ ≤ combined_limit.
+    """
     loads = np.atleast_2d(np.asarray(total_loads, dtype=float))
     capacity = np.asarray(config.capacity, float)
-    orientations = np.array(sorted(set(int(i) for i in _schedule(config).orientation)
-                                   & set(config.gravity_directions)))
-    applied = np.stack([loads - tare_loads(config.calibration_body, config.gravity(i))
-                        for i in orientations])                              # (O, C, n)
-    fraction = np.max(np.abs(applied) / capacity, axis=2)                   # (O, C)
+    orientations = np.array(
+        sorted({int(i) for i in _schedule(config).orientation} & set(config.gravity_directions))
+    )
+    applied = np.stack(
+        [loads - tare_loads(config.calibration_body, config.gravity(i)) for i in orientations]
+    )  # (O, C, n)
+    fraction = np.max(np.abs(applied) / capacity, axis=2)  # (O, C)
     best = np.argmin(fraction, axis=0)
     rows = np.arange(len(loads))
-    feasible = (fraction[best, rows] <= 1.0) & np.all(np.abs(loads) <= capacity, axis=1) \
+    feasible = (
+        (fraction[best, rows] <= 1.0)
+        & np.all(np.abs(loads) <= capacity, axis=1)
         & (np.linalg.norm(loads / capacity, axis=1) <= combined_limit)
+    )
     return feasible, orientations[best], applied[best, rows]
 
 
-def schedule_with(config: BalanceConfig, total_loads,
-                  combined_limit: float = DEFAULT_COMBINED_LIMIT) -> LoadSchedule:
+def schedule_with(
+    config: BalanceConfig, total_loads, combined_limit: float = DEFAULT_COMBINED_LIMIT
+) -> LoadSchedule:
     """The balance's schedule with these total loads (A, n) added as rig_loading applies them
     (weights rounded to ROUND_KGF), in blocks of one orientation bracketed by zero points,
-    numbered after the last point. DesignError if one of them cannot be applied."""
+    numbered after the last point. DesignError if one of them cannot be applied.
+    """
     feasible, orientations, applied = rig_loading(config, total_loads, combined_limit)
     if not feasible.all():
-        raise DesignError(f'load {int(np.flatnonzero(~feasible)[0]) + 1} to add cannot be applied '
-                          f'within capacity and the combined-loading limit {combined_limit}')
+        raise DesignError(
+            f'load {int(np.flatnonzero(~feasible)[0]) + 1} to add cannot be applied '
+            f'within capacity and the combined-loading limit {combined_limit}'
+        )
     step = ROUND_KGF * STANDARD_GRAVITY_M_S2
     hung = np.round(applied / step) * step
     base = _schedule(config)
     number = int(np.max(base.point)) + 1
     points, orientation_rows, load_rows = [], [], []
     zero = np.zeros(hung.shape[1])
-    for i_g in sorted(set(int(o) for o in orientations)):
+    for i_g in sorted({int(o) for o in orientations}):
         rows = hung[orientations == i_g]
         for start in range(0, len(rows), BLOCK_POINTS):
-            for loads in [zero] + list(rows[start:start + BLOCK_POINTS]) + [zero]:
+            for loads in [zero] + list(rows[start : start + BLOCK_POINTS]) + [zero]:
                 points.append(number)
                 orientation_rows.append(i_g)
                 load_rows.append(loads)
                 number += 1
     added = [np.array(load_rows)] if load_rows else []
-    return LoadSchedule(np.concatenate([base.point, points]).astype(int),
-                        np.concatenate([base.orientation, orientation_rows]).astype(int),
-                        np.vstack([base.loads] + added),
-                        tuple(base.byproduct) + ('',) * len(points))
+    return LoadSchedule(
+        np.concatenate([base.point, points]).astype(int),
+        np.concatenate([base.orientation, orientation_rows]).astype(int),
+        np.vstack([base.loads] + added),
+        tuple(base.byproduct) + ('',) * len(points),
+    )
 
 
-def _exchange(candidate_rows: np.ndarray, base_inverse: np.ndarray, weight: np.ndarray,
-              count: int) -> list[int]:
+def _exchange(
+    candidate_rows: np.ndarray, base_inverse: np.ndarray, weight: np.ndarray, count: int
+) -> list[int]:
     """Indices of at most `count` candidate rows (C, p) that minimise trace(M⁻¹ W), M = X₀ᵀX₀ +
-    Σ cᵀc: greedy, then Fedorov exchange; base_inverse = (X₀ᵀX₀)⁻¹ and weight = W (p, p)."""
+    Σ cᵀc: greedy, then Fedorov exchange; base_inverse = (X₀ᵀX₀)⁻¹ and weight = W (p, p).
+    """
+
     def gains(inverse):
         a = inverse @ weight @ inverse
-        return (np.einsum('ij,jk,ik->i', candidate_rows, a, candidate_rows)
-                / (1.0 + np.einsum('ij,jk,ik->i', candidate_rows, inverse, candidate_rows)))
+        return np.einsum('ij,jk,ik->i', candidate_rows, a, candidate_rows) / (
+            1.0 + np.einsum('ij,jk,ik->i', candidate_rows, inverse, candidate_rows)
+        )
 
     def add(inverse, row):
         v = inverse @ row
@@ -198,10 +222,16 @@ def _rows(model: BalanceModel, total_loads: np.ndarray) -> np.ndarray:
     return model.design(outputs_for_loads(model.without_constant(), total_loads))
 
 
-def design_points(config: BalanceConfig, envelope_loads, points: int, *,
-                  model: BalanceModel | None = None, sigma=None,
-                  combined_limit: float = DEFAULT_COMBINED_LIMIT,
-                  where: str = 'envelope') -> Design:
+def design_points(
+    config: BalanceConfig,
+    envelope_loads,
+    points: int,
+    *,
+    model: BalanceModel | None = None,
+    sigma=None,
+    combined_limit: float = DEFAULT_COMBINED_LIMIT,
+    where: str = 'envelope',
+) -> Design:
     """Add at most `points` combined load points to the balance's schedule for this envelope.
 
     Parameters
@@ -221,15 +251,17 @@ def design_points(config: BalanceConfig, envelope_loads, points: int, *,
     """
     if not isinstance(points, (int, np.integer)) or points < 1:
         raise DesignError(f'--points {points}: add at least 1 point')
-    _schedule(config)       # DesignError without one
+    _schedule(config)  # DesignError without one
     if not combined_limit > 0:
         raise DesignError(f'combined-loading limit {combined_limit}: must be positive')
     capacity = np.asarray(config.capacity, float)
     envelope = check_envelope(envelope_loads, capacity, config.components, where)
     model = model or config.matrices['cubic']
     if model.extra_variables:
-        raise DesignError(f'model {model.name} needs {", ".join(model.extra_variables)} besides '
-                          f'the outputs; design for its base model')
+        raise DesignError(
+            f'model {model.name} needs {", ".join(model.extra_variables)} besides '
+            f'the outputs; design for its base model'
+        )
     if sigma is None:
         row = config.table17_sigma_pct_fs.get('cubic', {})
         sigma = np.array([float(row.get(c, 0.0)) for c in config.components]) * capacity / 100.0
@@ -242,8 +274,10 @@ def design_points(config: BalanceConfig, envelope_loads, points: int, *,
     candidates = np.vstack([thinned * s for s in STRETCH])
     candidates = candidates[rig_loading(config, candidates, combined_limit)[0]]
     if len(candidates) == 0:
-        raise DesignError(f'{where}: no load of the envelope can be applied by the rig within '
-                          f'capacity and the combined-loading limit {combined_limit}')
+        raise DesignError(
+            f'{where}: no load of the envelope can be applied by the rig within '
+            f'capacity and the combined-loading limit {combined_limit}'
+        )
     base_rows = _rows(model, schedule_total_loads(config, _schedule(config)))
     envelope_rows = _rows(model, envelope)
     scales = np.linalg.norm(base_rows, axis=0)
@@ -258,13 +292,15 @@ def design_points(config: BalanceConfig, envelope_loads, points: int, *,
     loaded = ~np.all(schedule.loads[base_points:] == 0.0, axis=1)
     before = predicted_uncertainty(model, base_rows, sigma, envelope)
     after = predicted_uncertainty(model, _rows(model, total), sigma, envelope)
-    return Design(schedule, total[base_points:][loaded], before, after, tuple(config.components),
-                  capacity)
+    return Design(
+        schedule, total[base_points:][loaded], before, after, tuple(config.components), capacity
+    )
 
 
 def predicted_uncertainty(model: BalanceModel, point_rows: np.ndarray, sigma, loads) -> np.ndarray:
     """(E, n) u (k = 1) at loads (E, n) of a calibration fitted on points with design rows
-    (P, p) and residual σ (n,), N / N·m: the live node's computation (model/uncertainty.py)."""
+    (P, p) and residual σ (n,), N / N·m: the live node's computation (model/uncertainty.py).
+    """
     covariance, rank = unscaled_covariance(point_rows)
     fitted = with_covariance(model, covariance, sigma, max(len(point_rows) - rank, 1))
     return load_standard_uncertainty(fitted, outputs_for_loads(model.without_constant(), loads))

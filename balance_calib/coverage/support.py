@@ -14,6 +14,7 @@ A load of case 2 lies outside the hull of the schedule in the space of the model
 extrapolated, even when each load alone and each pair was calibrated. That is what a tunnel load
 (six components at once) does to a schedule of one or two components at a time.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -21,8 +22,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-RANGE_TOLERANCE_FS = 0.02          # 2 % FS beyond the calibrated range still counts as inside
-LEVERAGE_TOLERANCE = 1.1           # and 10 % beyond the largest leverage of a calibration point
+RANGE_TOLERANCE_FS = 0.02  # 2 % FS beyond the calibrated range still counts as inside
+LEVERAGE_TOLERANCE = 1.1  # and 10 % beyond the largest leverage of a calibration point
 
 
 @dataclass(frozen=True)
@@ -30,32 +31,38 @@ class ScheduleSupport:
     """Range per component and the largest leverage of the calibration points."""
 
     components: tuple[str, ...]
-    capacity: np.ndarray              # (n,) N / N·m
-    load_min: np.ndarray              # (n,) N / N·m, total loads
-    load_max: np.ndarray              # (n,)
-    leverage_max: float               # largest x (XᵀX)⁻¹ xᵀ of a calibration point
-    model: str                        # the model whose terms the leverage is of
+    capacity: np.ndarray  # (n,) N / N·m
+    load_min: np.ndarray  # (n,) N / N·m, total loads
+    load_max: np.ndarray  # (n,)
+    leverage_max: float  # largest x (XᵀX)⁻¹ xᵀ of a calibration point
+    model: str  # the model whose terms the leverage is of
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data for calibration.yaml (`extra.support`)."""
         return {
             'definition': 'outside for a component: its load beyond the calibrated range '
-                          '(+2 % FS), or the load\'s leverage in the base model beyond 1.1 x the '
-                          'largest of a calibration point',
+            "(+2 % FS), or the load's leverage in the base model beyond 1.1 x the "
+            'largest of a calibration point',
             'load_min': {c: float(v) for c, v in zip(self.components, self.load_min)},
             'load_max': {c: float(v) for c, v in zip(self.components, self.load_max)},
-            'leverage_max': float(self.leverage_max), 'model': self.model,
+            'leverage_max': float(self.leverage_max),
+            'model': self.model,
         }
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], components: Sequence[str],
-                  capacity) -> 'ScheduleSupport':
+    def from_dict(
+        cls, data: Mapping[str, Any], components: Sequence[str], capacity
+    ) -> 'ScheduleSupport':
         """Inverse of to_dict; KeyError/ValueError/TypeError on a malformed mapping."""
         names = tuple(components)
-        return cls(names, np.asarray(capacity, float),
-                   np.array([float(data['load_min'][c]) for c in names]),
-                   np.array([float(data['load_max'][c]) for c in names]),
-                   float(data['leverage_max']), str(data['model']))
+        return cls(
+            names,
+            np.asarray(capacity, float),
+            np.array([float(data['load_min'][c]) for c in names]),
+            np.array([float(data['load_max'][c]) for c in names]),
+            float(data['leverage_max']),
+            str(data['model']),
+        )
 
 
 def leverage(design_rows, covariance_unscaled) -> np.ndarray:
@@ -64,20 +71,28 @@ def leverage(design_rows, covariance_unscaled) -> np.ndarray:
     return np.einsum('ij,jk,ik->i', rows, np.asarray(covariance_unscaled, float), rows)
 
 
-def support_of_points(total_loads, design_rows, covariance_unscaled, capacity,
-                      components: Sequence[str], model: str) -> ScheduleSupport:
+def support_of_points(
+    total_loads, design_rows, covariance_unscaled, capacity, components: Sequence[str], model: str
+) -> ScheduleSupport:
     """The support of calibration points with these total loads (P, n), N / N·m, and design
-    rows (P, p) of `model`, whose fit has this unscaled covariance (p, p)."""
+    rows (P, p) of `model`, whose fit has this unscaled covariance (p, p).
+    """
     loads = np.atleast_2d(np.asarray(total_loads, dtype=float))
-    return ScheduleSupport(tuple(components), np.asarray(capacity, float), loads.min(axis=0),
-                           loads.max(axis=0),
-                           float(np.max(leverage(design_rows, covariance_unscaled))), str(model))
+    return ScheduleSupport(
+        tuple(components),
+        np.asarray(capacity, float),
+        loads.min(axis=0),
+        loads.max(axis=0),
+        float(np.max(leverage(design_rows, covariance_unscaled))),
+        str(model),
+    )
 
 
 def outside_support(support: ScheduleSupport, loads, load_leverage) -> np.ndarray:
     """(N, n) True where a load (N, n), of leverage (N,) in the support's model, is outside the
     support for that component (module doc). Loads or leverages that are not finite are
-    outside."""
+    outside.
+    """
     loads = np.atleast_2d(np.asarray(loads, dtype=float))
     margin = RANGE_TOLERANCE_FS * support.capacity
     limit = LEVERAGE_TOLERANCE * support.leverage_max

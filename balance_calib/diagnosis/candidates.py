@@ -16,8 +16,9 @@ ordinary `BalanceModel` whose extra variables carry these names:
     bidirectional  |FXV|, FXV*|FXV|, absload_X      sign-dependent terms keyed to the output
                                                     (AIAA R-091) and to the load: |L_X| / capacity
     cross_terms    FXV^2*FZV, FXV*FYV*FZV, ...       monomials up to degree 3 the base model lacks
-    creep          creep_XV_m                       Σ ΔV exp(-age/τ_m) over the bridge's load steps,
-                                                    τ_m on a grid: the time constant is estimated
+    creep          creep_XV_m                       Σ ΔV exp(-age/τ_m) over the bridge's load
+                                                    steps, τ_m on a grid: the time constant is
+                                                    estimated
     excitation     exc_m_X                          a common gain g(t) x the total load on X; g a
                                                     line in time or steps (one fit for all six)
     tare           (no terms: body weight and CG refitted, see tare_refit.py)
@@ -27,6 +28,7 @@ exactly as the bridge outputs are (TM-663 §5(4)): value minus its interpolation
 bracketing zero points. Live, the wind-off tare does the same referring: a hysteresis term c·dir_X
 read with the raw ±1 and the tare offset subtracted gives c·(dir_X - dir_X at tare).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -38,8 +40,16 @@ import numpy as np
 from ..model.terms import Term
 from ..zero_points import subtract_zero_points
 
-EFFECT_NAMES = ('temperature', 'zero_drift', 'hysteresis', 'bidirectional', 'cross_terms', 'tare',
-                'creep', 'excitation')
+EFFECT_NAMES = (
+    'temperature',
+    'zero_drift',
+    'hysteresis',
+    'bidirectional',
+    'cross_terms',
+    'tare',
+    'creep',
+    'excitation',
+)
 # Families whose terms are fitted at calibration but not applied live (they follow the campaign's
 # time line or load history, which the live calibrator does not have).
 NUISANCE_EFFECTS = ('zero_drift', 'creep', 'excitation')
@@ -55,9 +65,9 @@ class CandidateFamily:
     """The terms one physical effect may add to a component."""
 
     name: str
-    groups: tuple[tuple[str, ...], ...]     # canonical term names, in groups added as a whole
-    max_groups: int                         # forward selection adds at most this many per component
-    labels: Mapping[tuple[str, ...], str]   # what a group means, for the evidence line
+    groups: tuple[tuple[str, ...], ...]  # canonical term names, in groups added as a whole
+    max_groups: int  # forward selection adds at most this many per component
+    labels: Mapping[tuple[str, ...], str]  # what a group means, for the evidence line
 
     @property
     def nuisance(self) -> bool:
@@ -81,45 +91,69 @@ def _single(name: str, terms: Sequence[str], max_groups: int) -> CandidateFamily
 
 
 def temperature_family(outputs: Sequence[str]) -> CandidateFamily:
-    return _single('temperature', ['dT', 'dT^2'] + [f'dT*{v}' for v in outputs] + [f'dT^2*{v}' for v in outputs], 3)
+    return _single(
+        'temperature',
+        ['dT', 'dT^2'] + [f'dT*{v}' for v in outputs] + [f'dT^2*{v}' for v in outputs],
+        3,
+    )
 
 
 def hysteresis_family(components: Sequence[str], outputs: Sequence[str]) -> CandidateFamily:
-    """Loops keyed to a component's own load history (dir_X: constant, slope and even loops; turn_X:
-    growing away from the turning point, linearly or by Rayleigh's square) and to each bridge's own
-    output history (play_XV_m: the play operator of a Prandtl-Ishlinskii model, width PLAY_WIDTHS[m]
-    of rated output; a gauge's loop follows its strain, which on a coupled balance moves with other
-    components' loads too, and a small reversal makes a small loop). diagnose.py offers a component its own load-keyed terms
-    and every bridge's output-keyed ones."""
-    return _single('hysteresis', [f'dir_{c}' for c in components]
-                   + [f'dir_{c}*{v}' for c, v in zip(components, outputs)]
-                   + [f'dir_{c}*|{v}|' for c, v in zip(components, outputs)]
-                   + [f'turn_{c}' for c in components] + [f'turn_{c}*|turn_{c}|' for c in components]
-                   + [f'play_{v}_{m}' for v in outputs for m in range(1, len(PLAY_WIDTHS) + 1)], 3)
+    """Loops keyed to a component's own load history (dir_X: constant, slope and even loops;
+    turn_X: growing away from the turning point, linearly or by Rayleigh's square) and to each
+    bridge's own output history (play_XV_m: the play operator of a Prandtl-Ishlinskii model, width
+    PLAY_WIDTHS[m] of rated output; a gauge's loop follows its strain, which on a coupled balance
+    moves with other components' loads too, and a small reversal makes a small loop). diagnose.py
+    offers a component its own load-keyed terms and every bridge's output-keyed ones.
+    """
+    return _single(
+        'hysteresis',
+        [f'dir_{c}' for c in components]
+        + [f'dir_{c}*{v}' for c, v in zip(components, outputs)]
+        + [f'dir_{c}*|{v}|' for c, v in zip(components, outputs)]
+        + [f'turn_{c}' for c in components]
+        + [f'turn_{c}*|turn_{c}|' for c in components]
+        + [f'play_{v}_{m}' for v in outputs for m in range(1, len(PLAY_WIDTHS) + 1)],
+        3,
+    )
 
 
-def bidirectional_family(outputs: Sequence[str], components: Sequence[str] = ()) -> CandidateFamily:
+def bidirectional_family(
+    outputs: Sequence[str], components: Sequence[str] = ()
+) -> CandidateFamily:
     """Sign-dependent terms keyed to the bridge output (AIAA R-091) and to the load (absload_X)."""
-    return _single('bidirectional', [f'|{v}|' for v in outputs] + [f'{v}*|{v}|' for v in outputs]
-                   + [f'absload_{c}' for c in components], 3)
+    return _single(
+        'bidirectional',
+        [f'|{v}|' for v in outputs]
+        + [f'{v}*|{v}|' for v in outputs]
+        + [f'absload_{c}' for c in components],
+        3,
+    )
 
 
-def own_terms_only(family: CandidateFamily, component: str, output: str, components: Sequence[str]) -> tuple:
+def own_terms_only(
+    family: CandidateFamily, component: str, output: str, components: Sequence[str]
+) -> tuple:
     """The groups a component is offered: bidirectional only its own bridge's and load's (a
     sensitivity that differs with the sign of that component's load); hysteresis its own load
-    history's and every bridge's output history's; other families all."""
+    history's and every bridge's output history's; other families all.
+    """
     if family.name == 'bidirectional':
         own = {f'|{output}|', canonical(f'{output}*|{output}|'), f'absload_{component}'}
         return tuple(g for g in family.groups if set(g) <= own)
     if family.name == 'hysteresis':
         others = {c for c in components if c != component}
-        return tuple(g for g in family.groups
-                     if not any(t.startswith((f'dir_{c}', f'turn_{c}')) for t in g for c in others))
+        return tuple(
+            g
+            for g in family.groups
+            if not any(t.startswith((f'dir_{c}', f'turn_{c}')) for t in g for c in others)
+        )
     return family.groups
 
 
-def creep_family(outputs: Sequence[str], time_constants_s: Sequence[float] | np.ndarray,
-                 max_groups: int = 2) -> CandidateFamily:
+def creep_family(
+    outputs: Sequence[str], time_constants_s: Sequence[float] | np.ndarray, max_groups: int = 2
+) -> CandidateFamily:
     groups: list[tuple[str, ...]] = []
     labels: dict[tuple[str, ...], str] = {}
     for v in outputs:
@@ -130,15 +164,22 @@ def creep_family(outputs: Sequence[str], time_constants_s: Sequence[float] | np.
     return CandidateFamily('creep', tuple(groups), max_groups, labels)
 
 
-def excitation_family(components: Sequence[str], basis_labels: Sequence[str], max_groups: int = 4) -> CandidateFamily:
-    """Groups are basis functions of g(t); a group's terms are that function x each component's load
-    (one column per component; the joint test in diagnose.py shares the coefficient)."""
-    groups = tuple(tuple(f'exc_{m}_{c}' for c in components) for m in range(1, len(basis_labels) + 1))
+def excitation_family(
+    components: Sequence[str], basis_labels: Sequence[str], max_groups: int = 4
+) -> CandidateFamily:
+    """Groups are basis functions of g(t); a group's terms are that function x each component's
+    load (one column per component; the joint test in diagnose.py shares the coefficient).
+    """
+    groups = tuple(
+        tuple(f'exc_{m}_{c}' for c in components) for m in range(1, len(basis_labels) + 1)
+    )
     labels = {g: basis_labels[m] for m, g in enumerate(groups)}
     return CandidateFamily('excitation', groups, max_groups, labels)
 
 
-def cross_terms_family(outputs: Sequence[str], base_terms: Sequence[str], max_groups: int = 4) -> CandidateFamily:
+def cross_terms_family(
+    outputs: Sequence[str], base_terms: Sequence[str], max_groups: int = 4
+) -> CandidateFamily:
     """All monomials of degree 1-3 in the outputs that the base model does not have."""
     base = {canonical(t) for t in base_terms}
     names = []
@@ -162,17 +203,20 @@ def drift_family(frequencies_hz: np.ndarray, max_groups: int = 8) -> CandidateFa
 
 # --- the variables ----------------------------------------------------------------------------
 def refer_to_zero_points(values, times_s, is_zero_point, orientation) -> np.ndarray:
-    """values (N,) or (N, m) minus their interpolation between the bracketing zero points, §5(4)."""
+    """Values (N,) or (N, m) minus their interpolation between the bracketing zero points,
+    §5(4).
+    """
     values = np.asarray(values, dtype=float)
     column = values.ndim == 1
-    referred = subtract_zero_points(times_s, values[:, None] if column else values, is_zero_point,
-                                    orientation).zeroed_outputs_mv
+    referred = subtract_zero_points(
+        times_s, values[:, None] if column else values, is_zero_point, orientation
+    ).zeroed_outputs_mv
     return referred[:, 0] if column else referred
 
 
 # A load change below this fraction of capacity is no reversal (see load_directions). The live
-# LoadHistory (live/calibrator_core.py) uses 0.005 from its last reversal point; 0.005 here left the
-# simulated M_Y loops partly unexplained (their small steps do reverse the simulated gauge).
+# LoadHistory (live/calibrator_core.py) uses 0.005 from its last reversal point; 0.005 here left
+# the simulated M_Y loops partly unexplained (their small steps do reverse the simulated gauge).
 DIRECTION_THRESHOLD = 1e-3
 
 
@@ -188,10 +232,12 @@ def load_directions(loads, times_s, capacity) -> np.ndarray:
     loads = np.atleast_2d(np.asarray(loads, dtype=float))
     order = np.argsort(np.asarray(times_s, dtype=float), kind='stable')
     steps = np.diff(loads[order], axis=0)
-    sign = np.where(np.abs(steps) > DIRECTION_THRESHOLD * np.asarray(capacity, float), np.sign(steps), 0.0)
+    sign = np.where(
+        np.abs(steps) > DIRECTION_THRESHOLD * np.asarray(capacity, float), np.sign(steps), 0.0
+    )
     sign = np.vstack([np.ones((1, loads.shape[1])), sign])
     rows = np.arange(len(sign))[:, None] * np.ones((1, loads.shape[1]), dtype=int)
-    last = np.maximum.accumulate(np.where(sign != 0, rows, 0), axis=0)     # forward fill
+    last = np.maximum.accumulate(np.where(sign != 0, rows, 0), axis=0)  # forward fill
     direction_sorted = np.take_along_axis(sign, last, axis=0)
     direction = np.empty_like(direction_sorted)
     direction[order] = direction_sorted
@@ -231,9 +277,10 @@ def without_base_terms(family: CandidateFamily, base_terms: Sequence[str]) -> Ca
 
 
 def turning_distances(loads, times_s, direction, capacity) -> np.ndarray:
-    """(N, n) signed distance (fraction of capacity) the load travelled since its last turning point:
-    dir x |L - L at the last reversal|, in time order. A loop whose offset grows away from the turning
-    point (Preisach / Madelung) follows it; turn·|turn| is Rayleigh's law."""
+    """(N, n) signed distance (fraction of capacity) the load travelled since its last turning
+    point: dir x |L - L at the last reversal|, in time order. A loop whose offset grows away from
+    the turning point (Preisach / Madelung) follows it; turn·|turn| is Rayleigh's law.
+    """
     loads = np.atleast_2d(np.asarray(loads, dtype=float))
     order = np.argsort(np.asarray(times_s, dtype=float), kind='stable')
     load, d = loads[order], np.asarray(direction, float)[order]
@@ -254,7 +301,8 @@ PLAY_WIDTHS = (0.02, 0.1, 0.3)
 
 def play_lag(outputs, times_s, half_width) -> np.ndarray:
     """(N, n) (V - play(V)) / w in time order: ±1 once the output moved 2w past its last turning
-    point, linear in between (one hysteron of a Prandtl-Ishlinskii model)."""
+    point, linear in between (one hysteron of a Prandtl-Ishlinskii model).
+    """
     outputs = np.atleast_2d(np.asarray(outputs, dtype=float))
     order = np.argsort(np.asarray(times_s, dtype=float), kind='stable')
     v = outputs[order]
@@ -269,13 +317,27 @@ def play_lag(outputs, times_s, half_width) -> np.ndarray:
     return out
 
 
-def direction_variables(loads, times_s, capacity, components, is_zero_point, orientation, outputs=None,
-                        outputs_names=(), rated_outputs=None, fitted_loads=None):
+def direction_variables(
+    loads,
+    times_s,
+    capacity,
+    components,
+    is_zero_point,
+    orientation,
+    outputs=None,
+    outputs_names=(),
+    rated_outputs=None,
+    fitted_loads=None,
+):
     """dir_X, turn_X (and with outputs: play_XV_m) referred to the zero points, and the raw ±1 load
     directions (N, n). turn_X is measured on fitted_loads (the base model's, from the outputs) when
-    given: a column built from the applied loads, the fit's target, would fit part of the target."""
+    given: a column built from the applied loads, the fit's target, would fit part of the target.
+    """
     raw = load_directions(loads, times_s, capacity)
-    columns = [raw, turning_distances(loads if fitted_loads is None else fitted_loads, times_s, raw, capacity)]
+    columns = [
+        raw,
+        turning_distances(loads if fitted_loads is None else fitted_loads, times_s, raw, capacity),
+    ]
     names = [f'dir_{c}' for c in components] + [f'turn_{c}' for c in components]
     if outputs is not None:
         for m, width in enumerate(PLAY_WIDTHS, start=1):
@@ -286,8 +348,10 @@ def direction_variables(loads, times_s, capacity, components, is_zero_point, ori
 
 
 def absolute_load_variables(loads, capacity, components) -> dict[str, np.ndarray]:
-    """absload_X = |L_X| / capacity_X: keyed to the sign of the load, not of the bridge output. Pass
-    the *fitted* loads (from the outputs): |applied load| equals the target wherever it is positive."""
+    """absload_X = |L_X| / capacity_X: keyed to the sign of the load, not of the bridge output.
+    Pass the *fitted* loads (from the outputs): |applied load| equals the target wherever it is
+    positive.
+    """
     loads = np.asarray(loads, dtype=float)
     return {f'absload_{c}': np.abs(loads[:, k]) / capacity[k] for k, c in enumerate(components)}
 
@@ -296,22 +360,26 @@ def creep_time_constants(times_s) -> np.ndarray:
     """The grid of time constants (s) creep is tried with: 1/4 to 2 point spacings.
 
     Longer ones are not tried: a relaxation lasting many points looks, in point means, like the
-    load history (hysteresis) or a drift, and the schedule cannot tell them apart."""
+    load history (hysteresis) or a drift, and the schedule cannot tell them apart.
+    """
     times = np.sort(np.asarray(times_s, dtype=float))
     spacing = float(np.median(np.diff(times))) if len(times) > 1 else 1.0
     return spacing * np.array([0.25, 0.5, 1.0, 2.0])
 
 
-def creep_variables(outputs_mv, times_s, time_constants_s, outputs_names, is_zero_point, orientation):
+def creep_variables(
+    outputs_mv, times_s, time_constants_s, outputs_names, is_zero_point, orientation
+):
     """creep_XV_m: the unrelaxed part Σ_i ΔV_i exp(-(t - t_i)/τ_m) of each bridge's load steps,
-    t_i halfway between the two points, referred to the zero points."""
+    t_i halfway between the two points, referred to the zero points.
+    """
     outputs = np.asarray(outputs_mv, dtype=float)
     times = np.asarray(times_s, dtype=float)
     order = np.argsort(times, kind='stable')
     v, t = outputs[order], times[order]
-    steps = np.vstack([np.zeros((1, v.shape[1])), np.diff(v, axis=0)])            # (N, 6)
+    steps = np.vstack([np.zeros((1, v.shape[1])), np.diff(v, axis=0)])  # (N, 6)
     step_times = np.concatenate([[t[0]], 0.5 * (t[1:] + t[:-1])])
-    age = t[:, None] - step_times[None, :]                                        # (N, N)
+    age = t[:, None] - step_times[None, :]  # (N, N)
     columns, names = [], []
     for m, tau in enumerate(time_constants_s, start=1):
         kernel = np.where(age >= 0, np.exp(-np.clip(age, 0.0, None) / tau), 0.0)
@@ -331,8 +399,9 @@ def excitation_basis(times_s, n_steps: int = 16) -> tuple[np.ndarray, list[str]]
     t0, span = float(times.min()), float(np.ptp(times)) or 1.0
     columns = [(times - t0) / span - 0.5]
     labels = ['a gain drifting linearly in time']
-    for j in range(1, n_steps + 1):        # from 10 % to 90 % of the campaign: a step at its very
-        when = t0 + span * (0.1 + 0.8 * (j - 1) / max(n_steps - 1, 1))   # edge is a few points' offset
+    for j in range(1, n_steps + 1):  # from 10 % to 90 % of the campaign: a step at its very
+        # edge is a few points' offset
+        when = t0 + span * (0.1 + 0.8 * (j - 1) / max(n_steps - 1, 1))
         columns.append((times >= when).astype(float) - 0.5)
         labels.append(f'a gain step at t ≈ {when - t0:.0f} s')
     return np.column_stack(columns), labels
@@ -340,7 +409,8 @@ def excitation_basis(times_s, n_steps: int = 16) -> tuple[np.ndarray, list[str]]
 
 def excitation_variables(basis, total_loads, components, is_zero_point, times_s, orientation):
     """exc_m_X = g_m(t) x total load on X (body weight included), referred to the zero points
-    as the outputs it scales are."""
+    as the outputs it scales are.
+    """
     total = np.asarray(total_loads, dtype=float)
     columns, names = [], []
     for m in range(basis.shape[1]):

@@ -26,6 +26,7 @@ Limit (measured on test/diagnosis_physics.py's ratcheting joint on every bridge 
 0.5 % of rated output at its widest every flagged point is explained; at 1 % one or two points
 per campaign are predicted too loosely by the others and stay refused.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -35,8 +36,8 @@ import scipy.stats
 
 from .candidates import absolute_load_variables, direction_variables, play_lag
 
-EXTRA_PLAY_WIDTHS = (0.05, 0.2, 0.6)   # x rated output, besides candidates.PLAY_WIDTHS
-ALPHA_STRUCTURE = 1e-3        # the basis's F-test on the points not flagged, per component
+EXTRA_PLAY_WIDTHS = (0.05, 0.2, 0.6)  # x rated output, besides candidates.PLAY_WIDTHS
+ALPHA_STRUCTURE = 1e-3  # the basis's F-test on the points not flagged, per component
 
 
 @dataclass(frozen=True)
@@ -44,41 +45,62 @@ class StructureFit:
     """The flagged points of one component predicted from the other points' structure."""
 
     component: int
-    out_of_sample: np.ndarray         # (N,) residual minus the prediction from the other points
-    p_value: float                    # F-test of the basis on the other points' residual
-    explains: bool                    # p < alpha
+    out_of_sample: np.ndarray  # (N,) residual minus the prediction from the other points
+    p_value: float  # F-test of the basis on the other points' residual
+    explains: bool  # p < alpha
 
 
-def structure_basis(fitted_loads: np.ndarray, outputs_mv: np.ndarray, times_s: np.ndarray,
-                    is_zero_point: np.ndarray, orientation: np.ndarray, capacity: np.ndarray,
-                    components, outputs_names, rated_outputs_mv: np.ndarray) -> np.ndarray:
+def structure_basis(
+    fitted_loads: np.ndarray,
+    outputs_mv: np.ndarray,
+    times_s: np.ndarray,
+    is_zero_point: np.ndarray,
+    orientation: np.ndarray,
+    capacity: np.ndarray,
+    components,
+    outputs_names,
+    rated_outputs_mv: np.ndarray,
+) -> np.ndarray:
     """(N, m) columns a structure across the campaign can follow (see the module docstring).
 
     fitted_loads (N, 6) N, N·m; outputs_mv (N, 6) mV; times_s (N,) s; capacity (6,);
     rated_outputs_mv (6,). Columns are centred and scaled to unit RMS; constant ones dropped.
     """
-    variables, _ = direction_variables(fitted_loads, times_s, capacity, components, is_zero_point,
-                                       orientation, outputs=outputs_mv,
-                                       outputs_names=outputs_names,
-                                       rated_outputs=rated_outputs_mv, fitted_loads=fitted_loads)
+    variables, _ = direction_variables(
+        fitted_loads,
+        times_s,
+        capacity,
+        components,
+        is_zero_point,
+        orientation,
+        outputs=outputs_mv,
+        outputs_names=outputs_names,
+        rated_outputs=rated_outputs_mv,
+        fitted_loads=fitted_loads,
+    )
     columns = list(variables.values())
     columns += list(absolute_load_variables(fitted_loads, capacity, components).values())
-    for width in EXTRA_PLAY_WIDTHS:       # a loop of many hysterons: more widths than the family's
+    for width in EXTRA_PLAY_WIDTHS:  # a loop of many hysterons: more widths than the family's
         half = width * np.asarray(rated_outputs_mv, float)
         columns += list(play_lag(outputs_mv, times_s, half).T)
     t = np.asarray(times_s, float)
     span = max(float(t.max() - t.min()), 1e-9)
     u = 2.0 * (t - t.min()) / span - 1.0
-    columns += [u, 1.5 * u ** 2 - 0.5, 2.5 * u ** 3 - 1.5 * u]          # Legendre P1-P3
+    columns += [u, 1.5 * u**2 - 0.5, 2.5 * u**3 - 1.5 * u]  # Legendre P1-P3
     basis = np.column_stack(columns)
     basis = basis - basis.mean(axis=0)
-    scale = np.sqrt(np.mean(basis ** 2, axis=0))
+    scale = np.sqrt(np.mean(basis**2, axis=0))
     keep = scale > 1e-12
     return basis[:, keep] / scale[keep]
 
 
-def fit_structure(residual: np.ndarray, basis: np.ndarray, k: int, flagged: np.ndarray,
-                  alpha: float = ALPHA_STRUCTURE) -> StructureFit:
+def fit_structure(
+    residual: np.ndarray,
+    basis: np.ndarray,
+    k: int,
+    flagged: np.ndarray,
+    alpha: float = ALPHA_STRUCTURE,
+) -> StructureFit:
     """Fit one component's (standardized) residual (N,) on a constant and the basis (N, m) over the
     points not flagged, and predict the flagged ones (N,) bool from that fit.
 
@@ -105,28 +127,41 @@ def fit_structure(residual: np.ndarray, basis: np.ndarray, k: int, flagged: np.n
 class CampaignStructure:
     """What the outliers gate may hold a flagged point's residual against."""
 
-    basis: np.ndarray                 # (N, m) structure_basis of the campaign
-    covered: dict                     # component -> the structure the diagnosis found there
+    basis: np.ndarray  # (N, m) structure_basis of the campaign
+    covered: dict  # component -> the structure the diagnosis found there
 
 
 def diagnosis_structure(diagnosis, points, config) -> CampaignStructure | None:
     """The campaign's structure basis and, per component, what the diagnosis adopted or left
     `unexplained` there (only those components may have their flagged points explained).
-    None when the diagnosis's points are not the gate's (another order or subset)."""
-    if diagnosis is None or not np.array_equal(np.asarray(diagnosis.point_labels),
-                                               np.asarray(points.label)):
+    None when the diagnosis's points are not the gate's (another order or subset).
+    """
+    if diagnosis is None or not np.array_equal(
+        np.asarray(diagnosis.point_labels), np.asarray(points.label)
+    ):
         return None
     covered: dict[str, str] = {}
     for entry in diagnosis.unexplained:
         for c in entry.components:
-            covered.setdefault(c, f'the structure the diagnosis left unexplained on {c} '
-                                  f'(it tracks {entry.tracks})')
+            covered.setdefault(
+                c,
+                f'the structure the diagnosis left unexplained on {c} (it tracks {entry.tracks})',
+            )
     for effect in diagnosis.effects:
         for c in effect.components:
             covered.setdefault(c, f'the {effect.name} effect adopted on {c}')
-    fitted = (np.asarray(diagnosis.corrected.loads, float)
-              - np.asarray(diagnosis.residuals_after, float))
-    basis = structure_basis(fitted, diagnosis.corrected.bridge_outputs_mv, points.times_s,
-                            points.is_zero_point, points.orientation, config.capacity,
-                            config.components, config.bridge_outputs, config.rated_output_mv)
+    fitted = np.asarray(diagnosis.corrected.loads, float) - np.asarray(
+        diagnosis.residuals_after, float
+    )
+    basis = structure_basis(
+        fitted,
+        diagnosis.corrected.bridge_outputs_mv,
+        points.times_s,
+        points.is_zero_point,
+        points.orientation,
+        config.capacity,
+        config.components,
+        config.bridge_outputs,
+        config.rated_output_mv,
+    )
     return CampaignStructure(basis, covered)

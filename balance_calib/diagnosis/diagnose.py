@@ -1,7 +1,7 @@
 """Residual diagnosis (issues 4, 11): which physical effect does the base model of TM-663 lack?
 
-After the base fit (cubic, §2.3) of the corrected data (§5(4) zero points, §6-7 tare), the residuals
-of every component are examined against each candidate family of shapes (candidates.py,
+After the base fit (cubic, §2.3) of the corrected data (§5(4) zero points, §6-7 tare), the
+residuals of every component are examined against each candidate family of shapes (candidates.py,
 tare_refit.py): temperature, zero_drift, hysteresis, bidirectional, cross_terms, tare, creep and
 excitation. Per round, for every family and component:
 
@@ -26,53 +26,77 @@ excitation. Per round, for every family and component:
 The best family is added (its terms only for its components), everything refitted, and the search
 repeats until no family passes. Then leftovers.py tests what remains against the repeatability of
 the points (lack of fit), and for a component's own load shape changing with time or with the
-gravity vector (directed tests), and reports structure no family explains as `unexplained`, dropping
-the families that fitted only part of it. The adopted fit keeps every term; the live model drops the
-nuisance ones (time basis, creep, excitation) and the terms the live calibrator cannot evaluate
-(loops keyed to the turning point or a bridge's play, the sign of the fitted load): it needs only
-outputs, dT and the load directions.
+gravity vector (directed tests), and reports structure no family explains as `unexplained`,
+dropping the families that fitted only part of it. The adopted fit keeps every term; the live model
+drops the nuisance ones (time basis, creep, excitation) and the terms the live calibrator cannot
+evaluate (loops keyed to the turning point or a bridge's play, the sign of the fitted load): it
+needs only outputs, dT and the load directions.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence, cast
+from typing import cast, Mapping, Sequence
 
 import numpy as np
 
+from ..accuracy.sigma import sigma_pct_fs
 from ..config import BalanceConfig, CalibrationBody
 from ..model.balance_model import BalanceModel
 from ..model.terms import as_variables, design_matrix, parse_terms
 from ..model.tm663 import tm663_terms
 from ..reduction import Reduction
-from ..tare.calibration_body import CorrectedData
-from ..tare.calibration_body import tare_loads
-from .candidates import (EFFECT_NAMES, GENERIC_FAMILIES, NUISANCE_EFFECTS, STATIC_FAMILIES,
-                         CandidateFamily, absolute_load_variables,
-                         bidirectional_family, creep_family, creep_time_constants, creep_variables,
-                         cross_terms_family, direction_variables, drift_family, drift_frequencies,
-                         drift_variables, excitation_basis, excitation_family, excitation_variables,
-                         own_terms_only, without_base_terms, hysteresis_family, temperature_family)
+from ..tare.calibration_body import CorrectedData, tare_loads
+from .candidates import (
+    absolute_load_variables,
+    bidirectional_family,
+    CandidateFamily,
+    creep_family,
+    creep_time_constants,
+    creep_variables,
+    cross_terms_family,
+    direction_variables,
+    drift_family,
+    drift_frequencies,
+    drift_variables,
+    EFFECT_NAMES,
+    excitation_basis,
+    excitation_family,
+    excitation_variables,
+    GENERIC_FAMILIES,
+    hysteresis_family,
+    NUISANCE_EFFECTS,
+    own_terms_only,
+    STATIC_FAMILIES,
+    temperature_family,
+    without_base_terms,
+)
+from .leftovers import examine_leftovers, Leftovers
 from .loop_or_sign import components_to_drop, direction_pairs
-from .leftovers import Leftovers, examine_leftovers
-from ..accuracy.sigma import sigma_pct_fs
-from .statistics import ComponentFit, ZeroPointWhitening, fit_columns, forward_select, partial_f
+from .statistics import ComponentFit, fit_columns, forward_select, partial_f, ZeroPointWhitening
 from .tare_refit import BodyRefit, refit_body
 
 
 @dataclass(frozen=True)
 class DiagnosisSettings:
-    alpha: float = 1e-4                  # level of one family's test in a round (Bonferroni within it)
-    min_effect_pct_fs: float = 0.01      # an effect must remove at least this RMS in a component
+    alpha: float = 1e-4  # level of one family's test in a round (Bonferroni within it)
+    min_effect_pct_fs: float = 0.01  # an effect must remove at least this RMS in a component
     max_rounds: int = 6
-    max_terms: Mapping[str, int] = field(default_factory=lambda: {'cross_terms': 4, 'zero_drift': 8})
-    alpha_lack_of_fit: float = 0.001     # per component: residual beyond the repeatability
-    min_explained: float = 0.75          # effects on a component with structure left over must
-                                         # explain this fraction of its excess variance, or none is adopted
-    alpha_slow_structure: float = 0.001  # per campaign: directed leftover tests (leftovers.slow_structure_bases)
-    alpha_constancy: float = 1e-4        # Chow test of a static family's coefficients (first vs second half)
-    equal_score: float = 0.8             # a runner-up within this fraction of the winner's score that the
-                                         # winner absorbs: "cannot be separated" (a warning)
-    drift_oversampling: float = 2.0      # Fourier grid spacing = 1 / (oversampling x campaign span)
+    max_terms: Mapping[str, int] = field(
+        default_factory=lambda: {'cross_terms': 4, 'zero_drift': 8}
+    )
+    alpha_lack_of_fit: float = 0.001  # per component: residual beyond the repeatability
+    # effects on a component with structure left over must explain this fraction of its excess
+    # variance, or none is adopted
+    min_explained: float = 0.75
+    # per campaign: directed leftover tests (leftovers.slow_structure_bases)
+    alpha_slow_structure: float = 0.001
+    # Chow test of a static family's coefficients (first vs second half)
+    alpha_constancy: float = 1e-4
+    # a runner-up within this fraction of the winner's score that the winner absorbs: "cannot be
+    # separated" (a warning)
+    equal_score: float = 0.8
+    drift_oversampling: float = 2.0  # Fourier grid spacing = 1 / (oversampling x campaign span)
     tare_parameters: tuple[str, ...] = ('weight_n', 'cg_x_m')
     effects: tuple[str, ...] = EFFECT_NAMES
 
@@ -81,34 +105,40 @@ class DiagnosisSettings:
 class EffectFound:
     """One effect added to the model, with the numbers behind it (per component)."""
 
-    name: str                                  # one of EFFECT_NAMES
+    name: str  # one of EFFECT_NAMES
     components: tuple[str, ...]
-    evidence: str                              # one line a person can check
-    terms: tuple[str, ...]                     # union over its components
+    evidence: str  # one line a person can check
+    terms: tuple[str, ...]  # union over its components
     terms_by_component: Mapping[str, tuple[str, ...]]
-    sigma_before_pct_fs: Mapping[str, float]   # in-sample, eq. (44), just before it was added
-    sigma_after_pct_fs: Mapping[str, float]    # ... and just after
+    sigma_before_pct_fs: Mapping[str, float]  # in-sample, eq. (44), just before it was added
+    sigma_after_pct_fs: Mapping[str, float]  # ... and just after
     press_sigma_before_pct_fs: Mapping[str, float]
     press_sigma_after_pct_fs: Mapping[str, float]
-    removed_pct_fs: Mapping[str, float]        # sqrt(σ_before² - σ_after²): the size of the effect
-    f_value: Mapping[str, float]               # partial F of its terms
-    p_value: Mapping[str, float]               # of that F, Bonferroni-adjusted for the search
-    correlation: Mapping[str, float]           # multiple r between residual and its terms
+    removed_pct_fs: Mapping[str, float]  # sqrt(σ_before² - σ_after²): the size of the effect
+    f_value: Mapping[str, float]  # partial F of its terms
+    p_value: Mapping[str, float]  # of that F, Bonferroni-adjusted for the search
+    correlation: Mapping[str, float]  # multiple r between residual and its terms
     evidence_by_component: Mapping[str, str]
-    score: float                               # BIC gain that ranked it
-    nuisance: bool                             # fitted at calibration, not applied live
+    score: float  # BIC gain that ranked it
+    nuisance: bool  # fitted at calibration, not applied live
     parameters: Mapping[str, float] = field(default_factory=dict)  # tare: the refitted body
-    explaining_variable: Mapping[str, str] = field(default_factory=dict)       # per component
+    explaining_variable: Mapping[str, str] = field(default_factory=dict)  # per component
     explaining_values: Mapping[str, np.ndarray] = field(default_factory=dict)  # (N,) per component
-    contribution: Mapping[str, np.ndarray] = field(default_factory=dict)       # (N,) load, N / N·m
+    contribution: Mapping[str, np.ndarray] = field(default_factory=dict)  # (N,) load, N / N·m
 
     def to_report(self) -> dict:
         """The entry of report.json's "effects" list (interfaces.md)."""
-        return {'name': self.name, 'components': list(self.components), 'evidence': self.evidence,
-                'terms': list(self.terms),
-                'sigma_after_pct_fs': {c: round(float(v), 4) for c, v in self.sigma_after_pct_fs.items()}}
+        return {
+            'name': self.name,
+            'components': list(self.components),
+            'evidence': self.evidence,
+            'terms': list(self.terms),
+            'sigma_after_pct_fs': {
+                c: round(float(v), 4) for c, v in self.sigma_after_pct_fs.items()
+            },
+        }
 
-    as_report = to_report           # the name refit/report.py calls
+    as_report = to_report  # the name refit/report.py calls
 
 
 @dataclass(frozen=True)
@@ -119,31 +149,31 @@ class Diagnosis:
     base_model: str
     components: tuple[str, ...]
     capacity: np.ndarray
-    effects: tuple[EffectFound, ...]                       # most important first
-    sigma_pct_fs: Mapping[str, Mapping[str, float]]        # 'before' / 'after' -> component -> σ
+    effects: tuple[EffectFound, ...]  # most important first
+    sigma_pct_fs: Mapping[str, Mapping[str, float]]  # 'before' / 'after' -> component -> σ
     sigma_pct_fs_crossval: Mapping[str, Mapping[str, float]]
     base_fit: BalanceModel
-    adopted: BalanceModel                                  # every term, nuisance included
-    live: BalanceModel                                     # nuisance terms removed
-    live_variables: tuple[str, ...]                        # extra live inputs: 'dT', 'dir_FX', ...
-    extra_variables: Mapping[str, np.ndarray]              # values per point the adopted fit used
+    adopted: BalanceModel  # every term, nuisance included
+    live: BalanceModel  # nuisance terms removed
+    live_variables: tuple[str, ...]  # extra live inputs: 'dT', 'dir_FX', ...
+    extra_variables: Mapping[str, np.ndarray]  # values per point the adopted fit used
     reference_temperature_c: float | None
     calibration_body: CalibrationBody
-    body_source: str                                       # 'declared', 'estimated' or 'fitted'
-    corrected: CorrectedData                               # the data the adopted fit saw
+    body_source: str  # 'declared', 'estimated' or 'fitted'
+    corrected: CorrectedData  # the data the adopted fit saw
     point_labels: np.ndarray
     times_s: np.ndarray
     orientation: np.ndarray
-    load_direction: np.ndarray                             # (N, 6) raw ±1 load history
-    residuals_before: np.ndarray                           # (N, 6) N / N·m, base model
-    residuals_after: np.ndarray                            # (N, 6) adopted model
+    load_direction: np.ndarray  # (N, 6) raw ±1 load history
+    residuals_before: np.ndarray  # (N, 6) N / N·m, base model
+    residuals_after: np.ndarray  # (N, 6) adopted model
     press_residuals_before: np.ndarray
     press_residuals_after: np.ndarray
-    skipped: Mapping[str, str]                             # effects not examined, and why
-    unexplained: tuple = ()                                # leftovers.Unexplained entries
+    skipped: Mapping[str, str]  # effects not examined, and why
+    unexplained: tuple = ()  # leftovers.Unexplained entries
     repeatability_pct_fs: Mapping[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
-    leftovers: Leftovers | None = None                     # the lack-of-fit numbers behind them
+    leftovers: Leftovers | None = None  # the lack-of-fit numbers behind them
 
     @property
     def points(self) -> int:
@@ -168,13 +198,20 @@ class Diagnosis:
 
     def to_report(self) -> dict:
         """The σ and effect parts of report.json (interfaces.md)."""
+
         def rounded(table):
             return {k: {c: round(float(v), 4) for c, v in row.items()} for k, row in table.items()}
-        return {'sigma_pct_fs': rounded(self.sigma_pct_fs), 'sigma_pct_fs_crossval': rounded(self.sigma_pct_fs_crossval),
-                'effects': [e.to_report() for e in self.effects],
-                'unexplained': [u.to_report() for u in self.unexplained],
-                'repeatability_pct_fs': {c: round(float(v), 4) for c, v in self.repeatability_pct_fs.items() if v == v},
-                'warnings': list(self.warnings)}
+
+        return {
+            'sigma_pct_fs': rounded(self.sigma_pct_fs),
+            'sigma_pct_fs_crossval': rounded(self.sigma_pct_fs_crossval),
+            'effects': [e.to_report() for e in self.effects],
+            'unexplained': [u.to_report() for u in self.unexplained],
+            'repeatability_pct_fs': {
+                c: round(float(v), 4) for c, v in self.repeatability_pct_fs.items() if v == v
+            },
+            'warnings': list(self.warnings),
+        }
 
 
 # --- the search -------------------------------------------------------------------------------
@@ -185,8 +222,16 @@ class _Problem:
     the same fit whitened against the zero-point noise (statistics.ZeroPointWhitening).
     """
 
-    def __init__(self, outputs_names, corrected: CorrectedData, variables, whitening: ZeroPointWhitening,
-                 components=(), times=None, gravity=None):
+    def __init__(
+        self,
+        outputs_names,
+        corrected: CorrectedData,
+        variables,
+        whitening: ZeroPointWhitening,
+        components=(),
+        times=None,
+        gravity=None,
+    ):
         self.outputs_names = tuple(outputs_names)
         self.gravity = None if gravity is None else np.asarray(gravity, dtype=float)
         self.times = None if times is None else np.asarray(times, dtype=float)
@@ -214,7 +259,11 @@ class _Problem:
             matrix = np.ones((len(self.outputs), len(missing)))
             for j, term in enumerate(parse_terms(missing)):
                 for factor in term.factors:
-                    value = outputs[factor.variable] if factor.variable in outputs else self.variables[factor.variable]
+                    value = (
+                        outputs[factor.variable]
+                        if factor.variable in outputs
+                        else self.variables[factor.variable]
+                    )
                     matrix[:, j] *= factor.evaluate(np.asarray(value, dtype=float))
             white = self.whiten(matrix)
             for j, name in enumerate(missing):
@@ -246,37 +295,47 @@ class _Problem:
         return residuals
 
     def fit(self, k: int, terms: Sequence[str]) -> '_Fit':
-        return _Fit(fit_columns(self.columns(terms), self.loads[:, k]),
-                    fit_columns(self.white_columns(terms), self.loads_white[:, k]))
+        return _Fit(
+            fit_columns(self.columns(terms), self.loads[:, k]),
+            fit_columns(self.white_columns(terms), self.loads_white[:, k]),
+        )
 
 
 @dataclass(frozen=True)
 class _Fit:
-    ols: ComponentFit      # all points, eq. (19): coefficients, σ, PRESS
-    gls: ComponentFit      # loaded points, whitened: the tests
+    ols: ComponentFit  # all points, eq. (19): coefficients, σ, PRESS
+    gls: ComponentFit  # loaded points, whitened: the tests
 
 
 @dataclass
 class _Candidate:
     family: str
-    components: dict                 # component index -> dict of statistics
+    components: dict  # component index -> dict of statistics
     score: float
     body_refit: BodyRefit | None = None
-    components_fits: list | None = None      # tare: every component refitted with the new body
+    components_fits: list | None = None  # tare: every component refitted with the new body
 
 
 def _fmt_p(p: float) -> str:
     return f'{p:.1g}' if p >= 1e-99 else '< 1e-99'
 
 
-def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = 'cubic',
-             temperature_c=None, times_s=None, settings: DiagnosisSettings = DiagnosisSettings(),
-             point_variance_mv2=None, point_samples=None) -> Diagnosis:
+def diagnose(
+    reduction: Reduction,
+    config: BalanceConfig,
+    *,
+    base_model: str = 'cubic',
+    temperature_c=None,
+    times_s=None,
+    settings: DiagnosisSettings = DiagnosisSettings(),
+    point_variance_mv2=None,
+    point_samples=None,
+) -> Diagnosis:
     """Examine the residuals of the base fit and add the effects they show.
 
-    point_variance_mv2 (P, 6), point_samples (P,): the variance of each point's mean output from its
-    own samples and their number, when the samples are at hand (repeatability, leftovers.py); without
-    them the repeatability comes from consecutive zero points alone.
+    point_variance_mv2 (P, 6), point_samples (P,): the variance of each point's mean output from
+    its own samples and their number, when the samples are at hand (repeatability, leftovers.py);
+    without them the repeatability comes from consecutive zero points alone.
 
     reduction: the corrected data (zero points and tare done); temperature_c, times_s: per point
     (default: those of reduction.points; temperature all-NaN -> the temperature effect is skipped).
@@ -286,7 +345,9 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
     capacity = np.asarray(config.capacity, dtype=float)
     n_points = len(points.label)
     times = np.asarray(points.times_s if times_s is None else times_s, dtype=float)
-    temps = np.asarray(points.temperature_c if temperature_c is None else temperature_c, dtype=float)
+    temps = np.asarray(
+        points.temperature_c if temperature_c is None else temperature_c, dtype=float
+    )
     corrected = reduction.corrected
     skipped: dict[str, str] = {}
 
@@ -305,20 +366,36 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
     if 'zero_drift' in wanted:
         frequencies = drift_frequencies(times, settings.drift_oversampling)
         if len(frequencies):
-            variables.update(drift_variables(times, frequencies, points.is_zero_point, points.orientation))
+            variables.update(
+                drift_variables(times, frequencies, points.is_zero_point, points.orientation)
+            )
             families.append(drift_family(frequencies, settings.max_terms.get('zero_drift', 8)))
         else:
             skipped['zero_drift'] = 'point times do not span a campaign'
-    # loads as the base model fits them from the outputs: what a term keyed to the load may use (built
-    # from the applied loads themselves, the target, it would fit part of the target and not the effect)
-    base_design = design_matrix(parse_terms(base_terms), as_variables(outputs_names, corrected.bridge_outputs_mv),
-                                n_points)
-    fitted_loads = np.column_stack([base_design @ fit_columns(base_design, corrected.loads[:, k]).coefficients
-                                    for k in range(len(components))])
-    directions, raw_direction = direction_variables(corrected.loads, times, capacity, components,
-                                                    points.is_zero_point, points.orientation,
-                                                    corrected.bridge_outputs_mv, outputs_names,
-                                                    config.rated_output_mv, fitted_loads)
+    # loads as the base model fits them from the outputs: what a term keyed to the load may use
+    # (built from the applied loads themselves, the target, it would fit part of the target and not
+    # the effect)
+    base_design = design_matrix(
+        parse_terms(base_terms), as_variables(outputs_names, corrected.bridge_outputs_mv), n_points
+    )
+    fitted_loads = np.column_stack(
+        [
+            base_design @ fit_columns(base_design, corrected.loads[:, k]).coefficients
+            for k in range(len(components))
+        ]
+    )
+    directions, raw_direction = direction_variables(
+        corrected.loads,
+        times,
+        capacity,
+        components,
+        points.is_zero_point,
+        points.orientation,
+        corrected.bridge_outputs_mv,
+        outputs_names,
+        config.rated_output_mv,
+        fitted_loads,
+    )
     if 'hysteresis' in wanted:
         variables.update(directions)
         families.append(hysteresis_family(components, outputs_names))
@@ -327,24 +404,43 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
         families.append(bidirectional_family(outputs_names, components))
     if 'creep' in wanted:
         taus = creep_time_constants(times)
-        variables.update(creep_variables(points.outputs_mv, times, taus, outputs_names, points.is_zero_point,
-                                         points.orientation))
+        variables.update(
+            creep_variables(
+                points.outputs_mv,
+                times,
+                taus,
+                outputs_names,
+                points.is_zero_point,
+                points.orientation,
+            )
+        )
         families.append(creep_family(outputs_names, taus, settings.max_terms.get('creep', 2)))
     if 'excitation' in wanted:
         basis, basis_labels = excitation_basis(times)
         total = np.asarray(corrected.loads, float) + tare_loads(reduction.body, points.gravity)
-        variables.update(excitation_variables(basis, total, components, points.is_zero_point, times,
-                                              points.orientation))
-        families.append(excitation_family(components, basis_labels, settings.max_terms.get('excitation', 4)))
+        variables.update(
+            excitation_variables(
+                basis, total, components, points.is_zero_point, times, points.orientation
+            )
+        )
+        families.append(
+            excitation_family(components, basis_labels, settings.max_terms.get('excitation', 4))
+        )
     if 'cross_terms' in wanted:
-        families.append(cross_terms_family(outputs_names, base_terms, settings.max_terms.get('cross_terms', 4)))
+        families.append(
+            cross_terms_family(outputs_names, base_terms, settings.max_terms.get('cross_terms', 4))
+        )
     families = [without_base_terms(f, base_terms) for f in families]
     tare_available = 'tare' in wanted and len(np.unique(np.round(points.gravity, 6), axis=0)) >= 2
     if 'tare' in wanted and not tare_available:
         skipped['tare'] = 'a single orientation: the body weight cannot be told from the constant'
 
-    whitening = ZeroPointWhitening.for_points(points.times_s, points.is_zero_point, points.orientation)
-    problem = _Problem(outputs_names, corrected, variables, whitening, components, times, points.gravity)
+    whitening = ZeroPointWhitening.for_points(
+        points.times_s, points.is_zero_point, points.orientation
+    )
+    problem = _Problem(
+        outputs_names, corrected, variables, whitening, components, times, points.gravity
+    )
     comp_terms = [list(base_terms) for _ in components]
     fits = [problem.fit(k, comp_terms[k]) for k in range(len(components))]
     base_fits = list(fits)
@@ -356,21 +452,35 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
     effects: list[dict] = []
     adopted_families: set[str] = set()
     warnings: list[str] = []
-    close_runners: list = []           # (winner, runner-up) of the last round, scores about equal
+    close_runners: list = []  # (winner, runner-up) of the last round, scores about equal
     for _round in range(settings.max_rounds):
         candidates: list[_Candidate] = []
         for family in families:
             if family.name in adopted_families:
                 continue
             if family.name == 'excitation':
-                candidate = _examine_excitation(family, fits, comp_terms, problem, capacity, settings)
+                candidate = _examine_excitation(
+                    family, fits, comp_terms, problem, capacity, settings
+                )
             else:
-                candidate = _examine_family(family, fits, comp_terms, problem, capacity, settings, 1)
+                candidate = _examine_family(
+                    family, fits, comp_terms, problem, capacity, settings, 1
+                )
             if candidate:
                 candidates.append(candidate)
         if tare_available and 'tare' not in adopted_families:
-            candidate = _examine_tare(fits, comp_terms, problem, points.gravity, body, settings, 1,
-                                      capacity, components, outputs_names)
+            candidate = _examine_tare(
+                fits,
+                comp_terms,
+                problem,
+                points.gravity,
+                body,
+                settings,
+                1,
+                capacity,
+                components,
+                outputs_names,
+            )
             if candidate:
                 candidates.append(candidate)
         candidates = _told_apart_by_direction(candidates, fits, pairs)
@@ -383,17 +493,26 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
         winner = max(candidates, key=lambda c: c.score)
         # a generic family (a time basis, any monomial) that wins only narrowly over a specific one
         # yields to it: the specific effect explains about as much with its physics
-        specific = [c for c in candidates if c.family not in GENERIC_FAMILIES
-                    and c.score >= settings.equal_score * winner.score]
+        specific = [
+            c
+            for c in candidates
+            if c.family not in GENERIC_FAMILIES and c.score >= settings.equal_score * winner.score
+        ]
         if winner.family in GENERIC_FAMILIES and specific:
             winner = max(specific, key=lambda c: c.score)
-        close_runners = [(winner, c) for c in candidates if c is not winner and c.family != 'tare'
-                         and winner.family != 'tare' and c.score >= settings.equal_score * winner.score
-                         and set(c.components) & set(winner.components)]
+        close_runners = [
+            (winner, c)
+            for c in candidates
+            if c is not winner
+            and c.family != 'tare'
+            and winner.family != 'tare'
+            and c.score >= settings.equal_score * winner.score
+            and set(c.components) & set(winner.components)
+        ]
         adopted_families.add(winner.family)
         before = {k: fits[k] for k in winner.components}
         if winner.family == 'tare':
-            refit = cast(BodyRefit, winner.body_refit)        # a tare candidate carries both
+            refit = cast(BodyRefit, winner.body_refit)  # a tare candidate carries both
             problem.set_corrected(refit.corrected)
             body, body_source = refit.body, 'fitted'
             fits = list(cast(list, winner.components_fits))
@@ -404,9 +523,25 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
         effects.append({'candidate': winner, 'before': before})
 
     # --- what is left: lack of fit against the repeatability, unexplained structure ------------
-    leftovers = examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, effects, settings,
-                                  components, outputs_names, capacity, variables, raw_direction, times, temps,
-                                  point_variance_mv2, point_samples)
+    leftovers = examine_leftovers(
+        points,
+        problem,
+        fits,
+        comp_terms,
+        base_fits,
+        base_terms,
+        effects,
+        settings,
+        components,
+        outputs_names,
+        capacity,
+        variables,
+        raw_direction,
+        times,
+        temps,
+        point_variance_mv2,
+        point_samples,
+    )
     for k, dropped in leftovers.dropped.items():
         comp_terms[k] = [t for t in comp_terms[k] if t not in dropped]
         fits[k] = problem.fit(k, comp_terms[k])
@@ -424,36 +559,60 @@ def diagnose(reduction: Reduction, config: BalanceConfig, *, base_model: str = '
         coefficients[k, [all_terms.index(t) for t in terms]] = fits[k].ols.coefficients
     label = '+'.join([base_model] + [e['candidate'].family for e in effects])
     adopted = BalanceModel(label, parse_terms(all_terms), coefficients, components, outputs_names)
-    base = BalanceModel(base_model, parse_terms(base_terms), base_coefficients, components, outputs_names)
+    base = BalanceModel(
+        base_model, parse_terms(base_terms), base_coefficients, components, outputs_names
+    )
     live_ok = set(outputs_names) | {'dT'} | {f'dir_{c}' for c in components}
     live_terms = [t.name for t in adopted.terms if set(t.variables) <= live_ok]
     live = adopted.restricted_to(live_terms, name=label + ' (live)')
     used = set(adopted.extra_variables)
     extra_values = {name: values for name, values in variables.items() if name in used}
 
-    found = tuple(_effect_found(e, fits, comp_terms, components, problem, points, times, set(live_terms))
-                  for e in effects)
+    found = tuple(
+        _effect_found(e, fits, comp_terms, components, problem, points, times, set(live_terms))
+        for e in effects
+    )
 
     def sigma_row(fit_list, press=False):
-        return {c: sigma_pct_fs(f.ols.press_residuals if press else f.ols.residuals, capacity[k])
-                for k, (c, f) in enumerate(zip(components, fit_list))}
+        return {
+            c: sigma_pct_fs(f.ols.press_residuals if press else f.ols.residuals, capacity[k])
+            for k, (c, f) in enumerate(zip(components, fit_list))
+        }
 
     return Diagnosis(
-        balance=config.name, base_model=base_model, components=components, capacity=capacity,
+        balance=config.name,
+        base_model=base_model,
+        components=components,
+        capacity=capacity,
         effects=found,
         sigma_pct_fs={'before': sigma_row(base_fits), 'after': sigma_row(fits)},
-        sigma_pct_fs_crossval={'before': sigma_row(base_fits, True), 'after': sigma_row(fits, True)},
-        base_fit=base, adopted=adopted, live=live, live_variables=live.extra_variables,
-        extra_variables=extra_values, reference_temperature_c=reference_temperature,
-        calibration_body=body, body_source=body_source, corrected=problem.corrected,
-        point_labels=np.asarray(points.label), times_s=times, orientation=np.asarray(points.orientation),
+        sigma_pct_fs_crossval={
+            'before': sigma_row(base_fits, True),
+            'after': sigma_row(fits, True),
+        },
+        base_fit=base,
+        adopted=adopted,
+        live=live,
+        live_variables=live.extra_variables,
+        extra_variables=extra_values,
+        reference_temperature_c=reference_temperature,
+        calibration_body=body,
+        body_source=body_source,
+        corrected=problem.corrected,
+        point_labels=np.asarray(points.label),
+        times_s=times,
+        orientation=np.asarray(points.orientation),
         load_direction=raw_direction,
         residuals_before=np.column_stack([f.ols.residuals for f in base_fits]),
         residuals_after=np.column_stack([f.ols.residuals for f in fits]),
         press_residuals_before=np.column_stack([f.ols.press_residuals for f in base_fits]),
         press_residuals_after=np.column_stack([f.ols.press_residuals for f in fits]),
-        skipped=skipped, unexplained=leftovers.unexplained, repeatability_pct_fs=leftovers.repeatability_pct_fs,
-        warnings=tuple(dict.fromkeys(warnings)), leftovers=leftovers)
+        skipped=skipped,
+        unexplained=leftovers.unexplained,
+        repeatability_pct_fs=leftovers.repeatability_pct_fs,
+        warnings=tuple(dict.fromkeys(warnings)),
+        leftovers=leftovers,
+    )
 
 
 def _component_statistics(before: _Fit, after: _Fit, capacity: float, n_tests: int) -> dict:
@@ -463,7 +622,10 @@ def _component_statistics(before: _Fit, after: _Fit, capacity: float, n_tests: i
     removed = np.sqrt(max(before.ols.rss - after.ols.rss, 0.0) / n) / capacity * 100.0
     ratio = before.gls.rss / after.gls.rss if after.gls.rss > 0 else 1.0
     return {
-        'fit': after, 'q': added, 'f': f_value, 'p': min(1.0, p_value * n_tests),
+        'fit': after,
+        'q': added,
+        'f': f_value,
+        'p': min(1.0, p_value * n_tests),
         'r': float(np.sqrt(max(1.0 - 1.0 / ratio, 0.0))),
         'removed': float(removed),
         'sigma_before': sigma_pct_fs(before.ols.residuals, capacity),
@@ -475,7 +637,10 @@ def _component_statistics(before: _Fit, after: _Fit, capacity: float, n_tests: i
 
 
 def _passes(stats: dict, settings: DiagnosisSettings) -> bool:
-    return stats['removed'] >= settings.min_effect_pct_fs and stats['press_after'] < stats['press_before']
+    return (
+        stats['removed'] >= settings.min_effect_pct_fs
+        and stats['press_after'] < stats['press_before']
+    )
 
 
 def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_searches):
@@ -483,32 +648,40 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
     n_components = len(fits)
     for k, fit in enumerate(fits):
         present = set(comp_terms[k])
-        offered = own_terms_only(family, problem.components[k], problem.outputs_names[k], problem.components)
+        offered = own_terms_only(
+            family, problem.components[k], problem.outputs_names[k], problem.components
+        )
         groups = [g for g in offered if not set(g) & present]
         if not groups:
             continue
         names = [t for g in groups for t in g]
         index = {t: i for i, t in enumerate(names)}
-        n_tests = n_searches * len(groups) * n_components      # Bonferroni within this family
-        selection = forward_select(fit.gls, problem.white_columns(names), [tuple(index[t] for t in g) for g in groups],
-                                   alpha_per_test=settings.alpha / n_tests, max_groups=family.max_groups)
+        n_tests = n_searches * len(groups) * n_components  # Bonferroni within this family
+        selection = forward_select(
+            fit.gls,
+            problem.white_columns(names),
+            [tuple(index[t] for t in g) for g in groups],
+            alpha_per_test=settings.alpha / n_tests,
+            max_groups=family.max_groups,
+        )
         if not selection.steps:
             continue
         chosen = [groups[i] for i in selection.groups]
         added = [t for g in chosen for t in g]
-        stats = _component_statistics(fit, problem.fit(k, comp_terms[k] + added), capacity[k], n_tests)
+        stats = _component_statistics(
+            fit, problem.fit(k, comp_terms[k] + added), capacity[k], n_tests
+        )
         label = family.label(chosen)
         if family.name == 'zero_drift':
             label = f'the time drift between zero points (periods {label.replace(" + ", ", ")})'
         stats.update(added=tuple(added), groups=tuple(chosen), label=label)
-        if _passes(stats, settings) and not _changes_over_campaign(problem, k, comp_terms[k], added, fit,
-                                                                   settings.alpha_constancy, family.name):
+        if _passes(stats, settings) and not _changes_over_campaign(
+            problem, k, comp_terms[k], added, fit, settings.alpha_constancy, family.name
+        ):
             accepted[k] = stats
     if not accepted:
         return None
     return _Candidate(family.name, accepted, sum(s['bic_gain'] for s in accepted.values()))
-
-
 
 
 def _changes_over_campaign(problem, k, terms, added, fit, alpha, family) -> bool:
@@ -516,7 +689,8 @@ def _changes_over_campaign(problem, k, terms, added, fit, alpha, family) -> bool
     the campaign (static families), or between the body's orientations with gravity on the + and
     the - side of Y+Z (every family but tare)? A physical effect of the family keeps its
     coefficients; something it only resembles (a load-dependent term that drifts, one that flips
-    with the gravity direction, a temperature that lags) fits with coefficients that move."""
+    with the gravity direction, a temperature that lags) fits with coefficients that move.
+    """
     splits = []
     if family in STATIC_FAMILIES:
         splits.append((problem.times > np.median(problem.times)).astype(float))
@@ -540,7 +714,8 @@ def _changes_over_campaign(problem, k, terms, added, fit, alpha, family) -> bool
 
 def _examine_excitation(family, fits, comp_terms, problem, capacity, settings):
     """One gain g(t) common to every bridge: a joint forward selection over the six components
-    (whitened residuals scaled by their σ, stacked), each basis function one shared parameter."""
+    (whitened residuals scaled by their σ, stacked), each basis function one shared parameter.
+    """
     n_components = len(fits)
     groups = [g for g in family.groups if not any(set(g) & set(terms) for terms in comp_terms)]
     if not groups:
@@ -552,38 +727,56 @@ def _examine_excitation(family, fits, comp_terms, problem, capacity, settings):
     basis = np.zeros((n_white * n_components, sum(b.shape[1] for b in blocks)))
     column = 0
     for k, b in enumerate(blocks):
-        basis[k * n_white:(k + 1) * n_white, column:column + b.shape[1]] = b
+        basis[k * n_white : (k + 1) * n_white, column : column + b.shape[1]] = b
         column += b.shape[1]
     stacked = ComponentFit(np.zeros(0), residual, np.zeros(len(residual)), basis, basis.shape[1])
-    columns = np.column_stack([np.concatenate([problem.white_columns([g[k]])[:, 0] / sigmas[k]
-                                               for k in range(n_components)]) for g in groups])
-    selection = forward_select(stacked, columns, [(i,) for i in range(len(groups))],
-                               alpha_per_test=settings.alpha / len(groups) / n_components,
-                               max_groups=family.max_groups)
+    columns = np.column_stack(
+        [
+            np.concatenate(
+                [problem.white_columns([g[k]])[:, 0] / sigmas[k] for k in range(n_components)]
+            )
+            for g in groups
+        ]
+    )
+    selection = forward_select(
+        stacked,
+        columns,
+        [(i,) for i in range(len(groups))],
+        alpha_per_test=settings.alpha / len(groups) / n_components,
+        max_groups=family.max_groups,
+    )
     if not selection.steps:
         return None
     chosen = [groups[i] for i in selection.groups]
     q = len(chosen)
-    f_joint, p_joint = partial_f(selection.rss_before, selection.steps[-1].rss_after, q,
-                                 selection.dof_before - q)
+    f_joint, p_joint = partial_f(
+        selection.rss_before, selection.steps[-1].rss_after, q, selection.dof_before - q
+    )
     # the score with the gain shared, as the effect is: Σ_k n ln(RSS_k before / after) - q ln n
     picked = columns[:, list(selection.groups)]
     picked = picked - basis @ (basis.T @ picked)
     coefficients, *_ = np.linalg.lstsq(picked, residual, rcond=None)
     shared = (residual - picked @ coefficients).reshape(n_components, n_white)
     before = residual.reshape(n_components, n_white)
-    score = float(sum(n_white * np.log(np.sum(b ** 2) / np.sum(a ** 2)) for b, a in zip(before, shared))
-                  - q * np.log(n_white))
+    score = float(
+        sum(n_white * np.log(np.sum(b**2) / np.sum(a**2)) for b, a in zip(before, shared))
+        - q * np.log(n_white)
+    )
     accepted = {}
     for k, fit in enumerate(fits):
         added = [g[k] for g in chosen]
         stats = _component_statistics(fit, problem.fit(k, comp_terms[k] + added), capacity[k], 1)
-        stats.update(added=tuple(added), groups=tuple((t,) for t in added), f=f_joint,
-                     p=min(1.0, p_joint * len(groups) * n_components),
-                     label='a gain common to all bridges (' + family.label(chosen) + ')')
+        stats.update(
+            added=tuple(added),
+            groups=tuple((t,) for t in added),
+            f=f_joint,
+            p=min(1.0, p_joint * len(groups) * n_components),
+            label='a gain common to all bridges (' + family.label(chosen) + ')',
+        )
         if _passes(stats, settings):
             accepted[k] = stats
-    # a gain common to all bridges shows in more than one component; one alone is that bridge's own effect
+    # a gain common to all bridges shows in more than one component; one alone is that bridge's own
+    # effect
     if len(accepted) < 2:
         return None
     return _Candidate(family.name, accepted, score)
@@ -591,16 +784,23 @@ def _examine_excitation(family, fits, comp_terms, problem, capacity, settings):
 
 def _told_apart_by_direction(candidates, fits, pairs) -> list:
     """Hysteresis and bidirectional keep only the components their contrast explains
-    (loop_or_sign.py); a candidate left with none is dropped, the others rescored."""
+    (loop_or_sign.py); a candidate left with none is dropped, the others rescored.
+    """
     by_family = {c.family: c for c in candidates}
     loop, sign = by_family.get('hysteresis'), by_family.get('bidirectional')
     if loop is None:
         return candidates
-    residuals = {name: {k: s['fit'].ols.residuals for k, s in c.components.items()}
-                 for name, c in (('hysteresis', loop), ('bidirectional', sign)) if c is not None}
-    loop_drop, sign_drop = components_to_drop(residuals['hysteresis'],
-                                              residuals.get('bidirectional', {}),
-                                              [f.ols.residuals for f in fits], pairs)
+    residuals = {
+        name: {k: s['fit'].ols.residuals for k, s in c.components.items()}
+        for name, c in (('hysteresis', loop), ('bidirectional', sign))
+        if c is not None
+    }
+    loop_drop, sign_drop = components_to_drop(
+        residuals['hysteresis'],
+        residuals.get('bidirectional', {}),
+        [f.ols.residuals for f in fits],
+        pairs,
+    )
     drop = {'hysteresis': loop_drop, 'bidirectional': sign_drop}
     kept = []
     for candidate in candidates:
@@ -609,28 +809,51 @@ def _told_apart_by_direction(candidates, fits, pairs) -> list:
             components = {k: s for k, s in candidate.components.items() if k not in gone}
             if not components:
                 continue
-            candidate = _Candidate(candidate.family, components,
-                                   sum(s['bic_gain'] for s in components.values()))
+            candidate = _Candidate(
+                candidate.family, components, sum(s['bic_gain'] for s in components.values())
+            )
         kept.append(candidate)
     return kept
 
 
 def _inseparable_warning(winner, runner, components) -> str:
     shared = [components[k] for k in sorted(set(winner.components) & set(runner.components))]
-    return (f'{winner.family} and {runner.family} explain the same residual in {", ".join(shared)} about '
-            f'equally (BIC gain {winner.score:.0f} vs {runner.score:.0f}): this load schedule cannot separate '
-            f'them; only {winner.family} was adopted')
+    return (
+        f'{winner.family} and {runner.family} explain the same residual in {", ".join(shared)} '
+        f'about equally (BIC gain {winner.score:.0f} vs {runner.score:.0f}): this load schedule '
+        f'cannot separate them; only {winner.family} was adopted'
+    )
 
 
-def _examine_tare(fits, comp_terms, problem, gravity, body, settings, n_searches, capacity,
-                  components, outputs_names):
+def _examine_tare(
+    fits,
+    comp_terms,
+    problem,
+    gravity,
+    body,
+    settings,
+    n_searches,
+    capacity,
+    components,
+    outputs_names,
+):
     sigmas = np.sqrt([f.gls.variance for f in fits])
-    output_terms = [t for t in comp_terms[0] if set(parse_terms([t])[0].variables) <= set(outputs_names)]
+    output_terms = [
+        t for t in comp_terms[0] if set(parse_terms([t])[0].variables) <= set(outputs_names)
+    ]
     # the inverse for tare outputs: the current fit's output-only part, constants dropped
-    coefficients = np.array([[f.ols.coefficients[comp_terms[k].index(t)] if t in comp_terms[k] else 0.0
-                              for t in output_terms] for k, f in enumerate(fits)])
-    inverse_model = BalanceModel('current', parse_terms(output_terms), coefficients, tuple(components),
-                                 tuple(outputs_names)).without_constant()
+    coefficients = np.array(
+        [
+            [
+                f.ols.coefficients[comp_terms[k].index(t)] if t in comp_terms[k] else 0.0
+                for t in output_terms
+            ]
+            for k, f in enumerate(fits)
+        ]
+    )
+    inverse_model = BalanceModel(
+        'current', parse_terms(output_terms), coefficients, tuple(components), tuple(outputs_names)
+    ).without_constant()
     corrected = problem.corrected
 
     def refits(data):
@@ -643,7 +866,7 @@ def _examine_tare(fits, comp_terms, problem, gravity, body, settings, n_searches
 
     # forward selection over the body parameters too: the weight alone first if that is what the
     # residuals show; a CG that only follows the noise stays as declared
-    chi2_before = sum(f.gls.rss / s ** 2 for f, s in zip(fits, sigmas))
+    chi2_before = sum(f.gls.rss / s**2 for f, s in zip(fits, sigmas))
     dof_total = sum(f.gls.dof for f in fits)
     parameters = tuple(settings.tare_parameters)
     selected: list[str] = []
@@ -653,11 +876,15 @@ def _examine_tare(fits, comp_terms, problem, gravity, body, settings, n_searches
             trials = []
             for name in parameters:
                 if name not in selected:
-                    trial = refit_body(corrected, gravity, body, inverse_model, weighted, selected + [name])
+                    trial = refit_body(
+                        corrected, gravity, body, inverse_model, weighted, selected + [name]
+                    )
                     trials.append((float(np.sum(weighted(trial.corrected) ** 2)), name, trial))
             chi2, name, trial = min(trials, key=lambda t: t[0])
             _, p_step = partial_f(chi2_current, chi2, 1, dof_total - len(selected) - 1)
-            if p_step * n_searches * len(parameters) > settings.alpha or trial.identifiable <= len(selected):
+            if p_step * n_searches * len(parameters) > settings.alpha or trial.identifiable <= len(
+                selected
+            ):
                 break
             selected.append(name)
             chi2_current, refit = chi2, trial
@@ -671,15 +898,22 @@ def _examine_tare(fits, comp_terms, problem, gravity, body, settings, n_searches
     for k, (before, after) in enumerate(zip(fits, new_fits)):
         stats = _component_statistics(before, after, capacity[k], n_searches)
         f_k, p_k = partial_f(before.gls.rss, after.gls.rss, q, after.gls.dof)
-        stats.update(q=q, f=f_k, p=min(1.0, p_k * n_searches), added=(), groups=(),
-                     label=_body_label(body, refit.body))
+        stats.update(
+            q=q,
+            f=f_k,
+            p=min(1.0, p_k * n_searches),
+            added=(),
+            groups=(),
+            label=_body_label(body, refit.body),
+        )
         if _passes(stats, settings) and stats['p'] <= settings.alpha:
             accepted[k] = stats
     if not accepted:
         return None
     n_white = fits[0].gls.points
-    score = (sum(float(n_white * np.log(b.gls.rss / a.gls.rss)) for b, a in zip(fits, new_fits))
-             - q * np.log(n_white))
+    score = sum(
+        float(n_white * np.log(b.gls.rss / a.gls.rss)) for b, a in zip(fits, new_fits)
+    ) - q * np.log(n_white)
     return _Candidate('tare', accepted, score, refit, new_fits)
 
 
@@ -691,20 +925,25 @@ def _body_label(declared: CalibrationBody, fitted: CalibrationBody) -> str:
     return 'the calibration body (' + ', '.join(parts) + ')'
 
 
-def _effect_found(entry, final_fits, comp_terms, components, problem, points, times, live_terms=None) -> EffectFound:
+def _effect_found(
+    entry, final_fits, comp_terms, components, problem, points, times, live_terms=None
+) -> EffectFound:
     candidate: _Candidate = entry['candidate']
     name = candidate.family
     per = {components[k]: s for k, s in candidate.components.items()}
     lines = {}
     for c, s in per.items():
-        lines[c] = (f'{c} residual follows {s["label"]}: r = {s["r"]:.2f}, F = {s["f"]:.3g} (p = {_fmt_p(s["p"])}), '
-                    f'removes {s["removed"]:.3f} % FS (σ {s["sigma_before"]:.3f} → {s["sigma_after"]:.3f}, '
-                    f'PRESS σ {s["press_before"]:.3f} → {s["press_after"]:.3f})')
+        lines[c] = (
+            f'{c} residual follows {s["label"]}: r = {s["r"]:.2f}, F = {s["f"]:.3g} (p = '
+            f'{_fmt_p(s["p"])}), removes {s["removed"]:.3f} % FS (σ {s["sigma_before"]:.3f} → '
+            f'{s["sigma_after"]:.3f}, PRESS σ {s["press_before"]:.3f} → {s["press_after"]:.3f})'
+        )
     order = sorted(per, key=lambda c: -per[c]['removed'])
     evidence = lines[order[0]]
     if len(order) > 1:
-        evidence += '; also ' + ', '.join(f'{c} (r = {per[c]["r"]:.2f}, removes {per[c]["removed"]:.3f} % FS)'
-                                          for c in order[1:])
+        evidence += '; also ' + ', '.join(
+            f'{c} (r = {per[c]["r"]:.2f}, removes {per[c]["removed"]:.3f} % FS)' for c in order[1:]
+        )
     terms = []
     for c in order:
         terms += [t for t in per[c]['added'] if t not in terms]
@@ -722,24 +961,41 @@ def _effect_found(entry, final_fits, comp_terms, components, problem, points, ti
         if name == 'zero_drift':
             explaining_variable[c], explaining_values[c] = 'time (s)', times
         else:
-            explaining_variable[c], explaining_values[c] = added[0], problem.columns(added[:1])[:, 0]
+            explaining_variable[c], explaining_values[c] = (
+                added[0],
+                problem.columns(added[:1])[:, 0],
+            )
     parameters = {}
     if name == 'tare':
         body = cast(BodyRefit, candidate.body_refit).body
-        parameters = {'weight_n': body.weight_n, 'cg_x_m': body.cg_m[0], 'cg_y_m': body.cg_m[1], 'cg_z_m': body.cg_m[2]}
+        parameters = {
+            'weight_n': body.weight_n,
+            'cg_x_m': body.cg_m[0],
+            'cg_y_m': body.cg_m[1],
+            'cg_z_m': body.cg_m[2],
+        }
     return EffectFound(
-        name=name, components=tuple(c for c in components if c in per), evidence=evidence, terms=tuple(terms),
+        name=name,
+        components=tuple(c for c in components if c in per),
+        evidence=evidence,
+        terms=tuple(terms),
         terms_by_component={c: tuple(per[c]['added']) for c in per},
         sigma_before_pct_fs={c: per[c]['sigma_before'] for c in per},
         sigma_after_pct_fs={c: per[c]['sigma_after'] for c in per},
         press_sigma_before_pct_fs={c: per[c]['press_before'] for c in per},
         press_sigma_after_pct_fs={c: per[c]['press_after'] for c in per},
         removed_pct_fs={c: per[c]['removed'] for c in per},
-        f_value={c: per[c]['f'] for c in per}, p_value={c: per[c]['p'] for c in per},
-        correlation={c: per[c]['r'] for c in per}, evidence_by_component=lines,
+        f_value={c: per[c]['f'] for c in per},
+        p_value={c: per[c]['p'] for c in per},
+        correlation={c: per[c]['r'] for c in per},
+        evidence_by_component=lines,
         score=float(candidate.score),
-        # not applied live: a nuisance family, or none of its terms is one the live calibrator evaluates
-        nuisance=name in NUISANCE_EFFECTS or (live_terms is not None and bool(terms)
-                                              and not set(terms) & live_terms),
+        # not applied live: a nuisance family, or none of its terms is one the live calibrator
+        # evaluates
+        nuisance=name in NUISANCE_EFFECTS
+        or (live_terms is not None and bool(terms) and not set(terms) & live_terms),
         parameters=parameters,
-        explaining_variable=explaining_variable, explaining_values=explaining_values, contribution=contribution)
+        explaining_variable=explaining_variable,
+        explaining_values=explaining_values,
+        contribution=contribution,
+    )

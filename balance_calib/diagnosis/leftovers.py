@@ -25,6 +25,7 @@ Caveat: the zero points do not see scatter of the loading hardware (weights, pan
 on real data the loaded points can be less repeatable than s says; the zero-point scatter is a
 lower bound of the repeatability, and `unexplained` then also flags that.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -33,14 +34,14 @@ from typing import Mapping
 import numpy as np
 import scipy.stats
 
-from .candidates import STATIC_FAMILIES
 from ..accuracy.sigma import sigma_pct_fs
+from .candidates import STATIC_FAMILIES
 from .statistics import fit_columns, partial_f
 
 # A component whose repeatability is this many times the median of the others is warned about.
-REPEATABILITY_WARNING_RATIO = 4.0   # LMC6522's own F_X (Table 17) is ~3x its other components
+REPEATABILITY_WARNING_RATIO = 4.0  # LMC6522's own F_X (Table 17) is ~3x its other components
 # A calibration body rolled by more than this (degrees) from the declared gravity direction.
-ROLL_WARNING_DEG = 0.4      # the fit-based estimate scatters ±0.2° on clean simulated campaigns
+ROLL_WARNING_DEG = 0.4  # the fit-based estimate scatters ±0.2° on clean simulated campaigns
 
 
 @dataclass(frozen=True)
@@ -49,34 +50,43 @@ class Unexplained:
     evidence: str
     tracks: str
     sigma_pct_fs: Mapping[str, float]
-    ratio: float                                   # residual variance / repeatability²
+    ratio: float  # residual variance / repeatability²
     p_value: float
     correlation: float
-    partly_fitted_by: tuple[str, ...] = ()         # families that fitted part of it (not adopted there)
-    tracks_values: np.ndarray | None = None        # (N,) the variable it follows (plot)
-    residual: np.ndarray | None = None             # (N,) leftover residual, N or N·m
+    partly_fitted_by: tuple[str, ...] = ()  # families that fitted part of it (not adopted there)
+    tracks_values: np.ndarray | None = None  # (N,) the variable it follows (plot)
+    residual: np.ndarray | None = None  # (N,) leftover residual, N or N·m
 
     def to_report(self) -> dict:
-        return {'components': list(self.components), 'evidence': self.evidence, 'tracks': self.tracks,
-                'sigma_pct_fs': {c: round(float(v), 4) for c, v in self.sigma_pct_fs.items()}}
+        return {
+            'components': list(self.components),
+            'evidence': self.evidence,
+            'tracks': self.tracks,
+            'sigma_pct_fs': {c: round(float(v), 4) for c, v in self.sigma_pct_fs.items()},
+        }
 
 
 @dataclass(frozen=True)
 class Leftovers:
     repeatability_pct_fs: Mapping[str, float]
-    pairs: int                                     # ν: pairs of consecutive zero points
+    pairs: int  # ν: pairs of consecutive zero points
     lack_of_fit_ratio: Mapping[str, float]
     lack_of_fit_p: Mapping[str, float]
     unexplained: tuple[Unexplained, ...]
     warnings: list[str] = field(default_factory=list)
-    dropped: Mapping[int, set] = field(default_factory=dict)    # component index -> terms not adopted
+    # component index -> terms not adopted
+    dropped: Mapping[int, set] = field(default_factory=dict)
     roll_deg: float | None = None
 
 
 def linear_part(fits, comp_terms, outputs_names) -> np.ndarray:
     """(6, 6) dL_k/dV_i from the linear terms of each component's fit."""
-    return np.array([[fit.ols.coefficients[terms.index(v)] if v in terms else 0.0 for v in outputs_names]
-                      for fit, terms in zip(fits, comp_terms)])
+    return np.array(
+        [
+            [fit.ols.coefficients[terms.index(v)] if v in terms else 0.0 for v in outputs_names]
+            for fit, terms in zip(fits, comp_terms)
+        ]
+    )
 
 
 def zero_point_pairs(points) -> np.ndarray:
@@ -92,51 +102,71 @@ def zero_point_pairs(points) -> np.ndarray:
 def _output_model_loads(fits, comp_terms, outputs_names, outputs) -> np.ndarray:
     """(M, 6) loads of the fitted model's output-only terms (no constant) at outputs (M, 6)."""
     from ..model.terms import as_variables, design_matrix, parse_terms
+
     outputs = np.atleast_2d(outputs)
     loads = np.zeros((len(outputs), len(fits)))
     for k, (fit, terms) in enumerate(zip(fits, comp_terms)):
-        keep = [i for i, t in enumerate(parse_terms(terms)) if t.variables and set(t.variables) <= set(outputs_names)]
-        design = design_matrix(parse_terms([terms[i] for i in keep]), as_variables(outputs_names, outputs), len(outputs))
+        keep = [
+            i
+            for i, t in enumerate(parse_terms(terms))
+            if t.variables and set(t.variables) <= set(outputs_names)
+        ]
+        design = design_matrix(
+            parse_terms([terms[i] for i in keep]),
+            as_variables(outputs_names, outputs),
+            len(outputs),
+        )
         loads[:, k] = design @ fit.ols.coefficients[keep]
     return loads
 
 
 def body_roll_deg(points, fits, comp_terms, outputs_names) -> float | None:
-    """Mean roll (about X, degrees) of the body-weight force from opposite zero points relative to the
-    declared gravity direction; None without opposite pairs in the Y-Z plane.
+    """Mean roll (about X, degrees) of the body-weight force from opposite zero points relative to
+    the declared gravity direction; None without opposite pairs in the Y-Z plane.
 
     V(±g) = e + V_body(±g); the electrical zero e is taken as the mean of (V(g) + V(-g)) / 2 over
     the pairs, and the fitted model (its nonlinear terms included: the linear part alone is off by
-    0.2-0.4° at the body's weight) gives the force at each."""
+    0.2-0.4° at the body's weight) gives the force at each.
+    """
     zero = np.asarray(points.is_zero_point)
     means: dict[tuple[float, ...], list[np.ndarray]] = {}
     for g, v in zip(np.asarray(points.gravity)[zero], np.asarray(points.outputs_mv)[zero]):
         means.setdefault(tuple(np.round(g, 6)), []).append(v)
     mean_of = {key: np.mean(v, axis=0) for key, v in means.items()}
-    pairs = [(np.array(key), mean_of[key], mean_of[tuple(np.round(-np.array(key), 6) + 0.0)]) for key in mean_of
-             if tuple(np.round(-np.array(key), 6) + 0.0) in mean_of and key > tuple(np.round(-np.array(key), 6) + 0.0)]
+    pairs = [
+        (np.array(key), mean_of[key], mean_of[tuple(np.round(-np.array(key), 6) + 0.0)])
+        for key in mean_of
+        if tuple(np.round(-np.array(key), 6) + 0.0) in mean_of
+        and key > tuple(np.round(-np.array(key), 6) + 0.0)
+    ]
     if not pairs:
         return None
     electrical = np.mean([(a + b) / 2.0 for _, a, b in pairs], axis=0)
     angles = []
     for g, plus, minus in pairs:
-        loads = _output_model_loads(fits, comp_terms, outputs_names, np.vstack([plus, minus]) - electrical)
+        loads = _output_model_loads(
+            fits, comp_terms, outputs_names, np.vstack([plus, minus]) - electrical
+        )
         force = (loads[0] - loads[1])[:3] / 2.0
         if np.hypot(g[1], g[2]) < 0.5 or np.hypot(force[1], force[2]) <= 0:
             continue
-        angles.append(np.degrees(np.arctan2(g[1] * force[2] - g[2] * force[1], g[1] * force[1] + g[2] * force[2])))
+        angles.append(
+            np.degrees(
+                np.arctan2(g[1] * force[2] - g[2] * force[1], g[1] * force[1] + g[2] * force[2])
+            )
+        )
     return float(np.mean(angles)) if angles else None
 
 
 def _trackers(points, variables, direction, times, temps, loads, components):
     loaded = ~np.asarray(points.is_zero_point)
     t = (times - times.mean()) / max(np.ptp(times), 1e-9)
-    trackers = {'time': np.column_stack([t, t ** 2])}
+    trackers = {'time': np.column_stack([t, t**2])}
     if 'dT' in variables:
         trackers['temperature'] = np.column_stack([variables['dT'], variables['dT'] ** 2])
     for k, c in enumerate(components):
         x = loads[:, k] / max(np.max(np.abs(loads[:, k])), 1e-12)
-        trackers[f'load {c}'] = np.column_stack([x, x ** 2, np.abs(x)])
+        trackers[f'load {c}'] = np.column_stack([x, x**2, np.abs(x)])
     d = np.asarray(direction, float)
     scaled = loads / np.maximum(np.max(np.abs(loads), axis=0), 1e-12)
     trackers['load history'] = np.hstack([d, d * np.abs(scaled)])
@@ -146,7 +176,9 @@ def _trackers(points, variables, direction, times, temps, loads, components):
 
 
 def _best_tracker(residual, trackers, alpha=0.01):
-    """(name, multiple r, p) of the tracker explaining most of the residual; 'nothing found' if none passes."""
+    """(name, multiple r, p) of the tracker explaining most of the residual; 'nothing found' if
+    none passes.
+    """
     n = len(residual)
     best = ('nothing found', 0.0, 1.0)
     total = float(np.sum((residual - residual.mean()) ** 2))
@@ -169,20 +201,22 @@ def _best_tracker(residual, trackers, alpha=0.01):
 
 def slow_structure_bases(times, gravity, loads_k) -> dict[str, np.ndarray]:
     """The directed leftover tests' bases for one component: its own load shape -- gain x, even
-    curvature x², odd curvature x|x| (x = applied load / its largest magnitude) -- changing with the
-    campaign's two slow covariates, time and the gravity vector in balance axes (each component that
-    varies), and with their product (main effects and interaction). A calibration that is the same
-    throughout the campaign and in every orientation leaves none of them in the residual; the omnibus
-    lack-of-fit test spreads such structure over all its degrees of freedom, these concentrate it in
-    three. Built from the applied loads, which carry no noise (a test column, never adopted)."""
+    curvature x², odd curvature x|x| (x = applied load / its largest magnitude) -- changing with
+    the campaign's two slow covariates, time and the gravity vector in balance axes (each component
+    that varies), and with their product (main effects and interaction). A calibration that is the
+    same throughout the campaign and in every orientation leaves none of them in the residual; the
+    omnibus lack-of-fit test spreads such structure over all its degrees of freedom, these
+    concentrate it in three. Built from the applied loads, which carry no noise (a test column,
+    never adopted).
+    """
     t = np.asarray(times, float)
     t = (t - t.mean()) / max(float(np.ptp(t)), 1e-9)
     x = np.asarray(loads_k, float) / max(float(np.max(np.abs(loads_k))), 1e-12)
-    shape = np.column_stack([x, x ** 2, x * np.abs(x)])
+    shape = np.column_stack([x, x**2, x * np.abs(x)])
     bases = {'time': t[:, None] * shape}
     g = np.asarray(gravity, float)
     varying = [g[:, i] for i in range(g.shape[1]) if np.ptp(g[:, i]) > 1e-6]
-    if varying:         # the body's weight loads the mounting linearly in the gravity vector
+    if varying:  # the body's weight loads the mounting linearly in the gravity vector
         by_gravity = np.hstack([gi[:, None] * shape for gi in varying])
         bases['gravity direction'] = by_gravity
         bases['time × gravity direction'] = t[:, None] * by_gravity
@@ -190,7 +224,9 @@ def slow_structure_bases(times, gravity, loads_k) -> dict[str, np.ndarray]:
 
 
 def _directed_reduction(problem, k, terms, basis) -> tuple[float, float, int, int]:
-    """(rss before, rss after, columns added, dof after) of the whitened fit of component k with the basis added."""
+    """(rss before, rss after, columns added, dof after) of the whitened fit of component k with
+    the basis added.
+    """
     design = problem.white_columns(list(terms))
     current = fit_columns(design, problem.loads_white[:, k])
     trial = fit_columns(np.hstack([design, problem.whiten(basis)]), problem.loads_white[:, k])
@@ -198,11 +234,12 @@ def _directed_reduction(problem, k, terms, basis) -> tuple[float, float, int, in
 
 
 def directed_lack_of_fit(problem, k, terms, base_terms, bases, alpha, n_tests):
-    """The most significant slow structure left on component k: (name, p adjusted, explained) or None
-    when none passes alpha. explained: the share the adopted terms beyond the base model took of all
-    the structure the base fit leaves in their span and the basis's together (whitened RSS),
-    (RSS_base - RSS_adopted) / (RSS_base - RSS_adopted+basis) -- the omnibus rule's "fraction of the
-    excess explained" (examine_leftovers), with the excess measured along the basis."""
+    """The most significant slow structure left on component k: (name, p adjusted, explained) or
+    None when none passes alpha. explained: the share the adopted terms beyond the base model took
+    of all the structure the base fit leaves in their span and the basis's together (whitened RSS),
+    (RSS_base - RSS_adopted) / (RSS_base - RSS_adopted+basis) -- the omnibus rule's "fraction of
+    the excess explained" (examine_leftovers), with the excess measured along the basis.
+    """
     best = None
     for name, basis in bases.items():
         before, after, q, dof = _directed_reduction(problem, k, terms, basis)
@@ -211,7 +248,9 @@ def directed_lack_of_fit(problem, k, terms, base_terms, bases, alpha, n_tests):
         _, p = partial_f(before, after, q, dof)
         p = min(1.0, p * n_tests)
         if p < alpha and (best is None or p < best[1]):
-            base_rss = fit_columns(problem.white_columns(list(base_terms)), problem.loads_white[:, k]).rss
+            base_rss = fit_columns(
+                problem.white_columns(list(base_terms)), problem.loads_white[:, k]
+            ).rss
             structure = base_rss - after
             explained = (base_rss - before) / structure if structure > 0 else 0.0
             best = (name, p, explained)
@@ -219,22 +258,25 @@ def directed_lack_of_fit(problem, k, terms, base_terms, bases, alpha, n_tests):
 
 
 def within_point_variance(linear, point_variance_mv2, point_samples, loaded):
-    """(6,) variance of a point mean in load units from the points' own sample scatter, and its dof.
+    """(6,) variance of a point mean in load units from the points' own sample scatter, and its
+    dof.
 
     point_variance_mv2 (P, 6): variance of each point's mean output (sample variance / n);
-    bridges independent: var L_k = Σ_i C_ki² var V_i."""
+    bridges independent: var L_k = Σ_i C_ki² var V_i.
+    """
     variance = np.asarray(point_variance_mv2, float)[loaded]
     samples = np.asarray(point_samples, float)[loaded]
     ok = np.all(np.isfinite(variance), axis=1) & (samples >= 2)
     if ok.sum() < 3:
         return None, 0
-    return np.mean(variance[ok] @ (linear ** 2).T, axis=0), int(np.sum(samples[ok] - 1))
+    return np.mean(variance[ok] @ (linear**2).T, axis=0), int(np.sum(samples[ok] - 1))
 
 
 def _unstable(problem, k, terms, fit, found, late, alpha) -> list[tuple[str, float]]:
     """Families found on component k whose coefficients differ between the first and second half of
-    the campaign (a Chow test on their terms x the second-half indicator): a physical effect of that
-    family keeps its coefficients; something else that the family only resembles does not."""
+    the campaign (a Chow test on their terms x the second-half indicator): a physical effect of
+    that family keeps its coefficients; something else that the family only resembles does not.
+    """
     out = []
     for entry in found:
         if entry['candidate'].family not in STATIC_FAMILIES:
@@ -243,7 +285,9 @@ def _unstable(problem, k, terms, fit, found, late, alpha) -> list[tuple[str, flo
         if not added:
             continue
         extra = problem.whiten(problem.columns(added) * late[:, None])
-        trial = fit_columns(np.hstack([problem.white_columns(list(terms)), extra]), problem.loads_white[:, k])
+        trial = fit_columns(
+            np.hstack([problem.white_columns(list(terms)), extra]), problem.loads_white[:, k]
+        )
         q = trial.rank - fit.gls.rank
         if q <= 0 or trial.dof <= 0:
             continue
@@ -254,54 +298,91 @@ def _unstable(problem, k, terms, fit, found, late, alpha) -> list[tuple[str, flo
     return out
 
 
-def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, effects, settings, components,
-                      outputs_names, capacity, variables, direction, times, temps, point_variance_mv2=None,
-                      point_samples=None) -> Leftovers:
+def examine_leftovers(
+    points,
+    problem,
+    fits,
+    comp_terms,
+    base_fits,
+    base_terms,
+    effects,
+    settings,
+    components,
+    outputs_names,
+    capacity,
+    variables,
+    direction,
+    times,
+    temps,
+    point_variance_mv2=None,
+    point_samples=None,
+) -> Leftovers:
     n_components = len(components)
     linear = linear_part(fits, comp_terms, outputs_names)
     pairs = zero_point_pairs(points)
     warnings: list[str] = []
     roll = body_roll_deg(points, fits, comp_terms, outputs_names)
     if roll is not None and abs(roll) > ROLL_WARNING_DEG:
-        warnings.append(f'the calibration body sits rolled by {roll:.2f}° about X from the declared gravity '
-                        f'direction (body-weight force from opposite zero points): check the body\'s mounting and '
-                        f'the declared orientations')
+        warnings.append(
+            f'the calibration body sits rolled by {roll:.2f}° about X from the declared gravity '
+            "direction (body-weight force from opposite zero points): check the body's "
+            "mounting and "
+            f'the declared orientations'
+        )
     nan = {c: float('nan') for c in components}
     if len(pairs) < 3:
-        warnings.append(f'only {len(pairs)} pair(s) of consecutive zero points in one orientation: the '
-                        'repeatability is unknown and the residuals were not tested for lack of fit')
+        warnings.append(
+            f'only {len(pairs)} pair(s) of consecutive zero points in one orientation: the '
+            'repeatability is unknown and the residuals were not tested for lack of fit'
+        )
         return Leftovers(nan, len(pairs), nan, nan, (), warnings, {}, roll)
     delta_loads = pairs @ linear.T
-    s2 = np.mean(delta_loads ** 2, axis=0) / 2.0
+    s2 = np.mean(delta_loads**2, axis=0) / 2.0
     nu = np.full(n_components, len(pairs), dtype=float)
     source = {c: f'{len(pairs)} pairs of consecutive zero points' for c in components}
     if point_variance_mv2 is not None and point_samples is not None:
         # the points' own samples: many more degrees of freedom, but blind to noise slower than a
-        # point; kept unless the zero points repeat significantly worse (then they are the yardstick)
-        s2_within, nu_within = within_point_variance(linear, point_variance_mv2, point_samples,
-                                                     ~np.asarray(points.is_zero_point))
+        # point; kept unless the zero points repeat significantly worse (then they are the
+        # yardstick)
+        s2_within, nu_within = within_point_variance(
+            linear, point_variance_mv2, point_samples, ~np.asarray(points.is_zero_point)
+        )
         if s2_within is not None:
             for k, c in enumerate(components):
                 p_worse = scipy.stats.f.sf(s2[k] / s2_within[k], len(pairs), nu_within)
                 if p_worse < 0.001 / n_components:
-                    warnings.append(f'{c}: consecutive zero points repeat worse than the points\' own samples '
-                                    f'({np.sqrt(s2[k] / s2_within[k]):.1f}x): noise slower than a point, or an '
-                                    'effect that shows at zero load too')
+                    warnings.append(
+                        f"{c}: consecutive zero points repeat worse than the points' own "
+                        "samples "
+                        f'({np.sqrt(s2[k] / s2_within[k]):.1f}x): noise slower than a point, or '
+                        'an '
+                        'effect that shows at zero load too'
+                    )
                 s2[k], nu[k] = s2_within[k], nu_within
-                source[c] = f'the scatter of the points\' own samples ({nu_within} dof)'
+                source[c] = f"the scatter of the points' own samples ({nu_within} dof)"
     values = np.sqrt(s2) / capacity * 100.0
     for k, c in enumerate(components):
         others = np.median(np.delete(values, k))
         if others > 0 and values[k] > REPEATABILITY_WARNING_RATIO * others:
-            warnings.append(f'{c} repeats far worse than the other components ({values[k]:.3f} vs a median of '
-                            f'{others:.3f} % FS): check that bridge, its wiring '
-                            'and amplifier channel')
+            warnings.append(
+                f'{c} repeats far worse than the other components ({values[k]:.3f} vs a median of '
+                f'{others:.3f} % FS): check that bridge, its wiring '
+                'and amplifier channel'
+            )
 
-    repeatability = {c: float(np.sqrt(s2[k]) / capacity[k] * 100.0) for k, c in enumerate(components)}
+    repeatability = {
+        c: float(np.sqrt(s2[k]) / capacity[k] * 100.0) for k, c in enumerate(components)
+    }
     loads = np.asarray(problem.corrected.loads, float)
     trackers, loaded = _trackers(points, variables, direction, times, temps, loads, components)
-    per_component = {k: [e for e in effects if k in e['candidate'].components and e['candidate'].family != 'tare']
-                     for k in range(n_components)}
+    per_component = {
+        k: [
+            e
+            for e in effects
+            if k in e['candidate'].components and e['candidate'].family != 'tare'
+        ]
+        for k in range(n_components)
+    }
     ratios, p_values, dropped, unexplained = {}, {}, {}, []
     alpha = settings.alpha_lack_of_fit / n_components
     late = (times > np.median(times)).astype(float)
@@ -319,12 +400,17 @@ def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, 
         directed, bases = None, {}
         if alpha_slow > 0:
             bases = slow_structure_bases(times, points.gravity, loads[:, k])
-            directed = directed_lack_of_fit(problem, k, comp_terms[k], base_terms, bases, alpha_slow,
-                                            n_components * len(bases))
+            directed = directed_lack_of_fit(
+                problem, k, comp_terms[k], base_terms, bases, alpha_slow, n_components * len(bases)
+            )
             if directed is not None:
-                size = fit_columns(np.hstack([problem.columns(comp_terms[k]), bases[directed[0]]]), loads[:, k])
-                if np.sqrt(max(fit.ols.rss - size.rss, 0.0) / len(loads)) / capacity[k] * 100.0 \
-                        < settings.min_effect_pct_fs:
+                size = fit_columns(
+                    np.hstack([problem.columns(comp_terms[k]), bases[directed[0]]]), loads[:, k]
+                )
+                if (
+                    np.sqrt(max(fit.ols.rss - size.rss, 0.0) / len(loads)) / capacity[k] * 100.0
+                    < settings.min_effect_pct_fs
+                ):
                     directed = None
         if not (lack_of_fit or unstable or directed):
             continue
@@ -332,7 +418,7 @@ def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, 
         if found:
             base_excess = max(base_fits[k].gls.rss / base_fits[k].gls.dof - s2[k], 0.0)
             explained = 1.0 - max(variance - s2[k], 0.0) / base_excess if base_excess > 0 else 0.0
-            if directed is not None:        # the excess along the directed basis (directed_lack_of_fit)
+            if directed is not None:  # the excess along the directed basis (directed_lack_of_fit)
                 explained = min(explained, directed[2]) if lack_of_fit else directed[2]
             if unstable or explained < settings.min_explained:
                 partly = tuple(e['candidate'].family for e in found)
@@ -345,15 +431,26 @@ def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, 
                 ratio = variance / s2[k]
                 p = float(scipy.stats.f.sf(ratio, fit.gls.dof, nu[k]))
                 if unstable:
-                    explained_note = ('; ' + ', '.join(f'{name} fitted it with coefficients that change over the '
-                                                       f'campaign (first vs second half, p = {q:.1g})'
-                                                       for name, q in unstable) + ': not adopted on ' + c)
+                    explained_note = (
+                        '; '
+                        + ', '.join(
+                            f'{name} fitted it with coefficients that change over the '
+                            f'campaign (first vs second half, p = {q:.1g})'
+                            for name, q in unstable
+                        )
+                        + ': not adopted on '
+                        + c
+                    )
                 else:
-                    explained_note = (f'; {", ".join(partly)} fitted only {explained:.0%} of the excess: '
-                                      'not adopted on ' + c)
+                    explained_note = (
+                        f'; {", ".join(partly)} fitted only {explained:.0%} of the excess: '
+                        'not adopted on ' + c
+                    )
             else:
-                explained_note = (f'; left after {", ".join(e["candidate"].family for e in found)} '
-                                  f'(which explained {explained:.0%} of the excess)')
+                explained_note = (
+                    f'; left after {", ".join(e["candidate"].family for e in found)} '
+                    f'(which explained {explained:.0%} of the excess)'
+                )
         residual = fit.ols.residuals
         name, r, _ = _best_tracker(residual[loaded], trackers)
         track_values = None
@@ -362,21 +459,45 @@ def examine_leftovers(points, problem, fits, comp_terms, base_fits, base_terms, 
             track_values[loaded] = trackers[name][:, 0]
         directed_note = ''
         if directed is not None:
-            directed_note = (f'; the load shape of {c} (x, x², x|x|) changes with {directed[0]} '
-                             f'(directed test p = {directed[1]:.1g})')
+            directed_note = (
+                f'; the load shape of {c} (x, x², x|x|) changes with {directed[0]} '
+                f'(directed test p = {directed[1]:.1g})'
+            )
             if name == 'nothing found':
                 name, r = f'load {c} × {directed[0]}', float('nan')
                 # the structure itself: the residual's least-squares projection on the basis
                 basis = bases[directed[0]]
                 coefficients, *_ = np.linalg.lstsq(basis[loaded], residual[loaded], rcond=None)
                 column = basis @ coefficients
-                track_values = np.where(loaded, column / max(float(np.max(np.abs(column[loaded]))), 1e-300), np.nan)
-        sigma = sigma_pct_fs(residual, capacity[k])
-        evidence = (f'{c}: residual σ {np.sqrt(ratio):.1f}× the repeatability ({repeatability[c]:.3f} % FS from '
-                    f'{source[c]}; lack of fit p = {p:.1g})'
-                    + (f'; follows {name}' + (f' (r = {r:.2f})' if r == r else '') if name != 'nothing found'
-                       else '; follows nothing examined')
-                    + directed_note + explained_note)
-        unexplained.append(Unexplained((c,), evidence, name, {c: sigma}, float(ratio), p, r, partly,
-                                       track_values, residual))
-    return Leftovers(repeatability, int(nu.min()), ratios, p_values, tuple(unexplained), warnings, dropped, roll)
+                track_values = np.where(
+                    loaded, column / max(float(np.max(np.abs(column[loaded]))), 1e-300), np.nan
+                )
+        sigma = float(sigma_pct_fs(residual, capacity[k]))
+        evidence = (
+            f'{c}: residual σ {np.sqrt(ratio):.1f}× the repeatability ({repeatability[c]:.3f} % '
+            f'FS from {source[c]}; lack of fit p = {p:.1g})'
+            + (
+                f'; follows {name}' + (f' (r = {r:.2f})' if r == r else '')
+                if name != 'nothing found'
+                else '; follows nothing examined'
+            )
+            + directed_note
+            + explained_note
+        )
+        unexplained.append(
+            Unexplained(
+                (c,),
+                evidence,
+                name,
+                {c: sigma},
+                float(ratio),
+                p,
+                r,
+                partly,
+                track_values,
+                residual,
+            )
+        )
+    return Leftovers(
+        repeatability, int(nu.min()), ratios, p_values, tuple(unexplained), warnings, dropped, roll
+    )

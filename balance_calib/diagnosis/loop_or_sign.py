@@ -15,6 +15,7 @@ the components its contrast explains:
 Where the schedule offers too few pairs (on LMC6522 the forces, on B660H every component) the
 contrast says nothing and the families compete as before.
 """
+
 from __future__ import annotations
 
 from typing import Sequence
@@ -42,44 +43,56 @@ def direction_pairs(corrected, orientation, direction, capacity) -> list[list[tu
     """Per component, the index pairs (falling, rising) at equal applied load (contrasts.py).
 
     corrected: CorrectedData (loads and tare_loads (N, 6), N, N·m); orientation (N,);
-    direction (N, 6) raw ±1 load history; capacity (6,) N, N·m."""
+    direction (N, 6) raw ±1 load history; capacity (6,) N, N·m.
+    """
     applied = np.asarray(corrected.loads, float) - np.asarray(corrected.tare_loads, float)
     capacity = np.asarray(capacity, float)
     is_zero = np.all(np.abs(applied) <= EQUAL_LOAD * capacity, axis=1)
-    return [pairs_of(applied, orientation, direction, is_zero, capacity, k)[0]
-            for k in range(applied.shape[1])]
+    return [
+        pairs_of(applied, orientation, direction, is_zero, capacity, k)[0]
+        for k in range(applied.shape[1])
+    ]
 
 
-def shows_loop(residual: np.ndarray, pairs: Sequence[tuple[int, int]], variance: float
-               ) -> bool | None:
+def shows_loop(
+    residual: np.ndarray, pairs: Sequence[tuple[int, int]], variance: float
+) -> bool | None:
     """Does residual (N,) differ between the branches beyond variance (its units squared)?
 
     True: a loop (ratio >= LOOP_RATIO, p < LOOP_P_VALUE); False: no more than noise (p >=
     NO_LOOP_P_VALUE); None: in between, or fewer than MIN_DIRECTION_PAIRS pairs (the contrast
-    then decides nothing)."""
+    then decides nothing).
+    """
     if len(pairs) < MIN_DIRECTION_PAIRS or not variance > 0:
         return None
     index = np.asarray(pairs, int)
     values = residual[index[:, 0]] - residual[index[:, 1]]
-    ratio = float(np.mean(values ** 2) / (2.0 * variance))
+    ratio = float(np.mean(values**2) / (2.0 * variance))
     p_value = float(scipy.stats.chi2.sf(len(values) * ratio, len(values)))
     if ratio >= LOOP_RATIO and p_value < LOOP_P_VALUE:
         return True
     return False if p_value >= NO_LOOP_P_VALUE else None
 
 
-def components_to_drop(loop_residuals: dict, sign_residuals: dict, current: Sequence[np.ndarray],
-                       pairs: Sequence[Sequence[tuple[int, int]]]
-                       ) -> tuple[set[int], set[int]]:
+def components_to_drop(
+    loop_residuals: dict,
+    sign_residuals: dict,
+    current: Sequence[np.ndarray],
+    pairs: Sequence[Sequence[tuple[int, int]]],
+) -> tuple[set[int], set[int]]:
     """(components hysteresis drops, components bidirectional drops).
 
     loop_residuals / sign_residuals: component index -> (N,) residual after that family's terms
-    (the components each family passed on); current: per component (N,) residual before."""
+    (the components each family passed on); current: per component (N,) residual before.
+    """
     loop_drop, sign_drop = set(), set()
     for k, after in loop_residuals.items():
         fitted = [after] + ([sign_residuals[k]] if k in sign_residuals else [])
-        verdict = shows_loop(np.asarray(current[k], float), pairs[k],
-                             min(float(np.mean(np.square(r))) for r in fitted))
+        verdict = shows_loop(
+            np.asarray(current[k], float),
+            pairs[k],
+            min(float(np.mean(np.square(r))) for r in fitted),
+        )
         if verdict is True and k in sign_residuals:
             sign_drop.add(k)
         elif verdict is False:

@@ -11,17 +11,18 @@
 Figures are built on `matplotlib.figure.Figure` with the Agg canvas (no pyplot state), so plotting
 is safe inside a node's callback thread.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+import numpy as np
 
 from .diagnose import Diagnosis, EffectFound
 
-CLIP_PCT_FS = 0.5      # the memo's vertical range of Figs. 4-9
+CLIP_PCT_FS = 0.5  # the memo's vertical range of Figs. 4-9
 
 
 def _save(figure: Figure, path) -> Path:
@@ -38,12 +39,23 @@ def _clipped_scatter(axes, x, y, clip, **style):
     for sign, marker in ((1, '^'), (-1, 'v')):
         outside = sign * y > clip
         if outside.any():
-            axes.plot(x[outside], np.full(outside.sum(), sign * clip * 0.97), linestyle='none', marker=marker,
-                      markersize=5, markerfacecolor='none', color=style.get('color', 'k'))
+            axes.plot(
+                x[outside],
+                np.full(outside.sum(), sign * clip * 0.97),
+                linestyle='none',
+                marker=marker,
+                markersize=5,
+                markerfacecolor='none',
+                color=style.get('color', 'k'),
+            )
 
 
-def plot_residuals(diagnosis: Diagnosis, path, *, which: str = 'after', clip_pct_fs: float = CLIP_PCT_FS) -> Path:
-    """Six panels of residual (% FS) vs point number for the base ('before') or adopted ('after') model."""
+def plot_residuals(
+    diagnosis: Diagnosis, path, *, which: str = 'after', clip_pct_fs: float = CLIP_PCT_FS
+) -> Path:
+    """Six panels of residual (% FS) vs point number for the base ('before') or adopted
+    ('after') model.
+    """
     if which not in ('before', 'after'):
         raise ValueError("which must be 'before' or 'after'")
     residuals = diagnosis.residuals_pct_fs(which)
@@ -51,12 +63,16 @@ def plot_residuals(diagnosis: Diagnosis, path, *, which: str = 'after', clip_pct
     model = diagnosis.base_fit.name if which == 'before' else diagnosis.adopted.name
     labels = np.asarray(diagnosis.point_labels, dtype=float)
     figure = Figure(figsize=(12, 6.5))
-    figure.suptitle(f'{diagnosis.balance} — residuals of the {model} model '
-                    f'(exp − th, % F.S.; axis ±{clip_pct_fs:g} %)')
+    figure.suptitle(
+        f'{diagnosis.balance} — residuals of the {model} model '
+        f'(exp − th, % F.S.; axis ±{clip_pct_fs:g} %)'
+    )
     for k, component in enumerate(diagnosis.components):
         axes = figure.add_subplot(2, 3, k + 1)
         axes.axhline(0.0, color='0.6', linewidth=0.8)
-        _clipped_scatter(axes, labels, residuals[:, k], clip_pct_fs, marker='o', markersize=2.5, color='C0')
+        _clipped_scatter(
+            axes, labels, residuals[:, k], clip_pct_fs, marker='o', markersize=2.5, color='C0'
+        )
         axes.set_ylim(-clip_pct_fs, clip_pct_fs)
         axes.set_title(f'{component}: σ = {sigma[component]:.3f} % FS', fontsize=10)
         axes.set_xlabel('point number')
@@ -67,7 +83,9 @@ def plot_residuals(diagnosis: Diagnosis, path, *, which: str = 'after', clip_pct
 
 
 def plot_effect(diagnosis: Diagnosis, effect: EffectFound, path) -> Path:
-    """Partial residual (final residual + this effect's contribution, % FS) vs its explaining variable."""
+    """Partial residual (final residual + this effect's contribution, % FS) vs its explaining
+    variable.
+    """
     components = list(effect.components)
     figure = Figure(figsize=(max(6.0, 4.2 * len(components) + 0.5), 4.2))
     figure.suptitle(f'{diagnosis.balance} — {effect.name}: residual with the effect put back')
@@ -78,14 +96,32 @@ def plot_effect(diagnosis: Diagnosis, effect: EffectFound, path) -> Path:
         contribution = np.asarray(effect.contribution[component]) * scale
         partial = diagnosis.residuals_after[:, k] * scale + contribution
         axes = figure.add_subplot(1, len(components), i + 1)
-        axes.plot(x, partial, linestyle='none', marker='o', markersize=2.5, color='C0', label='residual + effect')
+        axes.plot(
+            x,
+            partial,
+            linestyle='none',
+            marker='o',
+            markersize=2.5,
+            color='C0',
+            label='residual + effect',
+        )
         order = np.argsort(x, kind='stable')
-        axes.plot(x[order], contribution[order], linestyle='none', marker='.', markersize=3, color='C3',
-                  label='fitted effect')
+        axes.plot(
+            x[order],
+            contribution[order],
+            linestyle='none',
+            marker='.',
+            markersize=3,
+            color='C3',
+            label='fitted effect',
+        )
         axes.set_xlabel(effect.explaining_variable[component])
         axes.set_ylabel(f'{component} residual (% FS)')
-        axes.set_title(f'{component}: r = {effect.correlation[component]:.2f}, '
-                       f'removes {effect.removed_pct_fs[component]:.3f} % FS', fontsize=9)
+        axes.set_title(
+            f'{component}: r = {effect.correlation[component]:.2f}, '
+            f'removes {effect.removed_pct_fs[component]:.3f} % FS',
+            fontsize=9,
+        )
         axes.grid(True, linewidth=0.3)
         if i == 0:
             axes.legend(fontsize=8, loc='best')
@@ -96,7 +132,11 @@ def plot_effect(diagnosis: Diagnosis, effect: EffectFound, path) -> Path:
 def plot_diagnosis(diagnosis: Diagnosis, directory) -> list[Path]:
     """Every figure of a diagnosis into `directory`: residuals before/after, one per effect."""
     directory = Path(directory)
-    paths = [plot_residuals(diagnosis, directory / f'residuals_{diagnosis.base_model}.png', which='before')]
+    paths = [
+        plot_residuals(
+            diagnosis, directory / f'residuals_{diagnosis.base_model}.png', which='before'
+        )
+    ]
     if diagnosis.effects:
         paths.append(plot_residuals(diagnosis, directory / 'residuals_adopted.png', which='after'))
     for effect in diagnosis.effects:
@@ -108,25 +148,48 @@ def plot_unexplained(diagnosis: Diagnosis, entry, path) -> Path:
     """What is left and unexplained (% FS): against what it tracks, and against point number."""
     component = entry.components[0]
     k = diagnosis.components.index(component)
-    residual = np.asarray(entry.residual if entry.residual is not None else diagnosis.residuals_after[:, k],
-                          dtype=float) / diagnosis.capacity[k] * 100.0
+    residual = (
+        np.asarray(
+            entry.residual if entry.residual is not None else diagnosis.residuals_after[:, k],
+            dtype=float,
+        )
+        / diagnosis.capacity[k]
+        * 100.0
+    )
     figure = Figure(figsize=(10, 4.2))
-    figure.suptitle(f'{diagnosis.balance} — {component}: left over and not explained '
-                    f'(σ {entry.sigma_pct_fs[component]:.3f} % FS, repeatability '
-                    f'{diagnosis.repeatability_pct_fs.get(component, float("nan")):.3f} % FS)')
+    figure.suptitle(
+        f'{diagnosis.balance} — {component}: left over and not explained '
+        f'(σ {entry.sigma_pct_fs[component]:.3f} % FS, repeatability '
+        f'{diagnosis.repeatability_pct_fs.get(component, float("nan")):.3f} % FS)'
+    )
     axes = figure.add_subplot(1, 2, 1)
     if entry.tracks_values is not None:
         x = np.asarray(entry.tracks_values, dtype=float)
         keep = np.isfinite(x)
-        axes.plot(x[keep], residual[keep], linestyle='none', marker='o', markersize=2.5, color='C3')
+        axes.plot(
+            x[keep], residual[keep], linestyle='none', marker='o', markersize=2.5, color='C3'
+        )
         axes.set_xlabel(f'{entry.tracks} (scaled to ±1; loaded points)')
     else:
-        axes.text(0.5, 0.5, 'follows nothing examined', ha='center', va='center', transform=axes.transAxes)
+        axes.text(
+            0.5,
+            0.5,
+            'follows nothing examined',
+            ha='center',
+            va='center',
+            transform=axes.transAxes,
+        )
     axes.set_ylabel(f'{component} residual (% FS)')
     axes.grid(True, linewidth=0.3)
     axes = figure.add_subplot(1, 2, 2)
-    axes.plot(np.asarray(diagnosis.point_labels, dtype=float), residual, linestyle='none', marker='o',
-              markersize=2.5, color='C3')
+    axes.plot(
+        np.asarray(diagnosis.point_labels, dtype=float),
+        residual,
+        linestyle='none',
+        marker='o',
+        markersize=2.5,
+        color='C3',
+    )
     axes.set_xlabel('point number')
     axes.grid(True, linewidth=0.3)
     figure.tight_layout(rect=(0, 0, 1, 0.92))
@@ -137,22 +200,30 @@ def unexplained_figures(diagnosis: Diagnosis | None, directory) -> list[Path]:
     """One figure per unexplained entry (none without a diagnosis)."""
     if diagnosis is None:
         return []
-    return [plot_unexplained(diagnosis, entry, Path(directory) / f'unexplained_{entry.components[0]}.png')
-            for entry in diagnosis.unexplained]
+    return [
+        plot_unexplained(
+            diagnosis, entry, Path(directory) / f'unexplained_{entry.components[0]}.png'
+        )
+        for entry in diagnosis.unexplained
+    ]
 
 
 def plot_contrasts(diagnosis: Diagnosis, path, contrasts=None) -> Path | None:
     """Direction contrast (falling - rising at equal load, left) and sign contrast (r(+L) + r(-L),
     right) of the base model's residual (% FS) against the load (fraction of capacity), one row per
     component (diagnosis/contrasts.py), with the ±2√2 s band of two points' repeatability.
-    None when the schedule offers no pair."""
+    None when the schedule offers no pair.
+    """
     from .contrasts import schedule_contrasts
+
     contrasts = contrasts if contrasts is not None else schedule_contrasts(diagnosis)
     if not any(c.count for pair in contrasts.values() for c in pair):
         return None
-    figure = Figure(figsize=(9, 11.5))          # two panels wide, one row per component
-    figure.suptitle(f'{diagnosis.balance} — what the schedule tells: loop (direction) vs sign '
-                    f'(base model residuals, % F.S.)')
+    figure = Figure(figsize=(9, 11.5))  # two panels wide, one row per component
+    figure.suptitle(
+        f'{diagnosis.balance} — what the schedule tells: loop (direction) vs sign '
+        f'(base model residuals, % F.S.)'
+    )
     for k, component in enumerate(diagnosis.components):
         s = float(diagnosis.repeatability_pct_fs.get(component, float('nan')))
         for row, contrast in enumerate(contrasts[component]):
@@ -160,12 +231,18 @@ def plot_contrasts(diagnosis: Diagnosis, path, contrasts=None) -> Path | None:
             axes.axhline(0.0, color='0.6', linewidth=0.8)
             if np.isfinite(s) and s > 0:
                 axes.axhspan(-2 * np.sqrt(2) * s, 2 * np.sqrt(2) * s, color='0.9')
-            axes.plot(contrast.load_fraction, contrast.value_pct_fs, 'o', markersize=3,
-                      color='C3' if contrast.kind == 'direction' else 'C0')
+            axes.plot(
+                contrast.load_fraction,
+                contrast.value_pct_fs,
+                'o',
+                markersize=3,
+                color='C3' if contrast.kind == 'direction' else 'C0',
+            )
             what = 'falling − rising' if contrast.kind == 'direction' else 'r(+L) + r(−L)'
             ratio = f'{contrast.ratio:.1f}' if np.isfinite(contrast.ratio) else '–'
-            axes.set_title(f'{component} {contrast.kind}: {contrast.count} pairs, {ratio}× s²',
-                           fontsize=8)
+            axes.set_title(
+                f'{component} {contrast.kind}: {contrast.count} pairs, {ratio}× s²', fontsize=8
+            )
             axes.set_xlabel('|L| / capacity', fontsize=7)
             axes.set_ylabel(what, fontsize=7)
             axes.tick_params(labelsize=7)

@@ -8,6 +8,7 @@
 - Forward selection of term groups from a candidate family, each step a partial F-test at a
   Bonferroni-corrected level (the caller divides α by the number of tests it makes).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -37,30 +38,35 @@ class ZeroPointWhitening:
     it a slow regressor (time, dT) passes a 5 % test 20-35 % of the time on pure noise.
     """
 
-    loaded: np.ndarray        # (N,) bool: the points that enter the tests
-    cholesky: np.ndarray      # (N_loaded, N_loaded) lower factor of M Mᵀ
+    loaded: np.ndarray  # (N,) bool: the points that enter the tests
+    cholesky: np.ndarray  # (N_loaded, N_loaded) lower factor of M Mᵀ
 
     @classmethod
     def for_points(cls, times_s, is_zero_point, orientation) -> 'ZeroPointWhitening':
         from ..zero_points import subtract_zero_points
+
         n = len(times_s)
-        referring = subtract_zero_points(times_s, np.eye(n), is_zero_point, orientation).zeroed_outputs_mv
+        referring = subtract_zero_points(
+            times_s, np.eye(n), is_zero_point, orientation
+        ).zeroed_outputs_mv
         loaded = ~np.asarray(is_zero_point, dtype=bool)
         return cls(loaded, np.linalg.cholesky(referring[loaded] @ referring[loaded].T))
 
     def __call__(self, values) -> np.ndarray:
         """(N, ...) -> whitened (N_loaded, ...)."""
-        return scipy.linalg.solve_triangular(self.cholesky, np.asarray(values, float)[self.loaded], lower=True)
+        return scipy.linalg.solve_triangular(
+            self.cholesky, np.asarray(values, float)[self.loaded], lower=True
+        )
 
 
 @dataclass(frozen=True)
 class ComponentFit:
     """A least-squares fit of one load component on a set of design columns."""
 
-    coefficients: np.ndarray   # (p,) per design column; 0 for dependent columns
-    residuals: np.ndarray      # (N,) measured - fitted, N or N·m
-    hat: np.ndarray            # (N,) leverage h_ii
-    basis: np.ndarray          # (N, rank) orthonormal basis of the column space
+    coefficients: np.ndarray  # (p,) per design column; 0 for dependent columns
+    residuals: np.ndarray  # (N,) measured - fitted, N or N·m
+    hat: np.ndarray  # (N,) leverage h_ii
+    basis: np.ndarray  # (N, rank) orthonormal basis of the column space
     rank: int
 
     @property
@@ -86,7 +92,7 @@ class ComponentFit:
 
     @property
     def press(self) -> float:
-        return float(np.sum(self.press_residuals ** 2))
+        return float(np.sum(self.press_residuals**2))
 
 
 def fit_columns(design: np.ndarray, target: np.ndarray) -> ComponentFit:
@@ -99,11 +105,14 @@ def fit_columns(design: np.ndarray, target: np.ndarray) -> ComponentFit:
     target = np.asarray(target, dtype=float)
     solution = scaled_least_squares(design, target, tolerance=DEPENDENT_TOLERANCE)
     residuals = target - design @ solution.coefficients
-    return ComponentFit(solution.coefficients, residuals, solution.leverage, solution.basis,
-                        solution.rank)
+    return ComponentFit(
+        solution.coefficients, residuals, solution.leverage, solution.basis, solution.rank
+    )
 
 
-def partial_f(rss_before: float, rss_after: float, added: int, dof_after: int) -> tuple[float, float]:
+def partial_f(
+    rss_before: float, rss_after: float, added: int, dof_after: int
+) -> tuple[float, float]:
     """F statistic and p-value of `added` terms that took RSS from rss_before to rss_after."""
     if added <= 0 or dof_after <= 0 or rss_after <= 0:
         return 0.0, 1.0
@@ -113,9 +122,9 @@ def partial_f(rss_before: float, rss_after: float, added: int, dof_after: int) -
 
 @dataclass(frozen=True)
 class Step:
-    group: int           # index into the candidate groups
+    group: int  # index into the candidate groups
     f_value: float
-    p_value: float       # nominal, of this step's partial F-test
+    p_value: float  # nominal, of this step's partial F-test
     rss_after: float
 
 
@@ -130,8 +139,15 @@ class Selection:
         return tuple(s.group for s in self.steps)
 
 
-def forward_select(fit: ComponentFit, candidates: np.ndarray, groups, *, alpha_per_test: float,
-                   max_groups: int, reference_norms: np.ndarray | None = None) -> Selection:
+def forward_select(
+    fit: ComponentFit,
+    candidates: np.ndarray,
+    groups,
+    *,
+    alpha_per_test: float,
+    max_groups: int,
+    reference_norms: np.ndarray | None = None,
+) -> Selection:
     """Add candidate groups to `fit` one at a time, best partial F-test first.
 
     candidates (N, m) columns; groups: sequence of 1- or 2-tuples of column indices. A step is
@@ -142,8 +158,12 @@ def forward_select(fit: ComponentFit, candidates: np.ndarray, groups, *, alpha_p
     candidates = np.asarray(candidates, dtype=float)
     basis = fit.basis
     orthogonal = candidates - basis @ (basis.T @ candidates)
-    orthogonal -= basis @ (basis.T @ orthogonal)          # second pass: Gram-Schmidt accuracy
-    reference = np.linalg.norm(candidates, axis=0) if reference_norms is None else np.asarray(reference_norms)
+    orthogonal -= basis @ (basis.T @ orthogonal)  # second pass: Gram-Schmidt accuracy
+    reference = (
+        np.linalg.norm(candidates, axis=0)
+        if reference_norms is None
+        else np.asarray(reference_norms)
+    )
     first = np.array([g[0] for g in groups], dtype=int)
     second = np.array([g[1] if len(g) > 1 else -1 for g in groups], dtype=int)
     residual = fit.residuals.copy()
@@ -153,22 +173,28 @@ def forward_select(fit: ComponentFit, candidates: np.ndarray, groups, *, alpha_p
     for _ in range(max_groups):
         norms = np.linalg.norm(orthogonal, axis=0)
         usable_column = norms > 1e-6 * np.maximum(reference, 1e-300)
-        ok = available & usable_column[first] & ((second < 0) | usable_column[np.maximum(second, 0)])
+        ok = (
+            available
+            & usable_column[first]
+            & ((second < 0) | usable_column[np.maximum(second, 0)])
+        )
         if not ok.any() or dof <= 3:
             break
         a = norms[first] ** 2
         u = residual @ orthogonal[:, first]
-        reduction = u ** 2 / np.where(a > 0, a, 1.0)
+        reduction = u**2 / np.where(a > 0, a, 1.0)
         size = np.ones(len(groups))
         pair = second >= 0
         if pair.any():
             c1, c2 = orthogonal[:, first[pair]], orthogonal[:, second[pair]]
             aa, dd, bb = np.sum(c1 * c1, 0), np.sum(c2 * c2, 0), np.sum(c1 * c2, 0)
             uu, vv = residual @ c1, residual @ c2
-            det = aa * dd - bb ** 2
+            det = aa * dd - bb**2
             full = det > 1e-10 * aa * dd
-            both = (dd * uu ** 2 - 2 * bb * uu * vv + aa * vv ** 2) / np.where(full, det, 1.0)
-            single = np.maximum(uu ** 2 / np.where(aa > 0, aa, 1.0), vv ** 2 / np.where(dd > 0, dd, 1.0))
+            both = (dd * uu**2 - 2 * bb * uu * vv + aa * vv**2) / np.where(full, det, 1.0)
+            single = np.maximum(
+                uu**2 / np.where(aa > 0, aa, 1.0), vv**2 / np.where(dd > 0, dd, 1.0)
+            )
             reduction[pair] = np.where(full, both, single)
             size[pair] = np.where(full, 2.0, 1.0)
         reduction = np.clip(reduction, 0.0, rss)

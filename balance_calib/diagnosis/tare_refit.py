@@ -10,6 +10,7 @@ The body parameters enter nonlinearly (through the tare outputs and the fitted m
 found with the successive approximation of §3, eqs. (20)-(28) (`fit.gauss_newton`), around an
 inner linear least-squares fit of the coefficients (variable projection).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -25,11 +26,13 @@ from ..tare.calibration_body import CorrectedData, tare_loads
 
 # parameter -> (how a scaled unknown x maps to the body, a readable name)
 BODY_PARAMETERS = ('weight_n', 'cg_x_m', 'cg_y_m', 'cg_z_m')
-CG_SCALE_M = 0.01          # x = 1 moves the CG by 1 cm
-FINITE_STEP = 1e-3         # forward-difference step in the scaled unknowns
+CG_SCALE_M = 0.01  # x = 1 moves the CG by 1 cm
+FINITE_STEP = 1e-3  # forward-difference step in the scaled unknowns
 
 
-def body_from_unknowns(declared: CalibrationBody, parameters: Sequence[str], unknowns) -> CalibrationBody:
+def body_from_unknowns(
+    declared: CalibrationBody, parameters: Sequence[str], unknowns
+) -> CalibrationBody:
     weight = declared.weight_n
     cg = list(declared.cg_m)
     for name, x in zip(parameters, unknowns):
@@ -37,7 +40,9 @@ def body_from_unknowns(declared: CalibrationBody, parameters: Sequence[str], unk
             weight = declared.weight_n * (1.0 + x)
         else:
             cg['xyz'.index(name[3])] += CG_SCALE_M * x
-    return replace(declared, weight_n=float(weight), cg_m=(float(cg[0]), float(cg[1]), float(cg[2])))
+    return replace(
+        declared, weight_n=float(weight), cg_m=(float(cg[0]), float(cg[1]), float(cg[2]))
+    )
 
 
 class TareOutputChange:
@@ -51,7 +56,9 @@ class TareOutputChange:
     def __init__(self, corrected: CorrectedData, gravity: np.ndarray, inverse_model: BalanceModel):
         self.corrected = corrected
         self.gravity = np.asarray(gravity, dtype=float)
-        _, first, self.index = np.unique(np.round(self.gravity, 9), axis=0, return_index=True, return_inverse=True)
+        _, first, self.index = np.unique(
+            np.round(self.gravity, 9), axis=0, return_index=True, return_inverse=True
+        )
         self.index = np.ravel(self.index)
         self.unique_gravity = self.gravity[first]
         self.inverse_model = inverse_model
@@ -66,10 +73,16 @@ class TareOutputChange:
     def __call__(self, body: CalibrationBody) -> CorrectedData:
         """The corrected data of §7.1 with `body` instead of the one the reduction used."""
         new_tare = tare_loads(body, self.gravity)
-        delta = (self._outputs(tare_loads(body, self.unique_gravity)) - self.old_outputs)[self.index]
+        delta = (self._outputs(tare_loads(body, self.unique_gravity)) - self.old_outputs)[
+            self.index
+        ]
         c = self.corrected
-        return CorrectedData(c.loads + new_tare - c.tare_loads, c.bridge_outputs_mv + delta, new_tare,
-                             c.tare_outputs_mv + delta)
+        return CorrectedData(
+            c.loads + new_tare - c.tare_loads,
+            c.bridge_outputs_mv + delta,
+            new_tare,
+            c.tare_outputs_mv + delta,
+        )
 
 
 @dataclass(frozen=True)
@@ -77,13 +90,19 @@ class BodyRefit:
     body: CalibrationBody
     corrected: CorrectedData
     unknowns: np.ndarray
-    identifiable: int          # numerical rank of the Jacobian: parameters the data determine
+    identifiable: int  # numerical rank of the Jacobian: parameters the data determine
     converged: bool
 
 
-def refit_body(corrected: CorrectedData, gravity: np.ndarray, declared: CalibrationBody,
-               inverse_model: BalanceModel, weighted_residuals: Callable[[CorrectedData], np.ndarray],
-               parameters: Sequence[str] = ('weight_n', 'cg_x_m'), max_iterations: int = 4) -> BodyRefit:
+def refit_body(
+    corrected: CorrectedData,
+    gravity: np.ndarray,
+    declared: CalibrationBody,
+    inverse_model: BalanceModel,
+    weighted_residuals: Callable[[CorrectedData], np.ndarray],
+    parameters: Sequence[str] = ('weight_n', 'cg_x_m'),
+    max_iterations: int = 4,
+) -> BodyRefit:
     """Body parameters minimising the weighted residuals of the current model, eqs. (20)-(28).
 
     weighted_residuals(corrected data) -> (M,) stacked residuals of all components, each divided
@@ -108,7 +127,7 @@ def refit_body(corrected: CorrectedData, gravity: np.ndarray, declared: Calibrat
     for i in range(len(start)):
         step = np.zeros(len(start))
         step[i] = FINITE_STEP
-        columns.append(-(residual(step) - at_start) / FINITE_STEP)        # d model / d x
+        columns.append(-(residual(step) - at_start) / FINITE_STEP)  # d model / d x
     chord = np.column_stack(columns) if columns else np.zeros((len(at_start), 0))
     first = [True]
 
@@ -118,12 +137,18 @@ def refit_body(corrected: CorrectedData, gravity: np.ndarray, declared: Calibrat
             return at_start
         return residual(x)
 
-    result = gauss_newton(residual_cached, lambda x: chord, start, max_iterations=max_iterations,
-                          relative_step=1e-3)
+    result = gauss_newton(
+        residual_cached, lambda x: chord, start, max_iterations=max_iterations, relative_step=1e-3
+    )
     unknowns = result.parameters
-    if result.objective > float(np.sum(at_start ** 2)):
-        unknowns = start                      # never worse than the body we were given
+    if result.objective > float(np.sum(at_start**2)):
+        unknowns = start  # never worse than the body we were given
     singular = np.linalg.svd(chord, compute_uv=False)
     identifiable = int(np.sum(singular > 1e-6 * max(singular[0], 1e-300))) if singular.size else 0
-    return BodyRefit(body_from_unknowns(declared, unknown_names, unknowns), data(unknowns), unknowns,
-                     identifiable, bool(result.converged))
+    return BodyRefit(
+        body_from_unknowns(declared, unknown_names, unknowns),
+        data(unknowns),
+        unknowns,
+        identifiable,
+        bool(result.converged),
+    )

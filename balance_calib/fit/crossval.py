@@ -3,6 +3,7 @@
 For least squares the residual of point i when it is left out of the fit is e_i / (1 - h_ii),
 h_ii the leverage (diagonal of the hat matrix); no refits needed.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,6 +18,8 @@ def leverages(design: np.ndarray) -> np.ndarray:
 
 
 def press_residuals(design: np.ndarray, residuals: np.ndarray) -> np.ndarray:
-    """Leave-one-out residuals (N, k) from in-sample residuals (N, k) of a fit on `design` (N, p)."""
+    """Leave-one-out residuals (N, k) from in-sample residuals (N, k) of a fit on `design` (N,
+    p).
+    """
     h = np.minimum(leverages(design), 1.0 - 1e-12)
     return residuals / (1.0 - h)[:, None]

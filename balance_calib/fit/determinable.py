@@ -10,6 +10,7 @@ product term stays only with its single-variable factors (those of the set). Las
 points: terms are dropped from the end of the priority order until every load keeps at least
 `min_dof` residual degrees of freedom (N - terms - tares), so PRESS and σ stay defined.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -26,9 +27,9 @@ SEPARATION = 1e-3
 
 @dataclass(frozen=True)
 class TermScreen:
-    kept: tuple[Term, ...]                    # in the set's own order
-    dropped: tuple[tuple[str, str], ...]      # (term name, one-line reason), in screening order
-    no_room: tuple[str, ...] = ()             # dropped for want of points
+    kept: tuple[Term, ...]  # in the set's own order
+    dropped: tuple[tuple[str, str], ...]  # (term name, one-line reason), in screening order
+    no_room: tuple[str, ...] = ()  # dropped for want of points
 
 
 def _factor_terms(term: Term) -> tuple[Term, ...]:
@@ -40,12 +41,14 @@ def _factor_terms(term: Term) -> tuple[Term, ...]:
 
 def priority(terms: Sequence[Term]) -> list[int]:
     """Indices of `terms` in screening order: degree, one-variable before products, set order."""
-    return sorted(range(len(terms)),
-                  key=lambda j: (terms[j].degree, len(terms[j].variables) > 1, j))
+    return sorted(
+        range(len(terms)), key=lambda j: (terms[j].degree, len(terms[j].variables) > 1, j)
+    )
 
 
-def screen_terms(terms: Sequence[Term], columns: np.ndarray, nuisance: np.ndarray, *,
-                 min_dof: int = 2) -> TermScreen:
+def screen_terms(
+    terms: Sequence[Term], columns: np.ndarray, nuisance: np.ndarray, *, min_dof: int = 2
+) -> TermScreen:
     """Keep the terms the schedule separates.
 
     Parameters
@@ -89,15 +92,18 @@ def screen_terms(terms: Sequence[Term], columns: np.ndarray, nuisance: np.ndarra
         needed = [f.name for f in _factor_terms(terms[j]) if f.name in names]
         missing = [f for f in needed if names.index(f) not in kept]
         if missing:
-            dropped.append((names[j],
-                            f'hierarchy: its factor(s) {", ".join(missing)} not in the model'))
+            dropped.append(
+                (names[j], f'hierarchy: its factor(s) {", ".join(missing)} not in the model')
+            )
             continue
         part = new_part(columns[:, j])
         if part < SEPARATION:
-            why = ('the schedule never applies it (column all zero)'
-                   if not np.any(columns[:, j]) else
-                   f'the schedule cannot separate it from the terms and tares kept before it '
-                   f'({100 * part:.2g} % of its column is new)')
+            why = (
+                'the schedule never applies it (column all zero)'
+                if not np.any(columns[:, j])
+                else f'the schedule cannot separate it from the terms and tares kept before it '
+                f'({100 * part:.2g} % of its column is new)'
+            )
             dropped.append((names[j], why))
             continue
         accept(columns[:, j])
@@ -106,10 +112,15 @@ def screen_terms(terms: Sequence[Term], columns: np.ndarray, nuisance: np.ndarra
     no_room: list[str] = []
     if len(kept) > limit:
         by_priority = [j for j in order if j in kept]
-        for j in by_priority[max(limit, 0):]:
+        for j in by_priority[max(limit, 0) :]:
             no_room.append(names[j])
-            dropped.append((names[j], f'{n} points leave room for {max(limit, 0)} terms beside '
-                                      f'{q} series tares and {min_dof} residual degrees of '
-                                      f'freedom'))
-        kept = by_priority[:max(limit, 0)]
+            dropped.append(
+                (
+                    names[j],
+                    f'{n} points leave room for {max(limit, 0)} terms beside '
+                    f'{q} series tares and {min_dof} residual degrees of '
+                    f'freedom',
+                )
+            )
+        kept = by_priority[: max(limit, 0)]
     return TermScreen(tuple(terms[j] for j in sorted(kept)), tuple(dropped), tuple(no_room))

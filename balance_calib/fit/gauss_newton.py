@@ -5,6 +5,7 @@ approximate objective (27) minimised. Eq. (28) sets its gradient to zero, i.e. t
 equations; we solve the same linearised least-squares problem by SVD instead (same minimiser,
 without squaring the condition number), then iterate until the step is negligible.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -18,13 +19,17 @@ class GaussNewtonResult:
     parameters: np.ndarray
     iterations: int
     converged: bool
-    objective: float          # eq. (19): sum of squared load errors
+    objective: float  # eq. (19): sum of squared load errors
 
 
-def gauss_newton(residual: Callable[[np.ndarray], np.ndarray],
-                 jacobian: Callable[[np.ndarray], np.ndarray],
-                 initial: np.ndarray, *, max_iterations: int = 50,
-                 relative_step: float = 1e-12) -> GaussNewtonResult:
+def gauss_newton(
+    residual: Callable[[np.ndarray], np.ndarray],
+    jacobian: Callable[[np.ndarray], np.ndarray],
+    initial: np.ndarray,
+    *,
+    max_iterations: int = 50,
+    relative_step: float = 1e-12,
+) -> GaussNewtonResult:
     """Minimise sum(residual(C)**2) from C0 = initial.
 
     residual(C) -> (M,) measured minus model (all components stacked, eq. (19));
@@ -33,8 +38,12 @@ def gauss_newton(residual: Callable[[np.ndarray], np.ndarray],
     parameters = np.asarray(initial, dtype=float).copy()
     for iteration in range(1, max_iterations + 1):
         error = residual(parameters)
-        step, *_ = np.linalg.lstsq(jacobian(parameters), error, rcond=None)   # ΔC of eq. (28)
-        parameters = parameters + step                                         # eq. (20)
+        step, *_ = np.linalg.lstsq(jacobian(parameters), error, rcond=None)  # ΔC of eq. (28)
+        parameters = parameters + step  # eq. (20)
         if np.linalg.norm(step) <= relative_step * max(float(np.linalg.norm(parameters)), 1e-300):
-            return GaussNewtonResult(parameters, iteration, True, float(np.sum(residual(parameters) ** 2)))
-    return GaussNewtonResult(parameters, max_iterations, False, float(np.sum(residual(parameters) ** 2)))
+            return GaussNewtonResult(
+                parameters, iteration, True, float(np.sum(residual(parameters) ** 2))
+            )
+    return GaussNewtonResult(
+        parameters, max_iterations, False, float(np.sum(residual(parameters) ** 2))
+    )

@@ -2,7 +2,8 @@
 
 Outputs as a polynomial of the total loads, total = applied + T_s for the point's series s:
 
-    V_i = A · g(applied_i + T_{s(i)})        (g: the term set, no constant: V is measured from the natural zero)
+    V_i = A · g(applied_i + T_{s(i)})        (g: the term set, no constant: V is measured from the
+                                             natural zero)
 
 For fixed tares A is a linear least-squares problem; the tares enter nonlinearly. We iterate
 Gauss-Newton on the tares with A projected out (variable projection, Kaufman's Jacobian): each step
@@ -10,16 +11,17 @@ refits A on the current total loads and moves T along the part of dV/dT that A c
 the step is below 1e-9 of capacity. The outputs are weighted by 1/σ of each channel, so a noisy
 bridge does not dominate. Start: output intercepts per series mapped through the linear part.
 """
+
 from __future__ import annotations
 
-from typing import Sequence, cast
+from typing import cast, Sequence
 
 import numpy as np
 
 from ..model.r091 import IterativeModel, TermEvaluator
 from ..model.terms import Term
 from .least_squares import TooFewPointsError
-from .series_tares import SeriesTareFit, series_indicator, series_rows, solve_scaled
+from .series_tares import series_indicator, series_rows, SeriesTareFit, solve_scaled
 from .term_selection import term_statistics
 
 
@@ -27,9 +29,19 @@ class IterationDidNotConverge(ArithmeticError):
     """The tares did not settle; the message says after how many steps and by how much."""
 
 
-def fit_iterative(terms: Sequence[Term], applied_loads, outputs, series, *, components: Sequence[str],
-                  inputs: Sequence[str], capacity, name: str = 'iterative', max_iterations: int = 40,
-                  statistics: bool = True) -> SeriesTareFit:
+def fit_iterative(
+    terms: Sequence[Term],
+    applied_loads,
+    outputs,
+    series,
+    *,
+    components: Sequence[str],
+    inputs: Sequence[str],
+    capacity,
+    name: str = 'iterative',
+    max_iterations: int = 40,
+    statistics: bool = True,
+) -> SeriesTareFit:
     terms = tuple(t for t in terms if not t.is_constant)
     applied = np.atleast_2d(np.asarray(applied_loads, float))
     outputs = np.atleast_2d(np.asarray(outputs, float))
@@ -38,7 +50,10 @@ def fit_iterative(terms: Sequence[Term], applied_loads, outputs, series, *, comp
     n, m = applied.shape
     n_out = outputs.shape[1]
     if n_out != m:
-        raise ValueError(f'the iterative method needs as many bridge outputs as loads ({n_out} outputs, {m} loads)')
+        raise ValueError(
+            f'the iterative method needs as many bridge outputs as loads ({n_out} outputs, {m} '
+            'loads)'
+        )
     evaluator = TermEvaluator(terms, components)
     term_names = [t.name for t in terms]
     n_series = len(labels)
@@ -47,12 +62,14 @@ def fit_iterative(terms: Sequence[Term], applied_loads, outputs, series, *, comp
 
     # start: output intercepts per series, mapped to loads by the linear part
     design = evaluator.design(applied)
-    start = solve_scaled(np.hstack([design, onehot]), outputs,
-                         term_names + [f'series {s}' for s in labels], name)
-    linear = _linear_matrix(terms, components, start.coefficients[:len(terms)].T)
-    tares = np.linalg.lstsq(linear, start.coefficients[len(terms):].T, rcond=None)[0].T   # (n_series, m)
+    start = solve_scaled(
+        np.hstack([design, onehot]), outputs, term_names + [f'series {s}' for s in labels], name
+    )
+    linear = _linear_matrix(terms, components, start.coefficients[: len(terms)].T)
+    # (n_series, m)
+    tares = np.linalg.lstsq(linear, start.coefficients[len(terms) :].T, rcond=None)[0].T
     residual0 = outputs - np.hstack([design, onehot]) @ start.coefficients
-    weights = 1.0 / np.maximum(np.sqrt(np.mean(residual0 ** 2, axis=0)), 1e-300)
+    weights = 1.0 / np.maximum(np.sqrt(np.mean(residual0**2, axis=0)), 1e-300)
 
     converged = False
     iteration = 0
@@ -60,11 +77,16 @@ def fit_iterative(terms: Sequence[Term], applied_loads, outputs, series, *, comp
         totals = applied + tares[index]
         design, derivatives = evaluator.design_and_derivatives(totals)
         solution = solve_scaled(design, outputs, term_names, name)
-        coefficients = solution.coefficients                                # (p, n_out)
+        coefficients = solution.coefficients  # (p, n_out)
         residuals = outputs - design @ coefficients
-        sensitivity = np.einsum('vnp,pk->knv', derivatives, coefficients)   # (n_out, N, m) dV_k/dL_v
-        jac = (sensitivity[:, :, None, :] * onehot[None, :, :, None]).reshape(n_out, n, n_series * m)
-        jac = jac - np.einsum('nr,krq->knq', solution.basis, np.einsum('nr,knq->krq', solution.basis, jac))
+        # (n_out, N, m) dV_k/dL_v
+        sensitivity = np.einsum('vnp,pk->knv', derivatives, coefficients)
+        jac = (sensitivity[:, :, None, :] * onehot[None, :, :, None]).reshape(
+            n_out, n, n_series * m
+        )
+        jac = jac - np.einsum(
+            'nr,krq->knq', solution.basis, np.einsum('nr,knq->krq', solution.basis, jac)
+        )
         weighted_jac = (jac * weights[:, None, None]).reshape(n_out * n, n_series * m)
         weighted_res = (residuals.T * weights[:, None]).reshape(-1)
         step = np.linalg.lstsq(weighted_jac, weighted_res, rcond=None)[0].reshape(n_series, m)
@@ -75,7 +97,9 @@ def fit_iterative(terms: Sequence[Term], applied_loads, outputs, series, *, comp
     if not converged:
         raise IterationDidNotConverge(
             f'{name}: series tares did not converge in {max_iterations} iterations (last step '
-            f'{np.max(np.abs(step) / capacity):.2e} of capacity); the term set may be too large for the data')
+            f'{np.max(np.abs(step) / capacity):.2e} of capacity); the term set may be too large '
+            'for the data'
+        )
 
     totals = applied + tares[index]
     design = evaluator.design(totals)
@@ -83,35 +107,64 @@ def fit_iterative(terms: Sequence[Term], applied_loads, outputs, series, *, comp
     coefficients = solution.coefficients
     residuals = outputs - design @ coefficients
     dof = n - len(terms) - n_series
-    sigma = np.sqrt((residuals ** 2).sum(axis=0) / dof)
+    sigma = np.sqrt((residuals**2).sum(axis=0) / dof)
     # tare covariance: Gauss-Newton at the solution, outputs weighted by their own σ
     weights = 1.0 / sigma
     weighted_jac = (jac * weights[:, None, None]).reshape(n_out * n, n_series * m)
     _, singular, vt = np.linalg.svd(weighted_jac, full_matrices=False)
-    tare_cov = (vt.T / singular ** 2) @ vt
+    tare_cov = (vt.T / singular**2) @ vt
     tare_sigma = np.sqrt(np.diag(tare_cov)).reshape(n_series, m)
 
     # covariance for predictions: tares as output intercepts of one linear problem [g(L), e_s]
     full_design = np.hstack([design, onehot])
     full = solve_scaled(full_design, outputs, term_names + [f'series {s}' for s in labels], name)
-    metadata = {'capacity': capacity.tolist(),
-                'uncertainty': {'residual_sigma': sigma.tolist(),
-                                'covariance_unscaled': full.covariance_unscaled[:len(terms), :len(terms)].tolist(),
-                                'dof': int(dof)}}
+    metadata = {
+        'capacity': capacity.tolist(),
+        'uncertainty': {
+            'residual_sigma': sigma.tolist(),
+            'covariance_unscaled': full.covariance_unscaled[: len(terms), : len(terms)].tolist(),
+            'dof': int(dof),
+        },
+    }
     model = IterativeModel(name, terms, coefficients.T, tuple(components), tuple(inputs), metadata)
     predicted_total = model.loads(outputs)
     load_residuals = applied - (predicted_total - tares[index])
     _, out_jac = model.output_jacobian(predicted_total)
-    inverse = np.linalg.inv(out_jac)                                        # (N, m, n_out) dL/dV
+    inverse = np.linalg.inv(out_jac)  # (N, m, n_out) dL/dV
     h = np.minimum(full.leverage, 1 - 1e-12)
     press_outputs = residuals / (1 - h)[:, None]
     press_loads = -np.einsum('nmk,nk->nm', inverse, press_outputs)
     uncertainty = _load_sigma(inverse, sigma[None, :] ** 2 * (1.0 + h)[:, None])
-    stats = term_statistics(full_design, outputs, full.coefficients, full.covariance_unscaled, len(terms),
-                            term_names, list(inputs)) if statistics else None
-    return SeriesTareFit('iterative', model, labels, tares, tare_sigma, load_residuals, press_loads, uncertainty,
-                         sigma, dof, stats, solution.condition_number, iteration, (),
-                         full.covariance_unscaled)
+    stats = (
+        term_statistics(
+            full_design,
+            outputs,
+            full.coefficients,
+            full.covariance_unscaled,
+            len(terms),
+            term_names,
+            list(inputs),
+        )
+        if statistics
+        else None
+    )
+    return SeriesTareFit(
+        'iterative',
+        model,
+        labels,
+        tares,
+        tare_sigma,
+        load_residuals,
+        press_loads,
+        uncertainty,
+        sigma,
+        dof,
+        stats,
+        solution.condition_number,
+        iteration,
+        (),
+        full.covariance_unscaled,
+    )
 
 
 def _linear_matrix(terms, components, coefficients) -> np.ndarray:
@@ -124,15 +177,18 @@ def _linear_matrix(terms, components, coefficients) -> np.ndarray:
 
 def _load_sigma(inverse: np.ndarray, output_variance: np.ndarray) -> np.ndarray:
     """sqrt(diag(J⁻¹ diag(var_V) J⁻ᵀ)) per point: (N, m)."""
-    return np.sqrt(np.einsum('nmk,nk->nm', inverse ** 2, output_variance))
+    return np.sqrt(np.einsum('nmk,nk->nm', inverse**2, output_variance))
 
 
 def iterative_point_uncertainty(fit: SeriesTareFit, outputs, series) -> np.ndarray:
-    """k = 1 uncertainty of applied loads predicted at new points with the calibration's tares."""
+    """K = 1 uncertainty of applied loads predicted at new points with the calibration's tares."""
     model = fit.model
     outputs = np.atleast_2d(np.asarray(outputs, float))
     totals = model.loads(outputs)
     _, out_jac = model.output_jacobian(totals)
     z = np.hstack([model.design(totals), series_rows(fit, series)])
-    h = np.einsum('ij,jk,ik->i', z, cast(np.ndarray, fit.full_covariance_unscaled), z)  # fitted with it
-    return _load_sigma(np.linalg.inv(out_jac), fit.residual_sigma[None, :] ** 2 * (1.0 + h)[:, None])
+    # fitted with it
+    h = np.einsum('ij,jk,ik->i', z, cast(np.ndarray, fit.full_covariance_unscaled), z)
+    return _load_sigma(
+        np.linalg.inv(out_jac), fit.residual_sigma[None, :] ** 2 * (1.0 + h)[:, None]
+    )

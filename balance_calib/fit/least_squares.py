@@ -9,6 +9,7 @@ scaled, pivoted QR to find the terms the load schedule does not excite, the tria
 for the solution and the coefficient covariance. `scaled_least_squares` is that primitive; the
 series-tare fits (series_tares.py) and the diagnosis (diagnosis/statistics.py) call it too.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -19,7 +20,7 @@ import numpy as np
 import scipy.linalg
 
 from ..model.balance_model import BalanceModel
-from ..model.terms import Term, as_variables, design_matrix
+from ..model.terms import as_variables, design_matrix, Term
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
 
 # A term whose rated-scaled column, after removing what the other terms already explain, keeps
@@ -33,8 +34,10 @@ class UnexcitedTermsError(ValueError):
     def __init__(self, terms: Sequence[str], model_name: str):
         self.terms = tuple(terms)
         super().__init__(
-            f'the load schedule does not excite {len(self.terms)} term(s) of the {model_name} model: '
-            f'{", ".join(self.terms)}; load those bridges (alone and combined) or fit a smaller model')
+            f'the load schedule does not excite {len(self.terms)} term(s) of the {model_name} '
+            f'model: {", ".join(self.terms)}; load those bridges (alone and combined) or fit a '
+            'smaller model'
+        )
 
 
 class TooFewPointsError(ValueError):
@@ -42,8 +45,9 @@ class TooFewPointsError(ValueError):
 
     def __init__(self, points: int, terms: int, tares: int, model_name: str):
         super().__init__(
-            f'{points} points cannot determine the {model_name} model\'s {terms} terms and {tares} '
-            f'series tare(s) (it needs at least {terms + tares + 1} points); fit fewer terms')
+            f"{points} points cannot determine the {model_name} model's {terms} terms and {tares} "
+            f'series tare(s) (it needs at least {terms + tares + 1} points); fit fewer terms'
+        )
 
 
 @dataclass(frozen=True)
@@ -56,12 +60,12 @@ class ScaledSolution:
     `covariance_unscaled`.
     """
 
-    coefficients: np.ndarray    # (p,) or (p, k); 0 for dependent columns
-    pivots: np.ndarray          # (p,) column order of the pivoted QR: most new information first
+    coefficients: np.ndarray  # (p,) or (p, k); 0 for dependent columns
+    pivots: np.ndarray  # (p,) column order of the pivoted QR: most new information first
     pivot_diagonal: np.ndarray  # (p,) |R_ii| of the scaled columns in pivot order, 0-padded
-    r_factor: np.ndarray        # (r, r) upper triangular factor of the kept scaled columns
-    basis: np.ndarray           # (N, r) orthonormal basis of the kept columns' span (Q)
-    scales: np.ndarray          # (p,) the column scales used (design / scales was factored)
+    r_factor: np.ndarray  # (r, r) upper triangular factor of the kept scaled columns
+    basis: np.ndarray  # (N, r) orthonormal basis of the kept columns' span (Q)
+    scales: np.ndarray  # (p,) the column scales used (design / scales was factored)
 
     @property
     def rank(self) -> int:
@@ -71,29 +75,31 @@ class ScaledSolution:
     def kept(self) -> np.ndarray:
         """(p,) bool: the columns solved for (the others are dependent, fixed at zero)."""
         mask = np.zeros(self.pivots.size, dtype=bool)
-        mask[self.pivots[:self.rank]] = True
+        mask[self.pivots[: self.rank]] = True
         return mask
 
     @cached_property
     def dependent_columns(self) -> np.ndarray:
         """Indices of the dependent columns, in pivot order (least new information last)."""
-        return self.pivots[self.rank:]
+        return self.pivots[self.rank :]
 
     @cached_property
     def leverage(self) -> np.ndarray:
         """(N,) hat-matrix diagonal h_ii: the squared row norms of the basis."""
-        return np.sum(self.basis ** 2, axis=1)
+        return np.sum(self.basis**2, axis=1)
 
     @cached_property
     def covariance_unscaled(self) -> np.ndarray:
         """(p, p) (XᵀX)⁻¹ over the kept columns, in the design's units (zero rows and columns
-        for dependent ones): times σ² it is the coefficient covariance of eq. (28)'s solution."""
+        for dependent ones): times σ² it is the coefficient covariance of eq. (28)'s solution.
+        """
         p = self.pivots.size
-        order = self.pivots[:self.rank]
+        order = self.pivots[: self.rank]
         inverse_r = scipy.linalg.solve_triangular(self.r_factor, np.eye(self.rank))
         covariance = np.zeros((p, p))
         covariance[np.ix_(order, order)] = (inverse_r @ inverse_r.T) / np.outer(
-            self.scales[order], self.scales[order])
+            self.scales[order], self.scales[order]
+        )
         return covariance
 
     @cached_property
@@ -112,8 +118,14 @@ def column_norms(design: np.ndarray) -> np.ndarray:
     return norms
 
 
-def scaled_least_squares(design, targets, *, scales: np.ndarray | None = None,
-                         tolerance: float = 1e-9, relative: bool = True) -> ScaledSolution:
+def scaled_least_squares(
+    design,
+    targets,
+    *,
+    scales: np.ndarray | None = None,
+    tolerance: float = 1e-9,
+    relative: bool = True,
+) -> ScaledSolution:
     """Minimise ``||targets - design · coefficients||²`` per target column, eqs. (19), (28).
 
     Parameters
@@ -143,7 +155,7 @@ def scaled_least_squares(design, targets, *, scales: np.ndarray | None = None,
     scales = column_norms(design) if scales is None else np.asarray(scales, dtype=float)
     q_factor, r_factor, pivots = scipy.linalg.qr(design / scales, mode='economic', pivoting=True)
     diagonal = np.zeros(n_columns)
-    diagonal[:min(r_factor.shape)] = np.abs(np.diag(r_factor))
+    diagonal[: min(r_factor.shape)] = np.abs(np.diag(r_factor))
     threshold = tolerance * max(diagonal[0], 1e-300) if relative and n_columns else tolerance
     rank = int(np.sum(diagonal > threshold))
     basis = q_factor[:, :rank]
@@ -163,10 +175,10 @@ class FitResult:
 
     model: BalanceModel
     rank: int
-    condition_number: float              # of the column-scaled design matrix
-    unexcited_terms: tuple[str, ...]     # fixed at zero (only with on_unexcited='drop')
-    standard_errors: np.ndarray          # (n_components, n_terms), same units as coefficients
-    residuals: np.ndarray                # (N, n_components): measured - fitted load, N / N·m
+    condition_number: float  # of the column-scaled design matrix
+    unexcited_terms: tuple[str, ...]  # fixed at zero (only with on_unexcited='drop')
+    standard_errors: np.ndarray  # (n_components, n_terms), same units as coefficients
+    residuals: np.ndarray  # (N, n_components): measured - fitted load, N / N·m
     degrees_of_freedom: int
 
     @property
@@ -174,8 +186,9 @@ class FitResult:
         return self.residuals.shape[0]
 
 
-def term_scales(terms: Sequence[Term], rated_outputs: Mapping[str, float] | None,
-                design: np.ndarray) -> np.ndarray:
+def term_scales(
+    terms: Sequence[Term], rated_outputs: Mapping[str, float] | None, design: np.ndarray
+) -> np.ndarray:
     """Size of each term at rated outputs (products of rated values), else its largest value."""
     scales = np.empty(len(terms))
     for j, term in enumerate(terms):
@@ -189,11 +202,18 @@ def term_scales(terms: Sequence[Term], rated_outputs: Mapping[str, float] | None
     return scales
 
 
-def fit_model(terms: Sequence[Term], bridge_outputs_mv, loads, *, name: str = 'custom',
-              extra: Mapping[str, np.ndarray] | None = None,
-              rated_outputs: Mapping[str, float] | None = None,
-              components: Sequence[str] = COMPONENTS, inputs: Sequence[str] = BRIDGE_OUTPUTS,
-              on_unexcited: str = 'raise') -> FitResult:
+def fit_model(
+    terms: Sequence[Term],
+    bridge_outputs_mv,
+    loads,
+    *,
+    name: str = 'custom',
+    extra: Mapping[str, np.ndarray] | None = None,
+    rated_outputs: Mapping[str, float] | None = None,
+    components: Sequence[str] = COMPONENTS,
+    inputs: Sequence[str] = BRIDGE_OUTPUTS,
+    on_unexcited: str = 'raise',
+) -> FitResult:
     """Fit coefficients so that loads ≈ model(outputs), eq. (19).
 
     bridge_outputs_mv (N, n_inputs), loads (N, n_components). `rated_outputs` (mV by input name)
@@ -214,8 +234,9 @@ def fit_model(terms: Sequence[Term], bridge_outputs_mv, loads, *, name: str = 'c
     # Column scaling by the term's size at rated output, normalised so a fully excited column
     # has norm about 1: the absolute tolerance then means "not excited by the schedule".
     scales = term_scales(terms, rated_outputs, design) * np.sqrt(max(n_points, 1))
-    solution = scaled_least_squares(design, targets, scales=scales,
-                                    tolerance=UNEXCITED_TOLERANCE, relative=False)
+    solution = scaled_least_squares(
+        design, targets, scales=scales, tolerance=UNEXCITED_TOLERANCE, relative=False
+    )
     excited_mask = solution.kept
     unexcited = tuple(terms[j].name for j in range(n_terms) if not excited_mask[j])
     if unexcited and on_unexcited == 'raise':
@@ -226,13 +247,13 @@ def fit_model(terms: Sequence[Term], bridge_outputs_mv, loads, *, name: str = 'c
     kept = np.flatnonzero(excited_mask)
     if kept.size > n_points:
         raise UnexcitedTermsError([terms[j].name for j in kept[n_points:]], name)
-    coefficients = np.ascontiguousarray(solution.coefficients.T)        # (n_components, n_terms)
+    coefficients = np.ascontiguousarray(solution.coefficients.T)  # (n_components, n_terms)
 
     fitted = design @ coefficients.T
     residuals = targets - fitted
     dof = n_points - kept.size
-    variance = (residuals ** 2).sum(axis=0) / dof if dof > 0 else np.full(targets.shape[1], np.nan)
-    covariance_diag = np.diag(solution.covariance_unscaled)[kept]       # diag((XᵀX)⁻¹)
+    variance = (residuals**2).sum(axis=0) / dof if dof > 0 else np.full(targets.shape[1], np.nan)
+    covariance_diag = np.diag(solution.covariance_unscaled)[kept]  # diag((XᵀX)⁻¹)
     standard_errors = np.zeros_like(coefficients)
     standard_errors[:, kept] = np.sqrt(np.outer(variance, covariance_diag))
     condition = solution.condition_number
@@ -242,5 +263,12 @@ def fit_model(terms: Sequence[Term], bridge_outputs_mv, loads, *, name: str = 'c
 
 def refit_like(model: BalanceModel, bridge_outputs_mv, loads, **kwargs) -> FitResult:
     """Fit the term list of an existing model to new data."""
-    return fit_model(model.terms, bridge_outputs_mv, loads, name=model.name,
-                     components=model.components, inputs=model.inputs, **kwargs)
+    return fit_model(
+        model.terms,
+        bridge_outputs_mv,
+        loads,
+        name=model.name,
+        components=model.components,
+        inputs=model.inputs,
+        **kwargs,
+    )

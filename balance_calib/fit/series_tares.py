@@ -1,8 +1,8 @@
 """Series tares estimated with the model (AIAA R-091 practice), and the direct (TM-663) form.
 
-Every load series s carries an unknown tare load T_s: total load = applied + T_s. In the direct form
-(TM-663 eqs. (1)-(18): loads as a polynomial of the outputs) the tares are per-series load intercepts
-of one linear least-squares problem:
+Every load series s carries an unknown tare load T_s: total load = applied + T_s. In the direct
+form (TM-663 eqs. (1)-(18): loads as a polynomial of the outputs) the tares are per-series load
+intercepts of one linear least-squares problem:
 
     applied_i = C · x(V_i) - T_{s(i)}          (x without the constant: T takes its role)
 
@@ -10,32 +10,39 @@ solved with scaled columns by pivoted QR (fit/least_squares.scaled_least_squares
 equations), giving coefficients, tares and their full covariance, from all points of each series
 rather than its zero-load point alone.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Sequence, cast
+from typing import Any, cast, Sequence
 
 import numpy as np
 
 from ..model.balance_model import BalanceModel
-from ..model.terms import Term, as_variables, design_matrix
-from .least_squares import (ScaledSolution, TooFewPointsError, UnexcitedTermsError,
-                            scaled_least_squares)
-from .term_selection import TermStatistics, term_statistics
+from ..model.terms import as_variables, design_matrix, Term
+from .least_squares import (
+    scaled_least_squares,
+    ScaledSolution,
+    TooFewPointsError,
+    UnexcitedTermsError,
+)
+from .term_selection import term_statistics, TermStatistics
 
 RANK_TOLERANCE = 1e-9
 
 
-def solve_scaled(design: np.ndarray, targets: np.ndarray, column_names: Sequence[str],
-                 model_name: str = 'model') -> ScaledSolution:
+def solve_scaled(
+    design: np.ndarray, targets: np.ndarray, column_names: Sequence[str], model_name: str = 'model'
+) -> ScaledSolution:
     """Least squares with columns scaled to unit norm, eq. (19) with the tares as columns.
 
     design (N, q), targets (N, k); raises UnexcitedTermsError naming the dependent columns.
     """
     solution = scaled_least_squares(design, targets, tolerance=RANK_TOLERANCE)
     if solution.rank < design.shape[1]:
-        raise UnexcitedTermsError([column_names[j] for j in solution.dependent_columns],
-                                  model_name)
+        raise UnexcitedTermsError(
+            [column_names[j] for j in solution.dependent_columns], model_name
+        )
     return solution
 
 
@@ -52,38 +59,54 @@ def series_indicator(series) -> tuple[tuple[int, ...], np.ndarray, np.ndarray]:
 class SeriesTareFit:
     """A model fitted with its series tares, in SI, with what the report needs."""
 
-    method: str                        # 'direct' | 'iterative'
-    model: Any                         # BalanceModel (direct) or IterativeModel (iterative)
+    method: str  # 'direct' | 'iterative'
+    model: Any  # BalanceModel (direct) or IterativeModel (iterative)
     series_labels: tuple[int, ...]
-    tares: np.ndarray                  # (n_series, n_loads) N / N·m, total = applied + tare
-    tare_sigma: np.ndarray             # (n_series, n_loads) standard errors
-    load_residuals: np.ndarray         # (N, n_loads) applied - predicted applied
-    press_load_residuals: np.ndarray   # (N, n_loads) the same with each point left out of the fit
-    point_uncertainty: np.ndarray      # (N, n_loads) k = 1 standard uncertainty of each point's load
-    residual_sigma: np.ndarray         # (n_targets,) σ of the fit's own residuals (loads or outputs)
+    tares: np.ndarray  # (n_series, n_loads) N / N·m, total = applied + tare
+    tare_sigma: np.ndarray  # (n_series, n_loads) standard errors
+    load_residuals: np.ndarray  # (N, n_loads) applied - predicted applied
+    press_load_residuals: np.ndarray  # (N, n_loads) the same with each point left out of the fit
+    point_uncertainty: np.ndarray  # (N, n_loads) k = 1 standard uncertainty of each point's load
+    residual_sigma: np.ndarray  # (n_targets,) σ of the fit's own residuals (loads or outputs)
     dof: int
     statistics: TermStatistics | None
     condition_number: float
     iterations: int = 1
     notes: tuple[str, ...] = field(default_factory=tuple)
-    full_covariance_unscaled: np.ndarray | None = None   # (p + n_series, p + n_series) of [terms, series]
+    # (p + n_series, p + n_series) of [terms, series]
+    full_covariance_unscaled: np.ndarray | None = None
 
     def tare_rows(self, series) -> np.ndarray:
-        """(N, n_loads) the calibration's tare of each point's series; KeyError names a series it lacks."""
+        """(N, n_loads) the calibration's tare of each point's series; KeyError names a series
+        it lacks.
+        """
         lookup = {s: i for i, s in enumerate(self.series_labels)}
         missing = sorted({int(s) for s in series} - set(lookup))
         if missing:
-            raise KeyError(f'load series {", ".join(map(str, missing))} not in the calibration '
-                           f'(it has {", ".join(map(str, self.series_labels))})')
+            raise KeyError(
+                f'load series {", ".join(map(str, missing))} not in the calibration '
+                f'(it has {", ".join(map(str, self.series_labels))})'
+            )
         return self.tares[[lookup[int(s)] for s in series]]
 
     def predict_applied(self, outputs, series) -> np.ndarray:
-        """Applied loads predicted for validation points: model loads minus the calibration's tares."""
+        """Applied loads predicted for validation points: model loads minus the calibration's
+        tares.
+        """
         return np.atleast_2d(self.model.loads(outputs)) - self.tare_rows(series)
 
 
-def fit_direct(terms: Sequence[Term], outputs, applied_loads, series, *, components: Sequence[str],
-               inputs: Sequence[str], name: str = 'direct', statistics: bool = True) -> SeriesTareFit:
+def fit_direct(
+    terms: Sequence[Term],
+    outputs,
+    applied_loads,
+    series,
+    *,
+    components: Sequence[str],
+    inputs: Sequence[str],
+    name: str = 'direct',
+    statistics: bool = True,
+) -> SeriesTareFit:
     """TM-663's form with per-series load intercepts (the tares), eq. (19) plus tares."""
     terms = tuple(t for t in terms if not t.is_constant)
     outputs = np.atleast_2d(np.asarray(outputs, float))
@@ -100,24 +123,56 @@ def fit_direct(terms: Sequence[Term], outputs, applied_loads, series, *, compone
     coefficients = solution.coefficients[:p].T
     tares = solution.coefficients[p:]
     residuals = applied - design @ solution.coefficients
-    sigma = np.sqrt((residuals ** 2).sum(axis=0) / dof)
+    sigma = np.sqrt((residuals**2).sum(axis=0) / dof)
     cov_diag = np.diag(solution.covariance_unscaled)
-    tare_sigma = np.sqrt(np.outer(cov_diag[p:], sigma ** 2))
+    tare_sigma = np.sqrt(np.outer(cov_diag[p:], sigma**2))
     h = np.minimum(solution.leverage, 1 - 1e-12)
     press = residuals / (1 - h)[:, None]
     uncertainty = sigma[None, :] * np.sqrt(1.0 + h)[:, None]
-    metadata = {'uncertainty': {'residual_sigma': sigma.tolist(),
-                                'covariance_unscaled': solution.covariance_unscaled[:p, :p].tolist(),
-                                'dof': int(dof)}}
+    metadata = {
+        'uncertainty': {
+            'residual_sigma': sigma.tolist(),
+            'covariance_unscaled': solution.covariance_unscaled[:p, :p].tolist(),
+            'dof': int(dof),
+        }
+    }
     model = BalanceModel(name, terms, coefficients, tuple(components), tuple(inputs), metadata)
-    stats = term_statistics(design, applied, solution.coefficients, solution.covariance_unscaled, p,
-                            [t.name for t in terms], list(components)) if statistics else None
-    return SeriesTareFit('direct', model, labels, tares, tare_sigma, residuals, press, uncertainty, sigma,
-                         dof, stats, solution.condition_number, 1, (), solution.covariance_unscaled)
+    stats = (
+        term_statistics(
+            design,
+            applied,
+            solution.coefficients,
+            solution.covariance_unscaled,
+            p,
+            [t.name for t in terms],
+            list(components),
+        )
+        if statistics
+        else None
+    )
+    return SeriesTareFit(
+        'direct',
+        model,
+        labels,
+        tares,
+        tare_sigma,
+        residuals,
+        press,
+        uncertainty,
+        sigma,
+        dof,
+        stats,
+        solution.condition_number,
+        1,
+        (),
+        solution.covariance_unscaled,
+    )
 
 
 def series_rows(fit: SeriesTareFit, series) -> np.ndarray:
-    """(N, n_series) one-hot rows of the calibration's series for new points (KeyError if unknown)."""
+    """(N, n_series) one-hot rows of the calibration's series for new points (KeyError if
+    unknown).
+    """
     fit.tare_rows(series)
     rows = np.zeros((len(series), len(fit.series_labels)))
     rows[np.arange(len(series)), [fit.series_labels.index(int(s)) for s in series]] = 1.0
@@ -125,10 +180,12 @@ def series_rows(fit: SeriesTareFit, series) -> np.ndarray:
 
 
 def direct_point_uncertainty(fit: SeriesTareFit, outputs, series) -> np.ndarray:
-    """k = 1 uncertainty of applied loads predicted at new points with the calibration's tares:
+    """K = 1 uncertainty of applied loads predicted at new points with the calibration's tares:
     u² = σ² (1 + z (ZᵀZ)⁻¹ zᵀ), z = [x(V), -e_s]: coefficients, the tare's own uncertainty and
-    their correlation, plus the residual scatter."""
+    their correlation, plus the residual scatter.
+    """
     outputs = np.atleast_2d(np.asarray(outputs, float))
     z = np.hstack([fit.model.design(outputs), -series_rows(fit, series)])
-    h = np.einsum('ij,jk,ik->i', z, cast(np.ndarray, fit.full_covariance_unscaled), z)  # fitted with it
+    # fitted with it
+    h = np.einsum('ij,jk,ik->i', z, cast(np.ndarray, fit.full_covariance_unscaled), z)
     return fit.residual_sigma[None, :] * np.sqrt(1.0 + h)[:, None]

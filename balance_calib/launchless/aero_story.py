@@ -12,21 +12,23 @@ offline through the linear, quadratic and cubic calibrations, against the simula
    (largest over α, and in units of the point's uncertainty u), C_AF at the highest α; the figure
    where the linear matrix departs is OUT/reduce/coefficient_CAF.png.
 """
+
 from __future__ import annotations
 
 import argparse
 import csv
 import os
+from pathlib import Path
 import random
 import shutil
 import stat
 import sys
 import threading
-from pathlib import Path
 
 import numpy as np
 
-from .processes import NodeProcess, close_graph, wait_until as _wait
+from .processes import close_graph, NodeProcess
+from .processes import wait_until as _wait
 
 MODEL = 'euler_replica_lmc6522'
 COEFFICIENTS = ('CAF', 'CY', 'CN', 'Cl', 'Cm', 'Cn', 'CD', 'CL')
@@ -34,14 +36,17 @@ COEFFICIENTS = ('CAF', 'CY', 'CN', 'Cl', 'Cm', 'Cn', 'CD', 'CL')
 
 def aero_executable(scratch: Path) -> str:
     """The aero_coefficients console script, or (before the package is reinstalled) a script that
-    runs the same main() with this interpreter."""
+    runs the same main() with this interpreter.
+    """
     found = shutil.which('aero_coefficients')
     if found:
         return found
     scratch.mkdir(parents=True, exist_ok=True)
     script = scratch / 'aero_coefficients'
-    script.write_text(f'#!{sys.executable}\nimport sys\nfrom balance_calib.nodes.aero_coefficients import main\n'
-                      f'sys.exit(main())\n')
+    script.write_text(
+        f'#!{sys.executable}\nimport sys\nfrom balance_calib.nodes.aero_coefficients import main\n'
+        f'sys.exit(main())\n'
+    )
     script.chmod(script.stat().st_mode | stat.S_IXUSR)
     return str(script)
 
@@ -51,12 +56,21 @@ def _six(msg):
     return [w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z]
 
 
-def run_story(out_dir: Path, *, q_pa: float = 50000.0, installation: str = 'upright', seed: int = 3,
-              noise_sigma_pct_fs: float = 0.005, say=print) -> dict:
-    """noise_sigma_pct_fs: σ of a held point's mean load; the default is a long average per point, so that
-    what separates the three calibrations is their model, not the scatter (Table 17's σ: -1)."""
-    import rclpy
+def run_story(
+    out_dir: Path,
+    *,
+    q_pa: float = 50000.0,
+    installation: str = 'upright',
+    seed: int = 3,
+    noise_sigma_pct_fs: float = 0.005,
+    say=print,
+) -> dict:
+    """noise_sigma_pct_fs: σ of a held point's mean load; the default is a long average per point,
+    so that what separates the three calibrations is their model, not the scatter (Table 17's σ:
+    -1).
+    """
     from geometry_msgs.msg import WrenchStamped
+    import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
@@ -83,33 +97,103 @@ def run_story(out_dir: Path, *, q_pa: float = 50000.0, installation: str = 'upri
     node.create_subscription(WrenchStamped, '/aero/point_wind', points_wind.append, reliable)
     processes = []
     try:
-        processes.append(NodeProcess('balance_calibrator', domain, logs, {
-            'installation': installation, 'model': 'cubic', 'tare_file': str(out_dir / 'calibrator_tare.yaml')}))
-        processes.append(NodeProcess(aero_executable(logs), domain, logs, {
-            'model': MODEL, 'estimate_weight': True, 'calibration_file': 'lmc6522', 'installation': installation}))
-        recorder = NodeProcess('balance_recorder', domain, logs, {'output': str(bag), 'topics': [
-            '/balance/raw', '/model/attitude', '/tunnel/dynamic_pressure', '/aero/truth', '/aero/truth_wind']})
+        processes.append(
+            NodeProcess(
+                'balance_calibrator',
+                domain,
+                logs,
+                {
+                    'installation': installation,
+                    'model': 'cubic',
+                    'tare_file': str(out_dir / 'calibrator_tare.yaml'),
+                },
+            )
+        )
+        processes.append(
+            NodeProcess(
+                aero_executable(logs),
+                domain,
+                logs,
+                {
+                    'model': MODEL,
+                    'estimate_weight': True,
+                    'calibration_file': 'lmc6522',
+                    'installation': installation,
+                },
+            )
+        )
+        recorder = NodeProcess(
+            'balance_recorder',
+            domain,
+            logs,
+            {
+                'output': str(bag),
+                'topics': [
+                    '/balance/raw',
+                    '/model/attitude',
+                    '/tunnel/dynamic_pressure',
+                    '/aero/truth',
+                    '/aero/truth_wind',
+                ],
+            },
+        )
         processes.append(recorder)
-        _wait(lambda: node.count_subscribers('/model/attitude') >= 1 and node.count_subscribers('/balance/raw') >= 1,
-              30, 'aero_coefficients and balance_calibrator')
-        say(f'[aero] ROS_DOMAIN_ID={domain}: {MODEL} on the LMC6522 ({installation}), wind-off α/φ sweep, then '
-            f'α = -2 … 22° at q∞ = {q_pa / 1000:g} kPa (point noise {noise_sigma_pct_fs:g} % FS); recording to {bag}')
-        publisher = NodeProcess('bridge_publisher', domain, logs, {
-            'mode': 'wind_on', 'aero_model': MODEL, 'installation': installation, 'dynamic_pressure_pa': q_pa,
-            'rate_hz': 100.0, 'hold_s': 0.5, 'wind_off_hold_s': 0.3, 'electrical_zero_mv': 0.0, 'seed': seed,
-            'noise_sigma_pct_fs': noise_sigma_pct_fs,
-            'exit_when_done': True, 'wait_for_subscribers': 2, 'start_delay_s': 2.0})
+        _wait(
+            lambda: (
+                node.count_subscribers('/model/attitude') >= 1
+                and node.count_subscribers('/balance/raw') >= 1
+            ),
+            30,
+            'aero_coefficients and balance_calibrator',
+        )
+        say(
+            f'[aero] ROS_DOMAIN_ID={domain}: {MODEL} on the LMC6522 ({installation}), wind-off '
+            f'α/φ sweep, then α = -2 … 22° at q∞ = {q_pa / 1000:g} kPa (point noise '
+            f'{noise_sigma_pct_fs:g} % FS); recording to {bag}'
+        )
+        publisher = NodeProcess(
+            'bridge_publisher',
+            domain,
+            logs,
+            {
+                'mode': 'wind_on',
+                'aero_model': MODEL,
+                'installation': installation,
+                'dynamic_pressure_pa': q_pa,
+                'rate_hz': 100.0,
+                'hold_s': 0.5,
+                'wind_off_hold_s': 0.3,
+                'electrical_zero_mv': 0.0,
+                'seed': seed,
+                'noise_sigma_pct_fs': noise_sigma_pct_fs,
+                'exit_when_done': True,
+                'wait_for_subscribers': 2,
+                'start_delay_s': 2.0,
+            },
+        )
         processes.append(publisher)
         if publisher.wait(300) != 0:
             raise RuntimeError(f'bridge_publisher failed; see {publisher.stderr_path}')
-        _wait(lambda: len(points) >= 13 and len(points_wind) >= 13, 30, 'the live points of aero_coefficients')
+        _wait(
+            lambda: len(points) >= 13 and len(points_wind) >= 13,
+            30,
+            'the live points of aero_coefficients',
+        )
         if recorder.stop() != 0:
-            raise RuntimeError(f'balance_recorder did not close cleanly; see {recorder.stderr_path}')
+            raise RuntimeError(
+                f'balance_recorder did not close cleanly; see {recorder.stderr_path}'
+            )
     finally:
         close_graph(processes, executor, node, context)
 
-    reduction = reduce_bags([bag], 'lmc6522', MODEL, compare=['linear', 'quadratic', 'cubic'], estimate_weight=True,
-                            installation=installation)
+    reduction = reduce_bags(
+        [bag],
+        'lmc6522',
+        MODEL,
+        compare=['linear', 'quadratic', 'cubic'],
+        estimate_weight=True,
+        installation=installation,
+    )
     write_outputs(reduction, out_dir / 'reduce')
     with open(out_dir / 'reduce' / 'coefficients.csv', newline='') as handle:
         rows = list(csv.DictReader(handle))
@@ -117,13 +201,27 @@ def run_story(out_dir: Path, *, q_pa: float = 50000.0, installation: str = 'upri
     live = np.array([_six(b) + [_six(w)[0], _six(w)[2]] for b, w in zip(points, points_wind)])
     tare = reduction.main.result.tares[0]
     truth = truth_by_point(reduction)
-    say(f'[aero] weight tare from {tare.points} wind-off attitudes (load space): W = {tare.weight_n:.2f} ± '
-        f'{tare.weight_sigma_n:.2f} N, CG = ({", ".join(f"{1000 * c:.1f}" for c in tare.cg_m)}) mm '
-        f'(simulated: 250 N at (15, 0, -4) mm)')
-    say(f'[aero] live (aero_coefficients) against offline (balance-calib reduce): {len(live)} and {len(offline)} '
-        f'held points, largest |difference| {np.max(np.abs(live - offline)):.1e}')
-    u = np.array([np.concatenate([p.uncertainty_body, p.uncertainty_wind[[0, 2]]]) for p in reduction.main.result.wind_on])
-    say('[aero] error against the truth, largest over α (and in units of the point\'s uncertainty u, k = 1):')
+    say(
+        f'[aero] weight tare from {tare.points} wind-off attitudes (load space): W = '
+        f'{tare.weight_n:.2f} ± {tare.weight_sigma_n:.2f} N, CG = '
+        f'({", ".join(f"{1000 * c:.1f}" for c in tare.cg_m)}) mm (simulated: 250 N at (15, 0, '
+        '-4) mm)'
+    )
+    say(
+        f'[aero] live (aero_coefficients) against offline (balance-calib reduce): {len(live)} '
+        f'and {len(offline)} held points, largest |difference| '
+        f'{np.max(np.abs(live - offline)):.1e}'
+    )
+    u = np.array(
+        [
+            np.concatenate([p.uncertainty_body, p.uncertainty_wind[[0, 2]]])
+            for p in reduction.main.result.wind_on
+        ]
+    )
+    say(
+        "[aero] error against the truth, largest over α (and in units of the point's "
+        "uncertainty u, k = 1):"
+    )
     say('         ' + ''.join(f'{c:>17}' for c in COEFFICIENTS))
     errors = {}
     for name in ('linear', 'quadratic', 'cubic'):
@@ -131,29 +229,60 @@ def run_story(out_dir: Path, *, q_pa: float = 50000.0, installation: str = 'upri
         values = np.array([[float(r[c]) for c in column] for r in rows])
         error = np.abs(values - truth)
         errors[name] = error
-        say(f'  {name:<9}' + ''.join(f'{np.max(error[:, k]):10.1e} ({np.max(error[:, k] / u[:, k]):3.1f}u)'
-                                      for k in range(len(COEFFICIENTS))))
+        say(
+            f'  {name:<9}'
+            + ''.join(
+                f'{np.max(error[:, k]):10.1e} ({np.max(error[:, k] / u[:, k]):3.1f}u)'
+                for k in range(len(COEFFICIENTS))
+            )
+        )
     alpha = float(rows[-1]['alpha_deg'])
-    caf = {name: float(rows[-1]['CAF' if name == reduction.main.name else f'CAF_{name}'])
-           for name in ('linear', 'quadratic', 'cubic')}
-    say(f'[aero] C_AF at α = {alpha:.2f}°: truth {truth[-1, 0]:+.5f}; '
-        + ', '.join(f'{name} {value:+.5f}' for name, value in caf.items()) + f' (u = {u[-1, 0]:.5f})')
-    say(f'[aero] figures (TM-663 Figs. 12-13 style): {out_dir / "reduce"}/coefficient_*.png; '
+    caf = {
+        name: float(rows[-1]['CAF' if name == reduction.main.name else f'CAF_{name}'])
+        for name in ('linear', 'quadratic', 'cubic')
+    }
+    say(
+        f'[aero] C_AF at α = {alpha:.2f}°: truth {truth[-1, 0]:+.5f}; '
+        + ', '.join(f'{name} {value:+.5f}' for name, value in caf.items())
+        + f' (u = {u[-1, 0]:.5f})'
+    )
+    say(
+        f'[aero] figures (TM-663 Figs. 12-13 style): {out_dir / "reduce"}/coefficient_*.png; '
         f'the linear departure in C_AF: {out_dir / "reduce" / "coefficient_CAF.png"}; report: '
-        f'{out_dir / "reduce" / "report.md"}')
-    return {'live_vs_offline': float(np.max(np.abs(live - offline))), 'errors': errors, 'tare': tare}
+        f'{out_dir / "reduce" / "report.md"}'
+    )
+    return {
+        'live_vs_offline': float(np.max(np.abs(live - offline))),
+        'errors': errors,
+        'tare': tare,
+    }
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='aero_story', description=__doc__.split('\n')[0])
-    parser.add_argument('out', nargs='?', default='demo_out/aero', help='output directory (default demo_out/aero)')
-    parser.add_argument('--q-pa', type=float, default=50000.0, help='dynamic pressure of the wind-on holds, Pa')
-    parser.add_argument('--installation', default='upright', help='upright or inverted (TM-663 §10.2)')
-    parser.add_argument('--noise-pct-fs', type=float, default=0.005,
-                        help="σ of a held point's mean load, %% FS (default 0.005; -1: Table 17's cubic row)")
+    parser.add_argument(
+        'out', nargs='?', default='demo_out/aero', help='output directory (default demo_out/aero)'
+    )
+    parser.add_argument(
+        '--q-pa', type=float, default=50000.0, help='dynamic pressure of the wind-on holds, Pa'
+    )
+    parser.add_argument(
+        '--installation', default='upright', help='upright or inverted (TM-663 §10.2)'
+    )
+    parser.add_argument(
+        '--noise-pct-fs',
+        type=float,
+        default=0.005,
+        help="σ of a held point's mean load, %% FS (default 0.005; -1: Table 17's cubic row)",
+    )
     args = parser.parse_args(argv)
     try:
-        run_story(Path(args.out), q_pa=args.q_pa, installation=args.installation, noise_sigma_pct_fs=args.noise_pct_fs)
+        run_story(
+            Path(args.out),
+            q_pa=args.q_pa,
+            installation=args.installation,
+            noise_sigma_pct_fs=args.noise_pct_fs,
+        )
     except (FileExistsError, RuntimeError, TimeoutError) as err:
         print(f'aero_story: {err}', file=sys.stderr)
         return 1

@@ -8,25 +8,28 @@ calibrator's ~/refit, then wind-on through the new calibration.
    processes on one ROS domain over loopback;
 2. when the publisher has played the schedule the recorder is stopped (the bag closes cleanly);
 3. ~/refit fits the bag (report in OUT/report) and the calibrator swaps to the new calibration;
-4. for each installation, bridge_publisher plays a wind-on α sweep, ~/zero takes the electrical zero on its wind-off
+4. for each installation, bridge_publisher plays a wind-on α sweep, ~/zero takes the electrical
+zero on its wind-off
    samples, and the mean /balance/wrench over every held point is compared with the true tunnel
    load (/balance/truth).
 """
+
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass, field
 import json
 import os
+from pathlib import Path
 import random
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from .processes import NodeProcess, close_graph, wait_until as _wait
+from .processes import close_graph, NodeProcess
+from .processes import wait_until as _wait
 
 
 @dataclass
@@ -34,7 +37,8 @@ class StoryResult:
     refit_success: bool
     refit_message: str
     report: dict
-    wind_on_error_pct_fs: dict = field(default_factory=dict)   # installation -> (held points, 6) errors
+    # installation -> (held points, 6) errors
+    wind_on_error_pct_fs: dict = field(default_factory=dict)
     bag: Path | None = None
     report_dir: Path | None = None
 
@@ -44,23 +48,35 @@ def graph_parameter(node: str, name: str):
     import yaml
 
     from ..config import resolve_config_path
+
     shipped = yaml.safe_load(resolve_config_path('graph_params').read_text())
     return shipped[node]['ros__parameters'][name]
 
 
-def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', installations=('upright', 'inverted'),
-              rate_hz: float = 200.0, point_duration_s: float = 0.1, transition_s: float = 0.03, seed: int = 1,
-              domain_id: int | None = None, wind_on_temperature_c: float = 20.0, compare_base: bool = False,
-              say=print) -> StoryResult:
-    import rclpy
+def run_story(
+    out_dir: Path,
+    *,
+    balance: str = 'lmc6522',
+    effects: str = '',
+    installations=('upright', 'inverted'),
+    rate_hz: float = 200.0,
+    point_duration_s: float = 0.1,
+    transition_s: float = 0.03,
+    seed: int = 1,
+    domain_id: int | None = None,
+    wind_on_temperature_c: float = 20.0,
+    compare_base: bool = False,
+    say=print,
+) -> StoryResult:
     from geometry_msgs.msg import WrenchStamped
+    from rcl_interfaces.srv import SetParameters
+    import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
+    from rclpy.parameter import Parameter
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from std_srvs.srv import Trigger
-    from rcl_interfaces.srv import SetParameters
-    from rclpy.parameter import Parameter
 
     out_dir = Path(out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -70,7 +86,8 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
     report_dir = out_dir / 'report'
     logs = out_dir / 'logs'
     domain = domain_id if domain_id is not None else random.randint(1, 99)
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')    # real DDS, never off this machine
+    # real DDS, never off this machine
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
     context = Context()
     rclpy.init(context=context, domain_id=domain)
@@ -90,27 +107,52 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
     # overload limit, which allows for them
     overload_fraction = graph_parameter('balance_calibrator', 'overload_fraction')
     try:
-        calibrator = NodeProcess('balance_calibrator', domain, logs, {'balance': balance, 'calibration_bags': [str(bag)],
-                                                     'report_dir': str(report_dir), 'tare_samples': 100,
-                                                     'overload_fraction': overload_fraction})
+        calibrator = NodeProcess(
+            'balance_calibrator',
+            domain,
+            logs,
+            {
+                'balance': balance,
+                'calibration_bags': [str(bag)],
+                'report_dir': str(report_dir),
+                'tare_samples': 100,
+                'overload_fraction': overload_fraction,
+            },
+        )
         processes.append(calibrator)
         recorder = NodeProcess('balance_recorder', domain, logs, {'output': str(bag)})
         processes.append(recorder)
-        say(f'[campaign] ROS_DOMAIN_ID={domain}: calibration campaign of {balance} over DDS '
+        say(
+            f'[campaign] ROS_DOMAIN_ID={domain}: calibration campaign of {balance} over DDS '
             f'({rate_hz:g} Hz, {point_duration_s:g} s per point), recording to {bag}'
-            + (f'; undeclared effects: {effects}' if effects else ''))
-        publisher = NodeProcess('bridge_publisher', domain, logs, {
-            'mode': 'calibration', 'balance': balance, 'rate_hz': rate_hz, 'point_duration_s': point_duration_s,
-            'transition_s': transition_s, 'effects': effects, 'seed': seed, 'exit_when_done': True,
-            'wait_for_subscribers': 2})
+            + (f'; undeclared effects: {effects}' if effects else '')
+        )
+        publisher = NodeProcess(
+            'bridge_publisher',
+            domain,
+            logs,
+            {
+                'mode': 'calibration',
+                'balance': balance,
+                'rate_hz': rate_hz,
+                'point_duration_s': point_duration_s,
+                'transition_s': transition_s,
+                'effects': effects,
+                'seed': seed,
+                'exit_when_done': True,
+                'wait_for_subscribers': 2,
+            },
+        )
         processes.append(publisher)
         code = publisher.wait(3600)
         if code != 0:
             raise RuntimeError(f'bridge_publisher failed ({code}); see {publisher.stderr_path}')
-        time.sleep(0.5)      # let the last samples reach the recorder before it closes the bag
+        time.sleep(0.5)  # let the last samples reach the recorder before it closes the bag
         if recorder.stop() != 0:
-            raise RuntimeError(f'balance_recorder did not close cleanly; see {recorder.stderr_path}')
-        say(f'[campaign] campaign recorded; calling /balance_calibrator/refit ...')
+            raise RuntimeError(
+                f'balance_recorder did not close cleanly; see {recorder.stderr_path}'
+            )
+        say('[campaign] campaign recorded; calling /balance_calibrator/refit ...')
         client = node.create_client(Trigger, '/balance_calibrator/refit')
         _wait(client.service_is_ready, 30, 'the ~/refit service')
         future = client.call_async(Trigger.Request())
@@ -119,36 +161,62 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
         say(f'[campaign] refit: success={reply.success}: {reply.message}')
         reports = sorted(report_dir.glob('*/report.json'), key=lambda p: p.stat().st_mtime)
         report = json.loads(reports[-1].read_text()) if reports else {}
-        result = StoryResult(reply.success, reply.message, report, {}, bag,
-                             reports[-1].parent if reports else report_dir)
+        result = StoryResult(
+            reply.success,
+            reply.message,
+            report,
+            {},
+            bag,
+            reports[-1].parent if reports else report_dir,
+        )
         if not reply.success:
             return result
 
         setter = node.create_client(SetParameters, '/balance_calibrator/set_parameters')
         _wait(setter.service_is_ready, 30, 'the calibrator parameter service')
         from balance_calib.config import load_balance_config
+
         capacity = load_balance_config(balance).capacity
         runs = [(installation, 'adopted') for installation in installations]
         if compare_base and report.get('adopted'):
-            runs.append((installations[0], report['base_model']))      # the same wind-on without the effect's terms
+            # the same wind-on without the effect's terms
+            runs.append((installations[0], report['base_model']))
         for installation, model in runs:
             request = SetParameters.Request()
-            request.parameters = [Parameter('installation', value=installation).to_parameter_msg(),
-                                  Parameter('model', value=model).to_parameter_msg()]
+            request.parameters = [
+                Parameter('installation', value=installation).to_parameter_msg(),
+                Parameter('model', value=model).to_parameter_msg(),
+            ]
             done = setter.call_async(request)
             _wait(done.done, 10, 'set installation')
             wrenches.clear()
             truths.clear()
-            # the simulated model weighs nothing: its wind-off outputs are the electrical zero (~/zero,
-            # output space); a model with weight would take ~/zero before mounting and ~/tare after
+            # the simulated model weighs nothing: its wind-off outputs are the electrical zero
+            # (~/zero, output space); a model with weight would take ~/zero before mounting and
+            # ~/tare after
             tare_client = node.create_client(Trigger, '/balance_calibrator/zero')
             _wait(tare_client.service_is_ready, 10, 'the ~/zero service')
             tare = tare_client.call_async(Trigger.Request())
-            wind = NodeProcess('bridge_publisher', domain, logs, {
-                'mode': 'wind_on', 'balance': balance, 'installation': installation, 'rate_hz': rate_hz,
-                'wind_off_s': 1.0, 'hold_s': 0.5, 'alpha_step_deg': 4.0, 'noise_sigma_pct_fs': 0.005,
-                'exit_when_done': True, 'wait_for_subscribers': 2, 'seed': seed + 1, 'effects': effects,
-                'temperature_c': wind_on_temperature_c})
+            wind = NodeProcess(
+                'bridge_publisher',
+                domain,
+                logs,
+                {
+                    'mode': 'wind_on',
+                    'balance': balance,
+                    'installation': installation,
+                    'rate_hz': rate_hz,
+                    'wind_off_s': 1.0,
+                    'hold_s': 0.5,
+                    'alpha_step_deg': 4.0,
+                    'noise_sigma_pct_fs': 0.005,
+                    'exit_when_done': True,
+                    'wait_for_subscribers': 2,
+                    'seed': seed + 1,
+                    'effects': effects,
+                    'temperature_c': wind_on_temperature_c,
+                },
+            )
             processes.append(wind)
             if wind.wait(300) != 0:
                 raise RuntimeError(f'wind-on publisher failed; see {wind.stderr_path}')
@@ -157,9 +225,14 @@ def run_story(out_dir: Path, *, balance: str = 'lmc6522', effects: str = '', ins
             errors = _held_point_errors(truths, wrenches, capacity)
             result.wind_on_error_pct_fs[f'{installation}/{model}'] = errors
             worst = np.max(np.abs(errors), axis=0)
-            say(f'[campaign] wind-on at {wind_on_temperature_c:g} °C, {installation} installation, {model} model: '
-                f'{len(errors)} held α points, worst |mean error| % FS: '
-                + ', '.join(f'{c} {w:.3f}' for c, w in zip(('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'), worst)))
+            say(
+                f'[campaign] wind-on at {wind_on_temperature_c:g} °C, {installation} '
+                f'installation, {model} model: {len(errors)} held α points, worst |mean error| '
+                '% FS: '
+                + ', '.join(
+                    f'{c} {w:.3f}' for c, w in zip(('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'), worst)
+                )
+            )
         return result
     finally:
         close_graph(processes, executor, node, context)
@@ -175,9 +248,18 @@ def _spin(executor):
 
 def _held_point_errors(truths, wrenches, capacity) -> np.ndarray:
     def by_stamp(messages):
-        return {(m.header.stamp.sec, m.header.stamp.nanosec): (m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
-                                                               m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z)
-                for m in messages}
+        return {
+            (m.header.stamp.sec, m.header.stamp.nanosec): (
+                m.wrench.force.x,
+                m.wrench.force.y,
+                m.wrench.force.z,
+                m.wrench.torque.x,
+                m.wrench.torque.y,
+                m.wrench.torque.z,
+            )
+            for m in messages
+        }
+
     true, measured = by_stamp(truths), by_stamp(wrenches)
     stamps = sorted(set(true) & set(measured))
     t = np.array([true[s] for s in stamps])
@@ -185,41 +267,85 @@ def _held_point_errors(truths, wrenches, capacity) -> np.ndarray:
     held = np.any(t != 0, axis=1)
     conditions, index = np.unique(t[held], axis=0, return_inverse=True)
     index = index.ravel()
-    return np.array([(m[held][index == k].mean(axis=0) - load) / np.abs(capacity) * 100
-                     for k, load in enumerate(conditions)])
+    return np.array(
+        [
+            (m[held][index == k].mean(axis=0) - load) / np.abs(capacity) * 100
+            for k, load in enumerate(conditions)
+        ]
+    )
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog='campaign', description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('out', nargs='?', default='demo_out',
-                        help='directory for the run (a new campaign_<time> inside it; default demo_out)')
-    parser.add_argument('--balance', default='lmc6522', help='balance config: lmc6522 (default), b660h or a path')
-    parser.add_argument('--effects', default='',
-                        help='effects the simulated balance has and the refit is not told about, e.g. '
-                             '"temperature:sensitivity_per_k=0.0045|0|0|0|0|0" (default none)')
-    parser.add_argument('--installations', default='upright,inverted',
-                        help='wind-on installations to run, comma-separated (TM-663 §10.2; default upright,inverted)')
-    parser.add_argument('--rate', type=float, default=200.0,
-                        help='bridge samples per second that bridge_publisher plays (default 200)')
-    parser.add_argument('--point-duration', type=float, default=0.1,
-                        help='seconds of samples per load point as played; the simulated balance still warms '
-                             'and drifts like a real campaign (default 0.1)')
-    parser.add_argument('--wind-on-temperature', type=float, default=20.0,
-                        help='balance temperature during the wind-on runs, °C')
+    parser = argparse.ArgumentParser(
+        prog='campaign', description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        'out',
+        nargs='?',
+        default='demo_out',
+        help='directory for the run (a new campaign_<time> inside it; default demo_out)',
+    )
+    parser.add_argument(
+        '--balance', default='lmc6522', help='balance config: lmc6522 (default), b660h or a path'
+    )
+    parser.add_argument(
+        '--effects',
+        default='',
+        help='effects the simulated balance has and the refit is not told about, e.g. '
+        '"temperature:sensitivity_per_k=0.0045|0|0|0|0|0" (default none)',
+    )
+    parser.add_argument(
+        '--installations',
+        default='upright,inverted',
+        help=(
+            'wind-on installations to run, comma-separated (TM-663 §10.2; default '
+            'upright,inverted)'
+        ),
+    )
+    parser.add_argument(
+        '--rate',
+        type=float,
+        default=200.0,
+        help='bridge samples per second that bridge_publisher plays (default 200)',
+    )
+    parser.add_argument(
+        '--point-duration',
+        type=float,
+        default=0.1,
+        help='seconds of samples per load point as played; the simulated balance still warms '
+        'and drifts like a real campaign (default 0.1)',
+    )
+    parser.add_argument(
+        '--wind-on-temperature',
+        type=float,
+        default=20.0,
+        help='balance temperature during the wind-on runs, °C',
+    )
     args = parser.parse_args(argv)
     out = Path(args.out) / time.strftime('campaign_%Y%m%dT%H%M%S')
-    result = run_story(out, balance=args.balance, effects=args.effects, rate_hz=args.rate,
-                       point_duration_s=args.point_duration, wind_on_temperature_c=args.wind_on_temperature,
-                       compare_base=bool(args.effects),
-                       installations=[i for i in args.installations.split(',') if i])
+    result = run_story(
+        out,
+        balance=args.balance,
+        effects=args.effects,
+        rate_hz=args.rate,
+        point_duration_s=args.point_duration,
+        wind_on_temperature_c=args.wind_on_temperature,
+        compare_base=bool(args.effects),
+        installations=[i for i in args.installations.split(',') if i],
+    )
     if result.report:
         report = result.report
         print(f'[campaign] report: {result.report_dir / "report.md"}')
-        print(f'[campaign] effects found: {", ".join(e["name"] for e in report["effects"]) or "none"}; '
-              f'σ before -> after (% FS): ' + ', '.join(
-                  f'{c} {report["sigma_pct_fs"]["before"][c]:.3f}->{report["sigma_pct_fs"]["after"][c]:.3f}'
-                  for c in report['sigma_pct_fs']['before']))
+        print(
+            '[campaign] effects found: '
+            f'{", ".join(e["name"] for e in report["effects"]) or "none"}; σ before -> after (% '
+            'FS): '
+            + ', '.join(
+                f'{c} '
+                f'{report["sigma_pct_fs"]["before"][c]:.3f}->{report["sigma_pct_fs"]["after"][c]:.3f}'
+                for c in report['sigma_pct_fs']['before']
+            )
+        )
     return 0 if result.refit_success else 1
 
 

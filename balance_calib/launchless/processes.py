@@ -1,12 +1,14 @@
 """Node processes for the launchless scripts and the ROS tests: a console script with parameters
-on a chosen ROS domain, its output in log files, stopped with SIGINT (then killed if it hangs)."""
+on a chosen ROS domain, its output in log files, stopped with SIGINT (then killed if it hangs).
+"""
+
 from __future__ import annotations
 
 import os
+from pathlib import Path
 import signal
 import subprocess
 import time
-from pathlib import Path
 
 
 def ros_args(parameters: dict) -> list[str]:
@@ -17,7 +19,7 @@ def ros_args(parameters: dict) -> list[str]:
         elif isinstance(value, (list, tuple)):
             value = '[' + ','.join(f"'{v}'" for v in value) + ']'
         elif value == '':
-            value = "''"           # an empty string must be spelled as YAML
+            value = "''"  # an empty string must be spelled as YAML
         args += ['-p', f'{name}:={value}']
     return args
 
@@ -25,15 +27,21 @@ def ros_args(parameters: dict) -> list[str]:
 class NodeProcess:
     """A node's console script as a subprocess with its own log files."""
 
-    def __init__(self, executable: str, domain_id: int, log_dir: Path, parameters: dict | None = None,
-                 extra_args: list[str] | None = None):
+    def __init__(
+        self,
+        executable: str,
+        domain_id: int,
+        log_dir: Path,
+        parameters: dict | None = None,
+        extra_args: list[str] | None = None,
+    ):
         self.name = executable
         env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
         log_dir.mkdir(parents=True, exist_ok=True)
         # bridge_publisher.1.out, bridge_publisher.2.out, ... in the order the runs started
         run = 1
         while True:
-            try:     # exclusive creation: two processes started at once never share a log
+            try:  # exclusive creation: two processes started at once never share a log
                 self._stdout = open(log_dir / f'{executable}.{run}.out', 'x')
                 break
             except FileExistsError:
@@ -41,9 +49,13 @@ class NodeProcess:
         self.stdout_path = log_dir / f'{executable}.{run}.out'
         self.stderr_path = log_dir / f'{executable}.{run}.err'
         self._stderr = open(self.stderr_path, 'w')
-        self.process = subprocess.Popen([executable] + ros_args(parameters or {}) + (extra_args or []),
-                                        env=env, stdout=self._stdout, stderr=self._stderr,
-                                        start_new_session=True)
+        self.process = subprocess.Popen(
+            [executable] + ros_args(parameters or {}) + (extra_args or []),
+            env=env,
+            stdout=self._stdout,
+            stderr=self._stderr,
+            start_new_session=True,
+        )
 
     def output(self) -> str:
         if not self._stdout.closed:
@@ -77,8 +89,11 @@ def wait_until(predicate, timeout: float, what: str):
 
 
 def close_graph(processes, executor, node, context) -> None:
-    """The end of a launchless story: its node processes (last started first), then its in-process node."""
+    """The end of a launchless story: its node processes (last started first), then its
+    in-process node.
+    """
     import rclpy
+
     for process in reversed(processes):
         process.stop()
     executor.shutdown(timeout_sec=2.0)

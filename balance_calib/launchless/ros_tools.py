@@ -5,7 +5,8 @@ of it, only the everyday verbs, with the same spelling:
 
     ros param list NODE                 ros2 param list NODE
     ros param get NODE NAME             ros2 param get NODE NAME
-    ros param set NODE NAME VALUE       ros2 param set NODE NAME VALUE   (VALUE in YAML: 3, 0.5, true,
+    ros param set NODE NAME VALUE       ros2 param set NODE NAME VALUE   (VALUE in YAML: 3, 0.5,
+                                                                         true,
                                         "[a.mcap, b.mcap]"; kept in the parameter's current type)
     ros topic list                      ros2 topic list -t
     ros topic echo TOPIC [--count N]    ros2 topic echo TOPIC            (YAML documents, ---)
@@ -27,23 +28,26 @@ Parameters go through the node's rcl_interfaces services (~/list_parameters, ~/g
 ~/set_parameters), as ros2 param does. Exit status 0 on success, 1 when the node, topic or service
 does not answer within --timeout, 2 on bad arguments; errors are one line on stderr.
 """
+
 from __future__ import annotations
 
 import argparse
 import importlib
 import math
+from pathlib import Path
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
+
 from ..closed_pipe import stdout_closed
 
 DEFAULT_TIMEOUT_S = 10.0
-SETTLE_S = 1.5          # a listing unchanged this long is the graph as discovery has it
-MIN_LISTING_S = 3.0     # and it is looked at for at least this long (a second participant can
-                        # take 2 s to be discovered by a new process on a busy machine)
-EMPTY_WAIT_S = 5.0      # an empty one this long before it counts (a loaded machine is slow)
+SETTLE_S = 1.5  # a listing unchanged this long is the graph as discovery has it
+# and it is looked at for at least this long (a second participant can take 2 s to be discovered by
+# a new process on a busy machine)
+MIN_LISTING_S = 3.0
+EMPTY_WAIT_S = 5.0  # an empty one this long before it counts (a loaded machine is slow)
 
 
 class ToolError(Exception):
@@ -52,16 +56,33 @@ class ToolError(Exception):
 
 # ---------------------------------------------------------------------------- values
 
-_TYPE_NAMES = {1: 'bool', 2: 'integer', 3: 'double', 4: 'string', 5: 'byte array', 6: 'bool array',
-               7: 'integer array', 8: 'double array', 9: 'string array'}
+_TYPE_NAMES = {
+    1: 'bool',
+    2: 'integer',
+    3: 'double',
+    4: 'string',
+    5: 'byte array',
+    6: 'bool array',
+    7: 'integer array',
+    8: 'double array',
+    9: 'string array',
+}
 
 
 def parameter_value_to_python(value):
     """rcl_interfaces/ParameterValue -> a Python value (None when the parameter is not set)."""
     kind = value.type
-    fields = {1: 'bool_value', 2: 'integer_value', 3: 'double_value', 4: 'string_value',
-              5: 'byte_array_value', 6: 'bool_array_value', 7: 'integer_array_value',
-              8: 'double_array_value', 9: 'string_array_value'}
+    fields = {
+        1: 'bool_value',
+        2: 'integer_value',
+        3: 'double_value',
+        4: 'string_value',
+        5: 'byte_array_value',
+        6: 'bool_array_value',
+        7: 'integer_array_value',
+        8: 'double_array_value',
+        9: 'string_array_value',
+    }
     if kind not in fields:
         return None
     result = getattr(value, fields[kind])
@@ -73,9 +94,10 @@ def python_to_parameter_value(text: str, current_type: int, name: str = ''):
     when it has one (so `set calibration_bags bag1` gives a one-element string array, and
     `set envelope_margin 2` stays a double). For a double, the words YAML 1.1 leaves as strings
     are numbers as Python spells them (`nan`, `inf`, `1e3`): the node, which knows the parameter's
-    range, is the one to refuse a NaN, with its reason."""
-    import yaml
+    range, is the one to refuse a NaN, with its reason.
+    """
     from rcl_interfaces.msg import ParameterType, ParameterValue
+    import yaml
 
     try:
         value = yaml.safe_load(text) if text.strip() else ''
@@ -100,8 +122,12 @@ def python_to_parameter_value(text: str, current_type: int, name: str = ''):
             out.double_value = float(value)
         elif kind == ParameterType.PARAMETER_STRING:
             out.string_value = text if not isinstance(value, str) else value
-        elif kind in (ParameterType.PARAMETER_STRING_ARRAY, ParameterType.PARAMETER_DOUBLE_ARRAY,
-                      ParameterType.PARAMETER_INTEGER_ARRAY, ParameterType.PARAMETER_BOOL_ARRAY):
+        elif kind in (
+            ParameterType.PARAMETER_STRING_ARRAY,
+            ParameterType.PARAMETER_DOUBLE_ARRAY,
+            ParameterType.PARAMETER_INTEGER_ARRAY,
+            ParameterType.PARAMETER_BOOL_ARRAY,
+        ):
             items = value if isinstance(value, list) else ([] if value in ('', None) else [value])
             if kind == ParameterType.PARAMETER_STRING_ARRAY:
                 out.string_array_value = [str(v) for v in items]
@@ -115,8 +141,10 @@ def python_to_parameter_value(text: str, current_type: int, name: str = ''):
             raise ValueError
     except (ValueError, TypeError):
         what = f' for {name}' if name else ''
-        raise ToolError(f'value {text!r}{what} is not a {_TYPE_NAMES.get(kind, "supported")} '
-                        '(the parameter\'s type)') from None
+        raise ToolError(
+            f'value {text!r}{what} is not a {_TYPE_NAMES.get(kind, "supported")} '
+            "(the parameter's type)"
+        ) from None
     out.type = kind
     return out
 
@@ -142,7 +170,10 @@ def _infer_type(value) -> int:
 def message_to_plain(message):
     """A ROS message -> nested dicts/lists of plain values (what `topic echo` prints as YAML)."""
     if hasattr(message, 'get_fields_and_field_types'):
-        return {name: message_to_plain(getattr(message, name)) for name in message.get_fields_and_field_types()}
+        return {
+            name: message_to_plain(getattr(message, name))
+            for name in message.get_fields_and_field_types()
+        }
     if isinstance(message, (list, tuple)) or type(message).__name__ == 'ndarray':
         return [message_to_plain(v) for v in message]
     if isinstance(message, float) and not math.isfinite(message):
@@ -165,11 +196,13 @@ def message_class(type_name: str):
 
 # ---------------------------------------------------------------------------- graph helpers
 
+
 class _Session:
     """rclpy init + one node, torn down on exit."""
 
     def __enter__(self):
         import rclpy
+
         self.rclpy = rclpy
         rclpy.init()
         self.node = rclpy.create_node('launchless_ros_cli', start_parameter_services=False)
@@ -184,8 +217,9 @@ class _Session:
         client = self.node.create_client(service_type, name)
         try:
             if not client.wait_for_service(timeout_sec=timeout):
-                raise ToolError(f'service {name} is not available (is the node running? '
-                                f'waited {timeout:g} s)')
+                raise ToolError(
+                    f'service {name} is not available (is the node running? waited {timeout:g} s)'
+                )
             future = client.call_async(request)
             self.rclpy.spin_until_future_complete(self.node, future, timeout_sec=timeout)
             if not future.done():
@@ -201,34 +235,50 @@ class _Session:
                 if name == topic and types:
                     return types[0]
             if time.monotonic() > deadline:
-                raise ToolError(f'topic {topic} has no publisher (waited {timeout:g} s); '
-                                'see "ros topic list"')
+                raise ToolError(
+                    f'topic {topic} has no publisher (waited {timeout:g} s); see "ros topic list"'
+                )
             self.rclpy.spin_once(self.node, timeout_sec=0.1)
 
     def qos_for(self, topic: str):
-        """Reliable and transient-local only when every publisher offers it (as ros2 topic echo)."""
+        """Reliable and transient-local only when every publisher offers it (as ros2 topic
+        echo).
+        """
         from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
         publishers = self.node.get_publishers_info_by_topic(topic)
-        reliable = bool(publishers) and all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE
-                                            for p in publishers)
-        latched = bool(publishers) and all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
-                                           for p in publishers)
-        return QoSProfile(depth=100,
-                          reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+        reliable = bool(publishers) and all(
+            p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers
+        )
+        latched = bool(publishers) and all(
+            p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers
+        )
+        return QoSProfile(
+            depth=100,
+            reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+        )
 
 
 def _node_name(name: str) -> str:
     return name if name.startswith('/') else '/' + name
 
 
-def settled(session, listing, timeout: float, *, settle_s: float = SETTLE_S,
-            min_s: float = MIN_LISTING_S, empty_s: float = EMPTY_WAIT_S,
-            complete=lambda listing: True):
+def settled(
+    session,
+    listing,
+    timeout: float,
+    *,
+    settle_s: float = SETTLE_S,
+    min_s: float = MIN_LISTING_S,
+    empty_s: float = EMPTY_WAIT_S,
+    complete=lambda listing: True,
+):
     """listing() once it has not changed for settle_s (looked at for at least min_s; while it is
     empty, for at least empty_s) and complete(listing) holds, or at the timeout: DDS discovers the
     other participants and then their endpoints one by one, so one early look shows only a part
-    (and a loaded machine can pause longer than settle_s between two nodes' endpoints)."""
+    (and a loaded machine can pause longer than settle_s between two nodes' endpoints).
+    """
     start = time.monotonic()
     last, changed = listing(), start
     while True:
@@ -238,8 +288,12 @@ def settled(session, listing, timeout: float, *, settle_s: float = SETTLE_S,
         if current != last:
             last, changed = current, now
         looked = now - start
-        if looked >= timeout or (now - changed >= settle_s and looked >= min_s
-                                 and (last or looked >= empty_s) and complete(last)):
+        if looked >= timeout or (
+            now - changed >= settle_s
+            and looked >= min_s
+            and (last or looked >= empty_s)
+            and complete(last)
+        ):
             return last
 
 
@@ -249,25 +303,39 @@ def _full_name(name: str, namespace: str) -> str:
 
 def _rosout_nodes(session) -> set[str]:
     """The other nodes whose /rosout publisher discovery has seen (every rclpy node has one):
-    endpoints and node names arrive separately, so a node can be known by this before its name."""
+    endpoints and node names arrive separately, so a node can be known by this before its name.
+    """
     own = _full_name(session.node.get_name(), session.node.get_namespace())
-    return {_full_name(info.node_name, info.node_namespace)
-            for info in session.node.get_publishers_info_by_topic('/rosout')} - {own}
+    return {
+        _full_name(info.node_name, info.node_namespace)
+        for info in session.node.get_publishers_info_by_topic('/rosout')
+    } - {own}
 
 
 def _other_nodes(session) -> list[str]:
     own = _full_name(session.node.get_name(), session.node.get_namespace())
-    return sorted(n for n in (_full_name(name, ns) for name, ns in
-                              session.node.get_node_names_and_namespaces()) if n != own)
+    return sorted(
+        n
+        for n in (
+            _full_name(name, ns) for name, ns in session.node.get_node_names_and_namespaces()
+        )
+        if n != own
+    )
 
 
 # ---------------------------------------------------------------------------- param
 
+
 def param_list(args) -> int:
     from rcl_interfaces.srv import ListParameters
+
     with _Session() as session:
-        reply = session.call(ListParameters, f'{_node_name(args.node)}/list_parameters',
-                             ListParameters.Request(), args.timeout)
+        reply = session.call(
+            ListParameters,
+            f'{_node_name(args.node)}/list_parameters',
+            ListParameters.Request(),
+            args.timeout,
+        )
     for name in sorted(reply.result.names):
         print(f'  {name}')
     return 0
@@ -275,6 +343,7 @@ def param_list(args) -> int:
 
 def _get(session, node: str, names, timeout: float):
     from rcl_interfaces.srv import GetParameters
+
     request = GetParameters.Request(names=list(names))
     return session.call(GetParameters, f'{node}/get_parameters', request, timeout).values
 
@@ -283,7 +352,10 @@ def param_get(args) -> int:
     with _Session() as session:
         values = _get(session, _node_name(args.node), [args.name], args.timeout)
     if not values or values[0].type == 0:
-        raise ToolError(f'{_node_name(args.node)} has no parameter {args.name!r}; see "ros param list {args.node}"')
+        raise ToolError(
+            f'{_node_name(args.node)} has no parameter {args.name!r}; see "ros param list '
+            f'{args.node}"'
+        )
     value = values[0]
     print(f'{_TYPE_NAMES[value.type].capitalize()} value is: {parameter_value_to_python(value)}')
     return 0
@@ -292,26 +364,35 @@ def param_get(args) -> int:
 def param_set(args) -> int:
     from rcl_interfaces.msg import Parameter
     from rcl_interfaces.srv import SetParameters
+
     node = _node_name(args.node)
     with _Session() as session:
         current = _get(session, node, [args.name], args.timeout)
         kind = current[0].type if current else 0
         value = python_to_parameter_value(args.value, kind, args.name)
-        reply = session.call(SetParameters, f'{node}/set_parameters',
-                             SetParameters.Request(parameters=[Parameter(name=args.name, value=value)]), args.timeout)
+        reply = session.call(
+            SetParameters,
+            f'{node}/set_parameters',
+            SetParameters.Request(parameters=[Parameter(name=args.name, value=value)]),
+            args.timeout,
+        )
     result = reply.results[0]
     if not result.successful:
-        raise ToolError(f'setting {args.name} on {node} failed: {result.reason or "refused by the node"}')
+        raise ToolError(
+            f'setting {args.name} on {node} failed: {result.reason or "refused by the node"}'
+        )
     print('Set parameter successful')
     return 0
 
 
 # ---------------------------------------------------------------------------- topic
 
+
 def topic_list(args) -> int:
     with _Session() as session:
-        topics = settled(session, lambda: sorted(session.node.get_topic_names_and_types()),
-                         args.timeout)
+        topics = settled(
+            session, lambda: sorted(session.node.get_topic_names_and_types()), args.timeout
+        )
     for name, types in topics:
         print(f'{name} [{", ".join(types)}]')
     return 0
@@ -319,6 +400,7 @@ def topic_list(args) -> int:
 
 def topic_echo(args) -> int:
     import yaml
+
     received = []
     with _Session() as session:
         type_name = args.type or session.topic_type(args.topic, args.timeout)
@@ -328,7 +410,11 @@ def topic_echo(args) -> int:
             if args.count and len(received) >= args.count:
                 return
             received.append(1)
-            print(yaml.safe_dump(message_to_plain(message), sort_keys=False, allow_unicode=True).rstrip())
+            print(
+                yaml.safe_dump(
+                    message_to_plain(message), sort_keys=False, allow_unicode=True
+                ).rstrip()
+            )
             print('---', flush=True)
 
         session.node.create_subscription(cls, args.topic, show, session.qos_for(args.topic))
@@ -348,8 +434,9 @@ def topic_hz(args) -> int:
     with _Session() as session:
         type_name = args.type or session.topic_type(args.topic, args.timeout)
         cls = message_class(type_name)
-        session.node.create_subscription(cls, args.topic, lambda _: stamps.append(time.monotonic()),
-                                         session.qos_for(args.topic))
+        session.node.create_subscription(
+            cls, args.topic, lambda _: stamps.append(time.monotonic()), session.qos_for(args.topic)
+        )
         deadline = time.monotonic() + args.timeout
         while not stamps:
             session.rclpy.spin_once(session.node, timeout_sec=0.1)
@@ -362,37 +449,57 @@ def topic_hz(args) -> int:
         except KeyboardInterrupt:
             pass
     if len(stamps) < 2:
-        raise ToolError(f'only {len(stamps)} message on {args.topic} in {args.duration:g} s: no rate')
+        raise ToolError(
+            f'only {len(stamps)} message on {args.topic} in {args.duration:g} s: no rate'
+        )
     import numpy as np
+
     gaps = np.diff(np.asarray(stamps))
     print(f'average rate: {1.0 / gaps.mean():.3f}')
-    print(f'\tmin: {gaps.min():.3f}s max: {gaps.max():.3f}s std dev: {gaps.std():.5f}s window: {len(stamps)}')
+    print(
+        f'\tmin: {gaps.min():.3f}s max: {gaps.max():.3f}s std dev: {gaps.std():.5f}s window: '
+        f'{len(stamps)}'
+    )
     return 0
 
 
 # ---------------------------------------------------------------------------- service
 
+
 def service_list(args) -> int:
     with _Session() as session:
         own = _full_name(session.node.get_name(), session.node.get_namespace()) + '/'
-        services = settled(session, lambda: sorted(
-            (name, types) for name, types in session.node.get_service_names_and_types()
-            if not name.startswith(own)), args.timeout,
-            complete=lambda listing: _every_node_listed(session, listing))
+        services = settled(
+            session,
+            lambda: sorted(
+                (name, types)
+                for name, types in session.node.get_service_names_and_types()
+                if not name.startswith(own)
+            ),
+            args.timeout,
+            complete=lambda listing: _every_node_listed(session, listing),
+        )
     for name, types in services:
         print(f'{name} [{", ".join(types)}]')
     return 0
 
 
 # what every rclpy node serves (unless started without parameter services)
-PARAMETER_SERVICES = ('describe_parameters', 'get_parameter_types', 'get_parameters',
-                      'list_parameters', 'set_parameters', 'set_parameters_atomically')
+PARAMETER_SERVICES = (
+    'describe_parameters',
+    'get_parameter_types',
+    'get_parameters',
+    'list_parameters',
+    'set_parameters',
+    'set_parameters_atomically',
+)
 
 
 def _every_node_listed(session, services) -> bool:
     """Every other node on the graph has all its parameter services in the listing: DDS brings a
     node's service servers one by one, so a node with only some of them is not yet the whole
-    picture (a node without parameter services makes the listing wait for --timeout)."""
+    picture (a node without parameter services makes the listing wait for --timeout).
+    """
     names = {name for name, _ in services}
     nodes = set(_other_nodes(session)) | _rosout_nodes(session)
     return all(f'{node}/{service}' in names for node in nodes for service in PARAMETER_SERVICES)
@@ -400,8 +507,12 @@ def _every_node_listed(session, services) -> bool:
 
 def service_call(args) -> int:
     if args.type not in ('std_srvs/srv/Trigger', 'std_srvs/srv/Empty'):
-        raise ToolError(f'service type {args.type}: only std_srvs/srv/Trigger and std_srvs/srv/Empty are supported')
+        raise ToolError(
+            f'service type {args.type}: only std_srvs/srv/Trigger and std_srvs/srv/Empty are '
+            'supported'
+        )
     from std_srvs.srv import Empty, Trigger
+
     service_type = Trigger if args.type.endswith('Trigger') else Empty
     with _Session() as session:
         reply = session.call(service_type, args.service, service_type.Request(), args.timeout)
@@ -414,10 +525,15 @@ def service_call(args) -> int:
 
 # ---------------------------------------------------------------------------- node
 
+
 def node_list(args) -> int:
     with _Session() as session:
-        nodes = settled(session, lambda: _other_nodes(session), args.timeout,
-                        complete=lambda listing: _rosout_nodes(session) <= set(listing))
+        nodes = settled(
+            session,
+            lambda: _other_nodes(session),
+            args.timeout,
+            complete=lambda listing: _rosout_nodes(session) <= set(listing),
+        )
     for name in nodes:
         print(name)
     return 0
@@ -431,23 +547,31 @@ def node_info(args) -> int:
         deadline = time.monotonic() + args.timeout
         while node not in _other_nodes(session):
             if time.monotonic() > deadline:
-                raise ToolError(f'node {node} is not on the graph (waited {args.timeout:g} s); '
-                                'see "ros node list"')
+                raise ToolError(
+                    f'node {node} is not on the graph (waited {args.timeout:g} s); '
+                    'see "ros node list"'
+                )
             session.rclpy.spin_once(session.node, timeout_sec=0.1)
         graph = session.node
 
         def info():
             try:
-                return (sorted(graph.get_subscriber_names_and_types_by_node(name, namespace)),
-                        sorted(graph.get_publisher_names_and_types_by_node(name, namespace)),
-                        sorted(graph.get_service_names_and_types_by_node(name, namespace)))
-            except Exception:       # rclpy's NodeNameNonExistentError: it left meanwhile
+                return (
+                    sorted(graph.get_subscriber_names_and_types_by_node(name, namespace)),
+                    sorted(graph.get_publisher_names_and_types_by_node(name, namespace)),
+                    sorted(graph.get_service_names_and_types_by_node(name, namespace)),
+                )
+            except Exception:  # rclpy's NodeNameNonExistentError: it left meanwhile
                 return ([], [], [])
+
         left = max(deadline - time.monotonic(), 0.0)
         subscribers, publishers, services = settled(session, info, left)
     print(node)
-    for title, entries in (('Subscribers', subscribers), ('Publishers', publishers),
-                           ('Service Servers', services)):
+    for title, entries in (
+        ('Subscribers', subscribers),
+        ('Publishers', publishers),
+        ('Service Servers', services),
+    ):
         print(f'  {title}:')
         for topic, types in entries:
             print(f'    {topic}: {", ".join(types)}')
@@ -456,6 +580,7 @@ def node_info(args) -> int:
 
 # ---------------------------------------------------------------------------- bag
 
+
 def bag_info(args) -> int:
     print(format_bag_info(Path(args.bag)))
     return 0
@@ -463,9 +588,12 @@ def bag_info(args) -> int:
 
 def _run_node(command: list[str], duration: float = 0.0) -> int:
     """A node executable in the foreground, its output ours; Ctrl-C, SIGTERM or the end of
-    duration (s, 0 = none) stop it with SIGINT, as a terminal's Ctrl-C would. Its exit status."""
+    duration (s, 0 = none) stop it with SIGINT, as a terminal's Ctrl-C would. Its exit status.
+    """
+
     def interrupt(signum, frame):
         raise KeyboardInterrupt
+
     previous = signal.signal(signal.SIGTERM, interrupt)
     # its own session: a terminal's Ctrl-C reaches it once, through us
     child = subprocess.Popen(command, start_new_session=True)
@@ -489,6 +617,7 @@ def _run_node(command: list[str], duration: float = 0.0) -> int:
 
 def bag_record(args) -> int:
     from .processes import ros_args
+
     parameters = {'output': args.out}
     if args.topics:
         parameters['topics'] = list(args.topics)
@@ -500,23 +629,34 @@ def bag_record(args) -> int:
 
 def bag_play(args) -> int:
     from .processes import ros_args
+
     if not args.rate > 0 or not math.isfinite(args.rate):
         raise ToolError(f'--rate {args.rate:g}: give a positive factor')
     for bag in args.bags:
         if ',' in bag:
-            raise ToolError(f'{bag}: a bag path with a comma cannot be replayed '
-                            '(bridge_publisher\'s bag parameter separates paths by commas)')
+            raise ToolError(
+                f'{bag}: a bag path with a comma cannot be replayed '
+                "(bridge_publisher's bag parameter separates paths by commas)"
+            )
         if not Path(bag).exists():
             raise ToolError(f'{bag}: no such bag directory or .mcap file')
-    parameters = {'mode': 'replay', 'bag': ','.join(args.bags), 'speed': args.rate,
-                  'loop': args.loop, 'exit_when_done': not args.loop,
-                  'wait_for_subscribers': args.wait_for_subscribers}
+    parameters = {
+        'mode': 'replay',
+        'bag': ','.join(args.bags),
+        'speed': args.rate,
+        'loop': args.loop,
+        'exit_when_done': not args.loop,
+        'wait_for_subscribers': args.wait_for_subscribers,
+    }
     return _run_node(['bridge_publisher', *ros_args(parameters), '-r', '__node:=bag_player'])
 
 
 def format_bag_info(path: Path) -> str:
-    """ros2 bag info's layout for a rosbag2 MCAP directory or a bare .mcap file (reads the MCAP summaries)."""
+    """ros2 bag info's layout for a rosbag2 MCAP directory or a bare .mcap file (reads the MCAP
+    summaries).
+    """
     from mcap.reader import make_reader
+
     if path.is_dir():
         files = sorted(path.glob('*.mcap'))
     elif path.suffix == '.mcap' and path.exists():
@@ -532,13 +672,15 @@ def format_bag_info(path: Path) -> str:
         with open(file, 'rb') as stream:
             try:
                 summary = make_reader(stream).get_summary()
-            except Exception as err:       # the mcap library raises its own types for damaged files
+            except Exception as err:  # the mcap library raises its own types for damaged files
                 raise ToolError(f'{file}: cannot read its MCAP summary ({err})') from None
         if summary is None or summary.statistics is None:
             raise ToolError(f'{file}: no MCAP summary (unfinished recording?)')
         stats = summary.statistics
         if stats.message_count:
-            start = stats.message_start_time if start is None else min(start, stats.message_start_time)
+            start = (
+                stats.message_start_time if start is None else min(start, stats.message_start_time)
+            )
             end = stats.message_end_time if end is None else max(end, stats.message_end_time)
         total += stats.message_count
         for chunk in summary.chunk_indexes:
@@ -548,160 +690,272 @@ def format_bag_info(path: Path) -> str:
             entry = topics.setdefault(channel.topic, [schema.name if schema else '?', 0])
             entry[1] += stats.channel_message_counts.get(channel_id, 0)
     duration = (end - start) / 1e9 if start is not None else 0.0
-    lines = [f'Files:             {", ".join(f.name for f in files)}',
-             f'Bag size:          {size / 1e6:.1f} MB',
-             'Storage id:        mcap',
-             f'Duration:          {duration:.3f}s']
+    lines = [
+        f'Files:             {", ".join(f.name for f in files)}',
+        f'Bag size:          {size / 1e6:.1f} MB',
+        'Storage id:        mcap',
+        f'Duration:          {duration:.3f}s',
+    ]
     if start is not None:
         lines += [f'Start:             {_stamp(start)}', f'End:               {_stamp(end)}']
-    lines += [f'Messages:          {total}',
-              f'Chunk compression: {", ".join(sorted(compression)) or "none"}',
-              'Topic information:']
+    lines += [
+        f'Messages:          {total}',
+        f'Chunk compression: {", ".join(sorted(compression)) or "none"}',
+        'Topic information:',
+    ]
     width = max((len(t) for t in topics), default=0)
     for topic, (type_name, count) in sorted(topics.items()):
-        lines.append(f'  Topic: {topic:{width}} | Type: {type_name} | Count: {count} | Serialization Format: cdr')
+        lines.append(
+            f'  Topic: {topic:{width}} | Type: {type_name} | Count: {count} | Serialization '
+            'Format: cdr'
+        )
     return '\n'.join(lines)
 
 
 def _stamp(nanoseconds: int) -> str:
     import datetime as dt
+
     moment = dt.datetime.fromtimestamp(nanoseconds / 1e9, dt.timezone.utc)
     return f'{moment:%b %d %Y %H:%M:%S.%f}'[:-3] + f' ({nanoseconds / 1e9:.9f})'
 
 
 # ---------------------------------------------------------------------------- CLI
 
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog='ros', description='The ros2 CLI verbs a balance_calib user needs (param, topic, '
-                                'service, node, bag info/record/play), '
-                                'over rclpy, for environments without ros2cli. Same spelling as ros2.',
+        prog='ros',
+        description='The ros2 CLI verbs a balance_calib user needs (param, topic, '
+        'service, node, bag info/record/play), '
+        'over rclpy, for environments without ros2cli. Same spelling as ros2.',
         epilog='Examples: ros param set /balance_calibrator calibration_bags "[bags/campaign_1]"; '
-               'ros service call /balance_calibrator/refit; ros topic hz /balance/raw; '
-               'ros node info /balance_calibrator; ros bag info bags/campaign_1; '
-               'ros bag record bags/run2 --duration 10; ros bag play bags/campaign_1')
+        'ros service call /balance_calibrator/refit; ros topic hz /balance/raw; '
+        'ros node info /balance_calibrator; ros bag info bags/campaign_1; '
+        'ros bag record bags/run2 --duration 10; ros bag play bags/campaign_1',
+    )
     verbs = parser.add_subparsers(dest='verb', required=True, metavar='VERB', title='verbs')
 
     def with_timeout(sub, what: str):
-        sub.add_argument('--timeout', type=float, default=DEFAULT_TIMEOUT_S,
-                         help=f'seconds to wait for {what} (default {DEFAULT_TIMEOUT_S:g})')
+        sub.add_argument(
+            '--timeout',
+            type=float,
+            default=DEFAULT_TIMEOUT_S,
+            help=f'seconds to wait for {what} (default {DEFAULT_TIMEOUT_S:g})',
+        )
         return sub
 
-    param = verbs.add_parser('param', help='list, get or set a running node\'s parameters',
-                             description='List, get or set the parameters of a running node through its '
-                                         'rcl_interfaces parameter services.')
+    param = verbs.add_parser(
+        'param',
+        help="list, get or set a running node's parameters",
+        description='List, get or set the parameters of a running node through its '
+        'rcl_interfaces parameter services.',
+    )
     actions = param.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
-    sub = with_timeout(actions.add_parser('list', help='names of the node\'s parameters',
-                                          description='Print the names of a node\'s parameters.'), 'the node')
+    sub = with_timeout(
+        actions.add_parser(
+            'list',
+            help="names of the node's parameters",
+            description="Print the names of a node's parameters.",
+        ),
+        'the node',
+    )
     sub.add_argument('node', help='node name, e.g. /balance_calibrator')
     sub.set_defaults(func=param_list)
-    sub = with_timeout(actions.add_parser('get', help='one parameter\'s type and value',
-                                          description='Print one parameter\'s type and value.'), 'the node')
+    sub = with_timeout(
+        actions.add_parser(
+            'get',
+            help="one parameter's type and value",
+            description="Print one parameter's type and value.",
+        ),
+        'the node',
+    )
     sub.add_argument('node', help='node name, e.g. /balance_calibrator')
     sub.add_argument('name', help='parameter name, e.g. calibration_bags')
     sub.set_defaults(func=param_get)
-    sub = with_timeout(actions.add_parser('set', help='set one parameter (kept in its current type)',
-                                          description='Set one parameter. VALUE is YAML (2.5, true, '
-                                                      '"[a, b]"); it is converted to the parameter\'s current '
-                                                      'type, so a single path sets a one-element string list.'),
-                       'the node')
+    sub = with_timeout(
+        actions.add_parser(
+            'set',
+            help='set one parameter (kept in its current type)',
+            description='Set one parameter. VALUE is YAML (2.5, true, '
+            '"[a, b]"); it is converted to the parameter\'s current '
+            'type, so a single path sets a one-element string list.',
+        ),
+        'the node',
+    )
     sub.add_argument('node', help='node name, e.g. /balance_calibrator')
     sub.add_argument('name', help='parameter name, e.g. calibration_bags')
     sub.add_argument('value', help='new value in YAML, e.g. "[bags/campaign_1]" or 1.2')
     sub.set_defaults(func=param_set)
 
-    topic = verbs.add_parser('topic', help='list topics, echo one, measure its rate',
-                             description='List topics, print a topic\'s messages as YAML, or measure its rate.')
+    topic = verbs.add_parser(
+        'topic',
+        help='list topics, echo one, measure its rate',
+        description="List topics, print a topic's messages as YAML, or measure its rate.",
+    )
     actions = topic.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
-    sub = with_timeout(actions.add_parser('list', help='topics and their types',
-                                          description='Print the topics seen on the graph with their types.'),
-                       'discovery to settle')
+    sub = with_timeout(
+        actions.add_parser(
+            'list',
+            help='topics and their types',
+            description='Print the topics seen on the graph with their types.',
+        ),
+        'discovery to settle',
+    )
     sub.set_defaults(func=topic_list)
-    sub = with_timeout(actions.add_parser('echo', help='print messages as YAML documents',
-                                          description='Print each message of a topic as a YAML document '
-                                                      '(---) until Ctrl-C or --count messages.'),
-                       'the topic and its first message')
+    sub = with_timeout(
+        actions.add_parser(
+            'echo',
+            help='print messages as YAML documents',
+            description='Print each message of a topic as a YAML document '
+            '(---) until Ctrl-C or --count messages.',
+        ),
+        'the topic and its first message',
+    )
     sub.add_argument('topic', help='topic name, e.g. /balance/wrench')
-    sub.add_argument('type', nargs='?', help='message type (default: the type its publishers offer)')
-    sub.add_argument('--count', type=int, default=0, help='stop after this many messages (default 0: never)')
+    sub.add_argument(
+        'type', nargs='?', help='message type (default: the type its publishers offer)'
+    )
+    sub.add_argument(
+        '--count', type=int, default=0, help='stop after this many messages (default 0: never)'
+    )
     sub.set_defaults(func=topic_echo)
-    sub = with_timeout(actions.add_parser('hz', help='average rate of a topic',
-                                          description='Measure the average rate of a topic (arrival times on '
-                                                      'this machine) over --duration seconds.'),
-                       'the topic and its first message')
+    sub = with_timeout(
+        actions.add_parser(
+            'hz',
+            help='average rate of a topic',
+            description='Measure the average rate of a topic (arrival times on '
+            'this machine) over --duration seconds.',
+        ),
+        'the topic and its first message',
+    )
     sub.add_argument('topic', help='topic name, e.g. /balance/raw')
-    sub.add_argument('type', nargs='?', help='message type (default: the type its publishers offer)')
-    sub.add_argument('--duration', type=float, default=5.0, help='seconds to count messages (default 5)')
+    sub.add_argument(
+        'type', nargs='?', help='message type (default: the type its publishers offer)'
+    )
+    sub.add_argument(
+        '--duration', type=float, default=5.0, help='seconds to count messages (default 5)'
+    )
     sub.set_defaults(func=topic_hz)
 
-    service = verbs.add_parser('service', help='list services, call a Trigger service',
-                               description='List services, or call a std_srvs/Trigger (or Empty) service.')
-    actions = service.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
-    sub = with_timeout(actions.add_parser('list', help='services and their types',
-                                          description='Print the services seen on the graph with their types.'),
-                       'discovery to settle')
+    service = verbs.add_parser(
+        'service',
+        help='list services, call a Trigger service',
+        description='List services, or call a std_srvs/Trigger (or Empty) service.',
+    )
+    actions = service.add_subparsers(
+        dest='action', required=True, metavar='ACTION', title='actions'
+    )
+    sub = with_timeout(
+        actions.add_parser(
+            'list',
+            help='services and their types',
+            description='Print the services seen on the graph with their types.',
+        ),
+        'discovery to settle',
+    )
     sub.set_defaults(func=service_list)
-    sub = actions.add_parser('call', help='call a std_srvs/srv/Trigger service and print its reply',
-                             description='Call a std_srvs/srv/Trigger (default) or std_srvs/srv/Empty service; '
-                                         'exit status 0 when its reply says success.')
+    sub = actions.add_parser(
+        'call',
+        help='call a std_srvs/srv/Trigger service and print its reply',
+        description='Call a std_srvs/srv/Trigger (default) or std_srvs/srv/Empty service; '
+        'exit status 0 when its reply says success.',
+    )
     sub.add_argument('service', help='e.g. /balance_calibrator/refit or /balance_calibrator/tare')
-    sub.add_argument('type', nargs='?', default='std_srvs/srv/Trigger',
-                     help='std_srvs/srv/Trigger (default) or std_srvs/srv/Empty')
-    sub.add_argument('--timeout', type=float, default=300.0,
-                     help='seconds to wait for the service and its reply (default 300: a refit takes a while)')
+    sub.add_argument(
+        'type',
+        nargs='?',
+        default='std_srvs/srv/Trigger',
+        help='std_srvs/srv/Trigger (default) or std_srvs/srv/Empty',
+    )
+    sub.add_argument(
+        '--timeout',
+        type=float,
+        default=300.0,
+        help='seconds to wait for the service and its reply (default 300: a refit takes a while)',
+    )
     sub.set_defaults(func=service_call)
 
     node = verbs.add_parser(
-        'node', help='list nodes, show what one publishes, subscribes and serves',
-        description='List the nodes on the graph, or show one node\'s publishers, subscribers '
-                    'and services.')
+        'node',
+        help='list nodes, show what one publishes, subscribes and serves',
+        description="List the nodes on the graph, or show one node's publishers, subscribers "
+        'and services.',
+    )
     actions = node.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
-    sub = with_timeout(actions.add_parser(
-        'list', help='full names of the nodes on the graph',
-        description='Print the full names of the nodes on the graph, once discovery has settled.'),
-        'discovery to settle')
+    sub = with_timeout(
+        actions.add_parser(
+            'list',
+            help='full names of the nodes on the graph',
+            description=(
+                'Print the full names of the nodes on the graph, once discovery has settled.'
+            ),
+        ),
+        'discovery to settle',
+    )
     sub.set_defaults(func=node_list)
-    sub = with_timeout(actions.add_parser(
-        'info', help='a node\'s subscribers, publishers and services',
-        description='Print the topics a node subscribes and publishes and the services it serves, '
-                    'with their types.'),
-        'the node and discovery to settle')
+    sub = with_timeout(
+        actions.add_parser(
+            'info',
+            help="a node's subscribers, publishers and services",
+            description=(
+                'Print the topics a node subscribes and publishes and the services it serves, '
+                'with their types.'
+            ),
+        ),
+        'the node and discovery to settle',
+    )
     sub.add_argument('node', help='node name, e.g. /balance_calibrator')
     sub.set_defaults(func=node_info)
 
     bag = verbs.add_parser(
-        'bag', help='describe, record or play a bag',
+        'bag',
+        help='describe, record or play a bag',
         description='Describe a recorded bag (no DDS), record topics into a bag with '
-                    'balance_recorder, or play bags with bridge_publisher\'s replay.')
+        "balance_recorder, or play bags with bridge_publisher's replay.",
+    )
     actions = bag.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
-    sub = actions.add_parser('info', help='duration, message counts and topic types of a bag',
-                             description='Print a bag\'s duration, start and end, message count, compression and '
-                                         'topics with types and counts, from its MCAP summaries.')
+    sub = actions.add_parser(
+        'info',
+        help='duration, message counts and topic types of a bag',
+        description="Print a bag's duration, start and end, message count, compression and "
+        'topics with types and counts, from its MCAP summaries.',
+    )
     sub.add_argument('bag', help='rosbag2 directory (metadata.yaml + *.mcap) or a bare .mcap file')
     sub.set_defaults(func=bag_info)
     sub = actions.add_parser(
-        'record', help='record topics into a new rosbag2 MCAP bag (balance_recorder)',
-        description='Record topics into a new rosbag2 MCAP bag directory with the package\'s '
-                    'balance_recorder, until Ctrl-C or --duration; the bag is closed '
-                    '(metadata.yaml written) when it stops.')
+        'record',
+        help='record topics into a new rosbag2 MCAP bag (balance_recorder)',
+        description="Record topics into a new rosbag2 MCAP bag directory with the package's "
+        'balance_recorder, until Ctrl-C or --duration; the bag is closed '
+        '(metadata.yaml written) when it stops.',
+    )
     sub.add_argument('out', help='bag directory to create (it must not exist)')
-    sub.add_argument('topics', nargs='*',
-                     help='topics to record (default: every topic of docs/interfaces.md)')
-    sub.add_argument('--duration', type=float,
-                     help='stop after this many seconds (default: at Ctrl-C)')
+    sub.add_argument(
+        'topics', nargs='*', help='topics to record (default: every topic of docs/interfaces.md)'
+    )
+    sub.add_argument(
+        '--duration', type=float, help='stop after this many seconds (default: at Ctrl-C)'
+    )
     sub.set_defaults(func=bag_record)
     sub = actions.add_parser(
-        'play', help='publish the messages of bags as recorded (bridge_publisher replay)',
+        'play',
+        help='publish the messages of bags as recorded (bridge_publisher replay)',
         description='Publish every message of the bags in receive-time order, header stamps as '
-                    'recorded, with bridge_publisher in replay mode (node name bag_player); ends '
-                    'when the bags are played.')
+        'recorded, with bridge_publisher in replay mode (node name bag_player); ends '
+        'when the bags are played.',
+    )
     sub.add_argument('bags', nargs='+', help='rosbag2 directories or bare .mcap files')
-    sub.add_argument('--rate', type=float, default=1.0,
-                     help='recorded seconds per real second (default 1)')
+    sub.add_argument(
+        '--rate', type=float, default=1.0, help='recorded seconds per real second (default 1)'
+    )
     sub.add_argument('--loop', action='store_true', help='start again at the end, until Ctrl-C')
-    sub.add_argument('--wait-for-subscribers', type=int, default=0,
-                     help='start when /balance/raw has this many subscribers (default 0: at once; '
-                          'bridge_publisher gives up after its wait_for_subscribers_timeout_s)')
+    sub.add_argument(
+        '--wait-for-subscribers',
+        type=int,
+        default=0,
+        help='start when /balance/raw has this many subscribers (default 0: at once; '
+        'bridge_publisher gives up after its wait_for_subscribers_timeout_s)',
+    )
     sub.set_defaults(func=bag_play)
     return parser
 

@@ -13,26 +13,32 @@ after --subscriber-timeout-s; when the run is over the recorder is stopped, the 
 (metadata.yaml written) and the `balance-calib reduce` command line for it is printed. A failed run
 removes the bag it created. Ctrl-C stops both nodes; the bag then holds the run so far.
 """
+
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 import os
+from pathlib import Path
 import shutil
 import signal
 import subprocess
 import sys
 import time
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable, Sequence
 
-from ..aero.bag_io import (ATTITUDE_TOPIC, DYNAMIC_PRESSURE_TOPIC, RAW_TOPIC, TRUTH_TOPIC,
-                           TRUTH_WIND_TOPIC)
+from ..aero.bag_io import (
+    ATTITUDE_TOPIC,
+    DYNAMIC_PRESSURE_TOPIC,
+    RAW_TOPIC,
+    TRUTH_TOPIC,
+    TRUTH_WIND_TOPIC,
+)
 from .processes import ros_args
 
 DEFAULT_MODEL = 'euler_replica_lmc6522'
-TRUTH_TOPICS = (TRUTH_TOPIC, TRUTH_WIND_TOPIC)   # simulation only, what `reduce` compares with
-REDUCE_TOPICS = (RAW_TOPIC, ATTITUDE_TOPIC, DYNAMIC_PRESSURE_TOPIC)   # what `reduce` reads
+TRUTH_TOPICS = (TRUTH_TOPIC, TRUTH_WIND_TOPIC)  # simulation only, what `reduce` compares with
+REDUCE_TOPICS = (RAW_TOPIC, ATTITUDE_TOPIC, DYNAMIC_PRESSURE_TOPIC)  # what `reduce` reads
 STOP_TIMEOUT_S = 10.0
 
 
@@ -52,28 +58,61 @@ class WindOnRun:
 def recorder_topics() -> list[str]:
     """The recorder's default topics (interfaces.md) and the simulation's truth."""
     from ..bags.recorder_parameters import DEFAULT_TOPICS
+
     return list(DEFAULT_TOPICS) + [t for t in TRUTH_TOPICS if t not in DEFAULT_TOPICS]
 
 
-def publisher_parameters(*, model: str, balance: str, q_pa: float, installation: str,
-                         alpha_deg: Sequence[float], hold_s: float, wind_off_hold_s: float,
-                         rate_hz: float, seed: int, noise_sigma_pct_fs: float,
-                         subscriber_timeout_s: float) -> dict:
+def publisher_parameters(
+    *,
+    model: str,
+    balance: str,
+    q_pa: float,
+    installation: str,
+    alpha_deg: Sequence[float],
+    hold_s: float,
+    wind_off_hold_s: float,
+    rate_hz: float,
+    seed: int,
+    noise_sigma_pct_fs: float,
+    subscriber_timeout_s: float,
+) -> dict:
     """bridge_publisher's parameters for a physical wind-on run (nodes/bridge_publisher.py)."""
     start, end, step = (float(v) for v in alpha_deg)
-    return {'mode': 'wind_on', 'aero_model': model, 'balance': balance,
-            'dynamic_pressure_pa': q_pa, 'installation': installation,
-            'alpha_start_deg': start, 'alpha_end_deg': end,
-            'alpha_step_deg': step, 'hold_s': hold_s, 'wind_off_hold_s': wind_off_hold_s,
-            'rate_hz': rate_hz, 'seed': seed, 'noise_sigma_pct_fs': noise_sigma_pct_fs,
-            'exit_when_done': True, 'wait_for_subscribers': 1,
-            'wait_for_subscribers_timeout_s': subscriber_timeout_s}
+    return {
+        'mode': 'wind_on',
+        'aero_model': model,
+        'balance': balance,
+        'dynamic_pressure_pa': q_pa,
+        'installation': installation,
+        'alpha_start_deg': start,
+        'alpha_end_deg': end,
+        'alpha_step_deg': step,
+        'hold_s': hold_s,
+        'wind_off_hold_s': wind_off_hold_s,
+        'rate_hz': rate_hz,
+        'seed': seed,
+        'noise_sigma_pct_fs': noise_sigma_pct_fs,
+        'exit_when_done': True,
+        'wait_for_subscribers': 1,
+        'wait_for_subscribers_timeout_s': subscriber_timeout_s,
+    }
 
 
 def reduce_command(bag: Path, *, model: str, balance: str, installation: str) -> list[str]:
     """The `balance-calib reduce` command line for the bag (the balance's shipped matrices)."""
-    return ['balance-calib', 'reduce', str(bag), '--calibration', balance, '--model', model,
-            '--installation', installation, '--out', str(bag.parent / f'{bag.name}_reduce')]
+    return [
+        'balance-calib',
+        'reduce',
+        str(bag),
+        '--calibration',
+        balance,
+        '--model',
+        model,
+        '--installation',
+        installation,
+        '--out',
+        str(bag.parent / f'{bag.name}_reduce'),
+    ]
 
 
 def _stop(process: subprocess.Popen, timeout_s: float = STOP_TIMEOUT_S) -> int:
@@ -87,13 +126,24 @@ def _stop(process: subprocess.Popen, timeout_s: float = STOP_TIMEOUT_S) -> int:
     return process.returncode
 
 
-def record_wind_on_run(out: Path, *, model: str = DEFAULT_MODEL, balance: str = 'lmc6522',
-                       q_pa: float = 50000.0, installation: str = 'upright',
-                       alpha_deg: Sequence[float] = (-2.0, 22.0, 2.0), hold_s: float = 0.5,
-                       wind_off_hold_s: float = 0.3, rate_hz: float = 200.0, seed: int = 0,
-                       noise_sigma_pct_fs: float = -1.0, subscriber_timeout_s: float = 30.0,
-                       run_timeout_s: float = 600.0, say: Callable[[str], None] = print,
-                       env: dict | None = None) -> WindOnRun:
+def record_wind_on_run(
+    out: Path,
+    *,
+    model: str = DEFAULT_MODEL,
+    balance: str = 'lmc6522',
+    q_pa: float = 50000.0,
+    installation: str = 'upright',
+    alpha_deg: Sequence[float] = (-2.0, 22.0, 2.0),
+    hold_s: float = 0.5,
+    wind_off_hold_s: float = 0.3,
+    rate_hz: float = 200.0,
+    seed: int = 0,
+    noise_sigma_pct_fs: float = -1.0,
+    subscriber_timeout_s: float = 30.0,
+    run_timeout_s: float = 600.0,
+    say: Callable[[str], None] = print,
+    env: dict | None = None,
+) -> WindOnRun:
     """Run balance_recorder and bridge_publisher (wind-on) until the run is over; the bag is out.
 
     The nodes print on this process's stdout and stderr. Raises WindOnError (the bag removed) when
@@ -103,10 +153,21 @@ def record_wind_on_run(out: Path, *, model: str = DEFAULT_MODEL, balance: str = 
     if out.exists():
         raise FileExistsError(f'{out} exists already; choose a new bag directory')
     recorder_args = ros_args({'output': str(out), 'topics': recorder_topics()})
-    publisher_args = ros_args(publisher_parameters(
-        model=model, balance=balance, q_pa=q_pa, installation=installation, alpha_deg=alpha_deg,
-        hold_s=hold_s, wind_off_hold_s=wind_off_hold_s, rate_hz=rate_hz, seed=seed,
-        noise_sigma_pct_fs=noise_sigma_pct_fs, subscriber_timeout_s=subscriber_timeout_s))
+    publisher_args = ros_args(
+        publisher_parameters(
+            model=model,
+            balance=balance,
+            q_pa=q_pa,
+            installation=installation,
+            alpha_deg=alpha_deg,
+            hold_s=hold_s,
+            wind_off_hold_s=wind_off_hold_s,
+            rate_hz=rate_hz,
+            seed=seed,
+            noise_sigma_pct_fs=noise_sigma_pct_fs,
+            subscriber_timeout_s=subscriber_timeout_s,
+        )
+    )
     env = dict(os.environ if env is None else env)
     processes: dict[str, subprocess.Popen] = {}
     interrupted = False
@@ -118,19 +179,25 @@ def record_wind_on_run(out: Path, *, model: str = DEFAULT_MODEL, balance: str = 
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         # own sessions: a terminal's Ctrl-C reaches the nodes only through us, in order
-        processes['balance_recorder'] = subprocess.Popen(['balance_recorder', *recorder_args],
-                                                         env=env, start_new_session=True)
-        processes['bridge_publisher'] = subprocess.Popen(['bridge_publisher', *publisher_args],
-                                                         env=env, start_new_session=True)
-        say(f'windon: recording {model} on the {balance} ({installation}, q∞ {q_pa:g} Pa) '
-            f'into {out}')
+        processes['balance_recorder'] = subprocess.Popen(
+            ['balance_recorder', *recorder_args], env=env, start_new_session=True
+        )
+        processes['bridge_publisher'] = subprocess.Popen(
+            ['bridge_publisher', *publisher_args], env=env, start_new_session=True
+        )
+        say(
+            f'windon: recording {model} on the {balance} ({installation}, q∞ {q_pa:g} Pa) '
+            f'into {out}'
+        )
         publisher, recorder = processes['bridge_publisher'], processes['balance_recorder']
         deadline = time.monotonic() + run_timeout_s
         while publisher.poll() is None and not interrupted:
             if recorder.poll() is not None:
                 _stop(publisher)
-                raise WindOnError(f'balance_recorder exited with status {recorder.returncode} '
-                                  'before the run was over (see its lines above)')
+                raise WindOnError(
+                    f'balance_recorder exited with status {recorder.returncode} '
+                    'before the run was over (see its lines above)'
+                )
             if time.monotonic() > deadline:
                 _stop(publisher)
                 raise WindOnError(f'the run did not end within {run_timeout_s:g} s')
@@ -138,12 +205,15 @@ def record_wind_on_run(out: Path, *, model: str = DEFAULT_MODEL, balance: str = 
         if interrupted:
             _stop(publisher)
             status = _stop(recorder)
-            raise KeyboardInterrupt(f'interrupted; the bag {out} holds the run so far'
-                                    + ('' if status == 0 else f' (recorder status {status})'))
+            raise KeyboardInterrupt(
+                f'interrupted; the bag {out} holds the run so far'
+                + ('' if status == 0 else f' (recorder status {status})')
+            )
         if publisher.returncode != 0:
             _stop(recorder)
-            raise WindOnError(f'bridge_publisher exited with status {publisher.returncode} '
-                              '(see its lines above)')
+            raise WindOnError(
+                f'bridge_publisher exited with status {publisher.returncode} (see its lines above)'
+            )
         status = _stop(recorder)
         if status != 0:
             raise WindOnError(f'balance_recorder did not close the bag cleanly (status {status})')
@@ -168,9 +238,12 @@ def record_wind_on_run(out: Path, *, model: str = DEFAULT_MODEL, balance: str = 
 def recorded_counts(bag: Path) -> dict[str, int]:
     """Messages per topic, from the metadata.yaml the recorder wrote when it closed the bag."""
     import yaml
+
     info = yaml.safe_load((bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
-    return {t['topic_metadata']['name']: int(t['message_count'])
-            for t in info['topics_with_message_count']}
+    return {
+        t['topic_metadata']['name']: int(t['message_count'])
+        for t in info['topics_with_message_count']
+    }
 
 
 def _alpha(text: str) -> tuple[float, float, float]:
@@ -195,37 +268,67 @@ def _positive(text: str) -> float:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog='windon', formatter_class=argparse.RawDescriptionHelpFormatter,
+        prog='windon',
+        formatter_class=argparse.RawDescriptionHelpFormatter,
         description=__doc__.split('\n\n', 2)[2].strip(),
         epilog='Then: the printed balance-calib reduce command (e.g. balance-calib reduce OUT '
-               '--calibration lmc6522 --model euler_replica_lmc6522 --out OUT_reduce).')
+        '--calibration lmc6522 --model euler_replica_lmc6522 --out OUT_reduce).',
+    )
     parser.add_argument('out', help='bag directory to create (it must not exist)')
-    parser.add_argument('--model', default=DEFAULT_MODEL,
-                        help=f'model file, config/models/NAME.yaml or a path '
-                             f'(default {DEFAULT_MODEL})')
-    parser.add_argument('--balance', default='lmc6522',
-                        help='balance config the simulated balance follows (default lmc6522)')
-    parser.add_argument('--q-pa', type=_positive, default=50000.0,
-                        help='dynamic pressure of the wind-on holds, Pa (default 50000)')
-    parser.add_argument('--installation', default='upright',
-                        help='upright or inverted (TM-663 §10.2)')
-    parser.add_argument('--alpha-deg', type=_alpha, default=(-2.0, 22.0, 2.0),
-                        help='wind-on α sweep START,END,STEP in degrees (default -2,22,2; '
-                             'spell a negative START as --alpha-deg=-4,20,4)')
-    parser.add_argument('--hold-s', type=_positive, default=0.5,
-                        help='seconds at each wind-on α (default 0.5)')
-    parser.add_argument('--wind-off-hold-s', type=_positive, default=0.3,
-                        help='seconds at each wind-off attitude (default 0.3)')
-    parser.add_argument('--rate-hz', type=_positive, default=200.0,
-                        help='bridge samples per second (default 200)')
-    parser.add_argument('--seed', type=int, default=0,
-                        help='random seed of the simulated noise (default 0)')
-    parser.add_argument('--noise-pct-fs', type=float, default=-1.0,
-                        help="σ of a held point's mean load, %% FS "
-                             "(default -1: Table 17's cubic row)")
-    parser.add_argument('--subscriber-timeout-s', type=_positive, default=30.0,
-                        help='bridge_publisher gives up when the recorder has not subscribed '
-                             'within this time, s (default 30)')
+    parser.add_argument(
+        '--model',
+        default=DEFAULT_MODEL,
+        help=f'model file, config/models/NAME.yaml or a path (default {DEFAULT_MODEL})',
+    )
+    parser.add_argument(
+        '--balance',
+        default='lmc6522',
+        help='balance config the simulated balance follows (default lmc6522)',
+    )
+    parser.add_argument(
+        '--q-pa',
+        type=_positive,
+        default=50000.0,
+        help='dynamic pressure of the wind-on holds, Pa (default 50000)',
+    )
+    parser.add_argument(
+        '--installation', default='upright', help='upright or inverted (TM-663 §10.2)'
+    )
+    parser.add_argument(
+        '--alpha-deg',
+        type=_alpha,
+        default=(-2.0, 22.0, 2.0),
+        help='wind-on α sweep START,END,STEP in degrees (default -2,22,2; '
+        'spell a negative START as --alpha-deg=-4,20,4)',
+    )
+    parser.add_argument(
+        '--hold-s', type=_positive, default=0.5, help='seconds at each wind-on α (default 0.5)'
+    )
+    parser.add_argument(
+        '--wind-off-hold-s',
+        type=_positive,
+        default=0.3,
+        help='seconds at each wind-off attitude (default 0.3)',
+    )
+    parser.add_argument(
+        '--rate-hz', type=_positive, default=200.0, help='bridge samples per second (default 200)'
+    )
+    parser.add_argument(
+        '--seed', type=int, default=0, help='random seed of the simulated noise (default 0)'
+    )
+    parser.add_argument(
+        '--noise-pct-fs',
+        type=float,
+        default=-1.0,
+        help="σ of a held point's mean load, %% FS (default -1: Table 17's cubic row)",
+    )
+    parser.add_argument(
+        '--subscriber-timeout-s',
+        type=_positive,
+        default=30.0,
+        help='bridge_publisher gives up when the recorder has not subscribed '
+        'within this time, s (default 30)',
+    )
     return parser
 
 
@@ -236,10 +339,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         run = record_wind_on_run(
-            Path(args.out), model=args.model, balance=args.balance, q_pa=args.q_pa,
-            installation=args.installation, alpha_deg=args.alpha_deg, hold_s=args.hold_s,
-            wind_off_hold_s=args.wind_off_hold_s, rate_hz=args.rate_hz, seed=args.seed,
-            noise_sigma_pct_fs=args.noise_pct_fs, subscriber_timeout_s=args.subscriber_timeout_s)
+            Path(args.out),
+            model=args.model,
+            balance=args.balance,
+            q_pa=args.q_pa,
+            installation=args.installation,
+            alpha_deg=args.alpha_deg,
+            hold_s=args.hold_s,
+            wind_off_hold_s=args.wind_off_hold_s,
+            rate_hz=args.rate_hz,
+            seed=args.seed,
+            noise_sigma_pct_fs=args.noise_pct_fs,
+            subscriber_timeout_s=args.subscriber_timeout_s,
+        )
     except (FileExistsError, WindOnError) as error:
         print(f'windon: {error}', file=sys.stderr)
         return 1

@@ -1,12 +1,13 @@
-"""The live calibrator's lone sample (the usual case at 1 kHz: every sample arrives alone) in one C call.
+"""The live calibrator's lone sample (the usual case at 1 kHz: every sample arrives alone) in one C
+call.
 
-At 1 kHz each sample wakes the node by itself, so the per-call cost of Python and numpy -- tripled by
-caches gone cold between samples -- is what a sample costs: about 190 µs of the calibrator's CPU per
-sample went to decoding, the dozen numpy calls of the one-sample path, the uncertainty and encoding.
-`_lone_kernel.c` does those steps for one serialized sample in one call and returns the serialized
-wrench and uncertainty: the pure core's only accelerator, called by the live path's one entry point
-(stream.LiveCalibrator.process_messages) for the leading samples of a batch it takes; the
-bookkeeping (input monitor, counters, overload) is the pure core's, fed once per batch.
+At 1 kHz each sample wakes the node by itself, so the per-call cost of Python and numpy -- tripled
+by caches gone cold between samples -- is what a sample costs: about 190 µs of the calibrator's CPU
+per sample went to decoding, the dozen numpy calls of the one-sample path, the uncertainty and
+encoding. `_lone_kernel.c` does those steps for one serialized sample in one call and returns the
+serialized wrench and uncertainty: the pure core's only accelerator, called by the live path's one
+entry point (stream.LiveCalibrator.process_messages) for the leading samples of a batch it takes;
+the bookkeeping (input monitor, counters, overload) is the pure core's, fed once per batch.
 
 It applies only where its result is the pure core's (test/test_lone_kernel.py holds them equal to
 1e-12): a direct polynomial model of the bridge outputs alone (no temperature or load-history
@@ -17,6 +18,7 @@ says why. Without the compiled module (no C compiler when installing), or with t
 variable BALANCE_CALIB_LONE_KERNEL=0, `available` is False and every sample takes the pure core's
 path; the node says so once at start-up.
 """
+
 from __future__ import annotations
 
 import os
@@ -28,16 +30,19 @@ from ..units import COMPONENTS
 
 try:
     from . import _lone_kernel
+
     available, unavailable_reason = True, ''
-except ImportError as err:         # built without a C compiler: the pure core does every sample
+except ImportError as err:  # built without a C compiler: the pure core does every sample
     _lone_kernel, available, unavailable_reason = None, False, str(err)
-if os.environ.get('BALANCE_CALIB_LONE_KERNEL', '1') == '0':      # the pure core for every sample (A/B, debugging)
+# the pure core for every sample (A/B, debugging)
+if os.environ.get('BALANCE_CALIB_LONE_KERNEL', '1') == '0':
     available, unavailable_reason = False, 'switched off by BALANCE_CALIB_LONE_KERNEL=0'
 
 
 def make_plan(active, tare, input_scale: float, middle: bytes):
     """The kernel's plan for this calibration (ActiveCalibration), zero and tare (TareState), input
-    scale and output frame (WrenchEncoder.middle); None where the kernel does not apply."""
+    scale and output frame (WrenchEncoder.middle); None where the kernel does not apply.
+    """
     if not available or active.model.extra_variables or active.requires or active.iterative:
         return None
     index = active.one_sample_index
@@ -57,20 +62,37 @@ def make_plan(active, tare, input_scale: float, middle: bytes):
     if tare.tare_sigma is not None:
         tare2[positions] = np.asarray(tare.tare_sigma, dtype=float)[positions] ** 2
     permutation, signs = active.installation.permutation, active.installation.signs
+
     def six(values):
         return np.ascontiguousarray(np.zeros(6) if values is None else values, dtype=float)
 
     return _lone_kernel.plan(
-        float(input_scale), six(tare.zero_mv), six(active.output_range_mv), six(active.envelope),
-        six(active.capacity), six(tare.tare_load), np.ascontiguousarray(permutation, dtype=np.int64), six(signs),
-        index.shape[0], index.shape[1], np.ascontiguousarray(index, dtype=np.intp),
-        np.ascontiguousarray(active.coefficients_six, dtype=float), covariance, sigma2, tare2, has_component,
-        bytes(middle))
+        float(input_scale),
+        six(tare.zero_mv),
+        six(active.output_range_mv),
+        six(active.envelope),
+        six(active.capacity),
+        six(tare.tare_load),
+        np.ascontiguousarray(permutation, dtype=np.int64),
+        six(signs),
+        index.shape[0],
+        index.shape[1],
+        np.ascontiguousarray(index, dtype=np.intp),
+        np.ascontiguousarray(active.coefficients_six, dtype=float),
+        covariance,
+        sigma2,
+        tare2,
+        has_component,
+        bytes(middle),
+    )
 
 
-def run(plan, data: bytes, want_uncertainty: bool, overload_fraction: float, peak_fraction: np.ndarray):
-    """One serialized sample -> None (the pure core's turn) or (stamp_ns, frame_id bytes, loads (6,)
-    balance axes before the tare, outside the envelope, beyond overload_fraction x capacity, wrench
-    bytes, uncertainty bytes or None). peak_fraction (6,) float64, the overload monitor's: updated
-    in place with this sample's |load| / capacity."""
+def run(
+    plan, data: bytes, want_uncertainty: bool, overload_fraction: float, peak_fraction: np.ndarray
+):
+    """One serialized sample -> None (the pure core's turn) or (stamp_ns, frame_id bytes, loads
+    (6,) balance axes before the tare, outside the envelope, beyond overload_fraction x capacity,
+    wrench bytes, uncertainty bytes or None). peak_fraction (6,) float64, the overload monitor's:
+    updated in place with this sample's |load| / capacity.
+    """
     return _lone_kernel.run(plan, data, want_uncertainty, overload_fraction, peak_fraction)

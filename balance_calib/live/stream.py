@@ -1,48 +1,65 @@
-"""The live calibrator's state between samples, without rclpy: what balance_calibrator orchestrates.
+"""The live calibrator's state between samples, without rclpy: what balance_calibrator
+orchestrates.
 
-`LiveCalibrator.process()` takes a batch of raw samples (outputs, stamps, frame ids) and returns the
-wrenches to publish; around the math of calibrator_core it keeps the electrical zero and the tare
-load (with their ~/zero and ~/tare windows), the overload state, the optional low-pass filter, the
-load history of hysteresis models and the input's health (stamps, frame ids, gaps). The node only
-turns messages into arrays and back.
+`LiveCalibrator.process()` takes a batch of raw samples (outputs, stamps, frame ids) and returns
+the wrenches to publish; around the math of calibrator_core it keeps the electrical zero and the
+tare load (with their ~/zero and ~/tare windows), the overload state, the optional low-pass filter,
+the load history of hysteresis models and the input's health (stamps, frame ids, gaps). The node
+only turns messages into arrays and back.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-
 from typing import Callable
 
 import numpy as np
 
 from ..model.active_calibration import ActiveCalibration, six_axis_loads
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
-from .calibrator_core import (InputCounters, LiveState, LoadHistory, StatusReport, TareResult,
-                              TareWindow, WrenchBatch, _extra_variables, compute_wrench,
-                              diagnostics, evaluate_window)
 from . import lone_sample
+from .calibrator_core import (
+    _extra_variables,
+    compute_wrench,
+    diagnostics,
+    evaluate_window,
+    InputCounters,
+    LiveState,
+    LoadHistory,
+    StatusReport,
+    TareResult,
+    TareWindow,
+    WrenchBatch,
+)
 from .raw_codec import WrenchEncoder
-from .tare_store import TareState, now_iso
+from .tare_store import now_iso, TareState
 
 
 @dataclass(frozen=True)
 class LiveSettings:
     stale_after_s: float = 1.0
-    overload_fraction: float = 1.0      # x rated load
+    overload_fraction: float = 1.0  # x rated load
     overload_clear_s: float = 1.0
-    lowpass_hz: float = 0.0             # 0 = off
-    tare_max_ratio: float = 4.0         # steadiness: scatter and step limit, x the window's own noise
+    lowpass_hz: float = 0.0  # 0 = off
+    tare_max_ratio: float = 4.0  # steadiness: scatter and step limit, x the window's own noise
     publish_uncertainty: bool = True
 
 
 class InputMonitor:
-    """Stamps out of order, duplicated or zero, frame ids naming another balance, and gaps (lost samples).
+    """Stamps out of order, duplicated or zero, frame ids naming another balance, and gaps (lost
+    samples).
 
     The nominal sample interval is the median of the last 256 positive stamp differences (re-taken
     every 64 samples); a gap of d > 1.5 intervals counts round(d / interval) - 1 samples lost.
     """
 
-    KINDS = ('stamps out of order', 'duplicate stamps', 'zero stamps', 'samples from another balance',
-             'samples lost (gaps in the stamps)')
+    KINDS = (
+        'stamps out of order',
+        'duplicate stamps',
+        'zero stamps',
+        'samples from another balance',
+        'samples lost (gaps in the stamps)',
+    )
 
     def __init__(self, balance: str):
         self.balance = balance.lower()
@@ -51,7 +68,7 @@ class InputMonitor:
         self.foreign_frames: set[str] = set()
         self.last_stamp_ns: int | None = None
         self.interval_ns: float | None = None
-        self._differences = [0] * 256             # the last 256 positive differences, a ring
+        self._differences = [0] * 256  # the last 256 positive differences, a ring
         self._filled = 0
         self._since_estimate = 0
 
@@ -66,7 +83,8 @@ class InputMonitor:
         One pass in plain Python: a sequential state machine (the latest stamp so far), and at
         1 kHz every batch is one sample, where numpy's per-call cost would be most of the work. The
         interval is estimated before the batch's gaps are counted (from the batch's own differences
-        when there is none yet) and re-taken after it."""
+        when there is none yet) and re-taken after it.
+        """
         if frame_ids is not None:
             foreign = [f for f in frame_ids if f and f.lower() != self.balance]
             if foreign:
@@ -83,7 +101,7 @@ class InputMonitor:
         first = self.last_stamp_ns is None
         latest = stamps[0] if first else self.last_stamp_ns
         positive, out_of_order, duplicates = [], 0, 0
-        for stamp in stamps[1:] if first else stamps:     # each against the latest stamp before it
+        for stamp in stamps[1:] if first else stamps:  # each against the latest stamp before it
             difference = stamp - latest
             if difference > 0:
                 positive.append(difference)
@@ -96,14 +114,15 @@ class InputMonitor:
             self._add('stamps out of order', out_of_order)
             self._add('duplicate stamps', duplicates)
         self.last_stamp_ns = latest
-        if self.interval_ns is None and len(positive) >= 3:     # a first batch: its own median
+        if self.interval_ns is None and len(positive) >= 3:  # a first batch: its own median
             self.interval_ns = float(np.median(positive))
         if self.interval_ns is not None and positive:
             interval = self.interval_ns
             gaps = [d for d in positive if d > 1.5 * interval]
             if gaps:
-                self._add('samples lost (gaps in the stamps)',
-                          sum(round(d / interval) - 1 for d in gaps))
+                self._add(
+                    'samples lost (gaps in the stamps)', sum(round(d / interval) - 1 for d in gaps)
+                )
         ring, filled = self._differences, self._filled
         for difference in positive[-256:]:
             ring[filled % 256] = difference
@@ -111,7 +130,7 @@ class InputMonitor:
         self._since_estimate += filled - self._filled
         self._filled = filled
         if filled and (self.interval_ns is None or self._since_estimate >= 64):
-            self.interval_ns = float(np.median(ring[:min(filled, 256)]))
+            self.interval_ns = float(np.median(ring[: min(filled, 256)]))
             self._since_estimate = 0
 
     def problems(self) -> tuple[tuple[str, int, int], ...]:
@@ -122,8 +141,9 @@ class InputMonitor:
 
 
 class OverloadMonitor:
-    """True as soon as any component's load exceeds capacity x fraction (or a bridge saturates); false
-    again once the samples have stayed inside for clear_s."""
+    """True as soon as any component's load exceeds capacity x fraction (or a bridge saturates);
+    false again once the samples have stayed inside for clear_s.
+    """
 
     def __init__(self, capacity: np.ndarray, fraction: float, clear_s: float):
         self.capacity = np.asarray(capacity, dtype=float)
@@ -136,7 +156,9 @@ class OverloadMonitor:
         self.events = 0
 
     def update(self, loads_total: np.ndarray, saturated: np.ndarray, now_s: float) -> bool:
-        """Feed a batch (loads of the accepted samples (N, 6), saturated flags); True if the state changed."""
+        """Feed a batch (loads of the accepted samples (N, 6), saturated flags); True if the
+        state changed.
+        """
         if len(loads_total):
             ratio = np.abs(loads_total).max(axis=0) / self.capacity
             np.maximum(self.peak_fraction, ratio, out=self.peak_fraction)
@@ -144,8 +166,9 @@ class OverloadMonitor:
         else:
             exceeded = np.zeros(6, bool)
         if exceeded.any() or saturated.any():
-            names = tuple(COMPONENTS[k] for k in np.flatnonzero(exceeded)) + (('saturated bridge',)
-                                                                               if np.any(saturated) else ())
+            names = tuple(COMPONENTS[k] for k in np.flatnonzero(exceeded)) + (
+                ('saturated bridge',) if np.any(saturated) else ()
+            )
             changed = not self.active
             self.active, self.inside_since_s = True, None
             self.components = names if changed else tuple(dict.fromkeys(self.components + names))
@@ -160,15 +183,21 @@ class OverloadMonitor:
         return False
 
     def values(self) -> tuple[tuple[str, str], ...]:
-        return (('overload', str(self.active)), ('overload_fraction', f'{self.fraction:g}'),
-                ('overload_events', str(self.events)),
-                ('peak_load_fraction_of_rated', ', '.join(f'{c}={v:.3f}' for c, v in
-                                                          zip(COMPONENTS, self.peak_fraction))))
+        return (
+            ('overload', str(self.active)),
+            ('overload_fraction', f'{self.fraction:g}'),
+            ('overload_events', str(self.events)),
+            (
+                'peak_load_fraction_of_rated',
+                ', '.join(f'{c}={v:.3f}' for c, v in zip(COMPONENTS, self.peak_fraction)),
+            ),
+        )
 
 
 class LowPass:
-    """First-order low-pass on each component, y += a (x - y) with a = 1 - exp(-2π f_c Δt), state carried
-    across batches (scipy.signal.lfilter)."""
+    """First-order low-pass on each component, y += a (x - y) with a = 1 - exp(-2π f_c Δt), state
+    carried across batches (scipy.signal.lfilter).
+    """
 
     def __init__(self, cutoff_hz: float):
         self.cutoff_hz = cutoff_hz
@@ -187,6 +216,7 @@ class LowPass:
             return values
         a = 1.0 - np.exp(-2.0 * np.pi * self.cutoff_hz * interval_s)
         from scipy.signal import lfilter
+
         out, _ = lfilter([a], [1.0, a - 1.0], values, axis=0, zi=((1.0 - a) * self.state)[None, :])
         self.state = out[-1].copy()
         return out
@@ -197,12 +227,31 @@ class Output:
     order; overload: the new overload state if it changed (None: unchanged; the session sets it,
     see LiveCalibrator.overload_changed); uncertainty() -> the uncertainties, computed when asked
     (after the wrenches went out). accelerated: how many of the leading samples the C kernel took;
-    batch: the pure core's WrenchBatch of the rest (None if the kernel took all)."""
-    __slots__ = ('wrench', 'overload', 'accelerated', 'batch', '_ready', '_later', '_stamps',
-                 '_encoder')
+    batch: the pure core's WrenchBatch of the rest (None if the kernel took all).
+    """
 
-    def __init__(self, wrench: list, ready: list, later=None, stamps=None, encoder=None, *,
-                 accelerated: int = 0, batch: WrenchBatch | None = None):
+    __slots__ = (
+        'wrench',
+        'overload',
+        'accelerated',
+        'batch',
+        '_ready',
+        '_later',
+        '_stamps',
+        '_encoder',
+    )
+
+    def __init__(
+        self,
+        wrench: list,
+        ready: list,
+        later=None,
+        stamps=None,
+        encoder=None,
+        *,
+        accelerated: int = 0,
+        batch: WrenchBatch | None = None,
+    ):
         self.wrench, self.accelerated, self.batch, self.overload = wrench, accelerated, batch, None
         self._ready, self._later, self._stamps, self._encoder = ready, later, stamps, encoder
 
@@ -220,21 +269,34 @@ class Published:
     indices: np.ndarray
     wrench: np.ndarray
     batch: WrenchBatch
-    uncertainty: np.ndarray | None = None     # (M, 6) standard uncertainty, tunnel axes; None = not available
-    uncertainty_later: Callable[[], np.ndarray | None] | None = None   # with defer_uncertainty: computes it
+    # (M, 6) standard uncertainty, tunnel axes; None = not available
+    uncertainty: np.ndarray | None = None
+    # with defer_uncertainty: computes it
+    uncertainty_later: Callable[[], np.ndarray | None] | None = None
 
 
-def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, tare_sigma, *, model=None,
-                       extra=None, loads_balance=None, design=None) -> np.ndarray | None:
-    """Standard uncertainty (k = 1) of each published load (M, 6), N / N·m, tunnel axes: the calibration's
-    coefficient covariance and residual σ (model/uncertainty.py) at these outputs, and the tare's own
-    scatter. `model`: the one that gave the loads (default the active model; the base model after a
-    fallback); `extra`: its variables besides the outputs (dT, dir_*) for these samples, as for its
-    loads(); `loads_balance` (M, 6): the loads it gave, balance axes, so that an iterative model is not
-    solved twice; `design` (M, n_terms): its design rows, if computed already. None when the model has no covariance (the memo's matrices) or needs an input it
-    was not given. A component the calibration lacks (a 1-, 3- or 5-component balance) is NaN:
-    its 0 is not a measurement."""
+def wrench_uncertainty(
+    active: ActiveCalibration,
+    zeroed_outputs: np.ndarray,
+    tare_sigma,
+    *,
+    model=None,
+    extra=None,
+    loads_balance=None,
+    design=None,
+) -> np.ndarray | None:
+    """Standard uncertainty (k = 1) of each published load (M, 6), N / N·m, tunnel axes: the
+    calibration's coefficient covariance and residual σ (model/uncertainty.py) at these outputs,
+    and the tare's own scatter. `model`: the one that gave the loads (default the active model; the
+    base model after a fallback); `extra`: its variables besides the outputs (dT, dir_*) for these
+    samples, as for its loads(); `loads_balance` (M, 6): the loads it gave, balance axes, so that
+    an iterative model is not solved twice; `design` (M, n_terms): its design rows, if computed
+    already. None when the model has no covariance (the memo's matrices) or needs an input it was
+    not given. A component the calibration lacks (a 1-, 3- or 5-component balance) is NaN: its 0 is
+    not a measurement.
+    """
     from ..model.uncertainty import has_uncertainty, load_standard_uncertainty
+
     model = active.model if model is None else model
     positions = [COMPONENTS.index(c) for c in model.components]
     tare = None if tare_sigma is None else np.asarray(tare_sigma)[positions]
@@ -242,13 +304,16 @@ def wrench_uncertainty(active: ActiveCalibration, zeroed_outputs: np.ndarray, ta
     if (model.extra_variables and extra is None) or not has_uncertainty(model):
         return None
     columns = [BRIDGE_OUTPUTS.index(v) for v in model.inputs]
-    loads = None if loads_balance is None or not iterative else \
-        np.asarray(loads_balance)[:, positions]
-    per_component = load_standard_uncertainty(model, zeroed_outputs[:, columns], extra,
-                                              tare_sigma=tare, loads=loads, design=design)
-    six = np.full((len(zeroed_outputs), 6), np.nan)     # NaN: a component the calibration lacks
+    loads = (
+        None if loads_balance is None or not iterative else np.asarray(loads_balance)[:, positions]
+    )
+    per_component = load_standard_uncertainty(
+        model, zeroed_outputs[:, columns], extra, tare_sigma=tare, loads=loads, design=design
+    )
+    six = np.full((len(zeroed_outputs), 6), np.nan)  # NaN: a component the calibration lacks
     six[:, positions] = per_component
-    return np.abs(active.installation.to_tunnel(six))       # a signed permutation: magnitudes carry over
+    # a signed permutation: magnitudes carry over
+    return np.abs(active.installation.to_tunnel(six))
 
 
 @dataclass
@@ -261,8 +326,9 @@ class LiveCalibrator:
         self.tare = self.tare or TareState(self.active.calibration.balance)
         self.counters = InputCounters()
         self.inputs = InputMonitor(self.active.calibration.balance)
-        self.overload = OverloadMonitor(self.active.capacity, self.settings.overload_fraction,
-                                        self.settings.overload_clear_s)
+        self.overload = OverloadMonitor(
+            self.active.capacity, self.settings.overload_fraction, self.settings.overload_clear_s
+        )
         self.lowpass = LowPass(self.settings.lowpass_hz)
         self.history = LoadHistory(self.active.capacity)
         self.window: TareWindow | None = None
@@ -282,16 +348,29 @@ class LiveCalibrator:
     def set_settings(self, settings: LiveSettings) -> None:
         if settings.lowpass_hz != self.settings.lowpass_hz:
             self.lowpass = LowPass(settings.lowpass_hz)
-        self.overload.fraction, self.overload.clear_s = settings.overload_fraction, settings.overload_clear_s
+        self.overload.fraction, self.overload.clear_s = (
+            settings.overload_fraction,
+            settings.overload_clear_s,
+        )
         self.settings = settings
 
     # --- the stream -----------------------------------------------------------------------------
-    def process(self, outputs_mv: np.ndarray, stamps_ns: np.ndarray, frame_ids=None, *, now_s: float,
-                temperature_c: float | None = None, uncertainty_wanted: bool = True,
-                defer_uncertainty: bool = False) -> Published:
-        """A batch of raw samples (N, 6) mV in arrival order -> what to publish. uncertainty_wanted: False
-        when nobody subscribes to it (the node asks its publisher): not computed then. defer_uncertainty:
-        leave it to Published.uncertainty_later(), so that the wrench goes out first."""
+    def process(
+        self,
+        outputs_mv: np.ndarray,
+        stamps_ns: np.ndarray,
+        frame_ids=None,
+        *,
+        now_s: float,
+        temperature_c: float | None = None,
+        uncertainty_wanted: bool = True,
+        defer_uncertainty: bool = False,
+    ) -> Published:
+        """A batch of raw samples (N, 6) mV in arrival order -> what to publish.
+        uncertainty_wanted: False when nobody subscribes to it (the node asks its publisher): not
+        computed then. defer_uncertainty: leave it to Published.uncertainty_later(), so that the
+        wrench goes out first.
+        """
         self.uncertainty_wanted = uncertainty_wanted
         outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
         self.inputs.update(stamps_ns, frame_ids)
@@ -302,9 +381,16 @@ class LiveCalibrator:
             zeroed = outputs[finite] - (0.0 if tare.zero_mv is None else tare.zero_mv)
             direction = np.ones((len(outputs), 6))
             direction[finite] = self.history.update(six_axis_loads(active.base_model, zeroed))
-        batch = compute_wrench(active, outputs, zero_mv=tare.zero_mv, tare_load=tare.tare_load,
-                               temperature_c=temperature_c, load_direction=direction,
-                               zero_temperature_c=tare.zero_temperature_c, zero_direction=tare.zero_direction)
+        batch = compute_wrench(
+            active,
+            outputs,
+            zero_mv=tare.zero_mv,
+            tare_load=tare.tare_load,
+            temperature_c=temperature_c,
+            load_direction=direction,
+            zero_temperature_c=tare.zero_temperature_c,
+            zero_direction=tare.zero_direction,
+        )
         self.counters.count(batch)
         self.fallback_reason = batch.fallback_reason
         accepted = batch.accepted
@@ -321,27 +407,48 @@ class LiveCalibrator:
         if not (self.settings.publish_uncertainty and uncertainty_wanted and len(indices)):
             return Published(indices, wrench, batch)
 
-        def uncertainty():      # of this batch, with this calibration and tare (immutable: safe to run later)
+        # of this batch, with this calibration and tare (immutable: safe to run later)
+        def uncertainty():
             accepted_outputs = outputs if all_accepted else outputs[indices]
             zeroed = accepted_outputs if tare.zero_mv is None else accepted_outputs - tare.zero_mv
             model = active.model if batch.model_used == active.model_name else active.base_model
             extra = None
-            if model.extra_variables:       # the same variables the loads were computed with
+            if model.extra_variables:  # the same variables the loads were computed with
                 extra = _extra_variables(
-                    model, len(indices),
-                    None if temperature_c is None or batch.fallback_reason else np.asarray(temperature_c, float),
-                    active.calibration.reference_temperature_c, None if direction is None else direction[indices])
+                    model,
+                    len(indices),
+                    None
+                    if temperature_c is None or batch.fallback_reason
+                    else np.asarray(temperature_c, float),
+                    active.calibration.reference_temperature_c,
+                    None if direction is None else direction[indices],
+                )
                 extra = None if isinstance(extra, str) else extra
-            return wrench_uncertainty(active, zeroed, tare.tare_sigma, model=model, extra=extra,
-                                      loads_balance=loads_total, design=batch.design_row)
+            return wrench_uncertainty(
+                active,
+                zeroed,
+                tare.tare_sigma,
+                model=model,
+                extra=extra,
+                loads_balance=loads_total,
+                design=batch.design_row,
+            )
+
         if defer_uncertainty:
             return Published(indices, wrench, batch, uncertainty_later=uncertainty)
         return Published(indices, wrench, batch, uncertainty())
 
-    def process_messages(self, messages: list[bytes], *, now_s: float, decode: Callable,
-                         input_scale: float, encoder: WrenchEncoder,
-                         temperature_c: float | None = None,
-                         uncertainty_wanted: bool = True) -> Output:
+    def process_messages(
+        self,
+        messages: list[bytes],
+        *,
+        now_s: float,
+        decode: Callable,
+        input_scale: float,
+        encoder: WrenchEncoder,
+        temperature_c: float | None = None,
+        uncertainty_wanted: bool = True,
+    ) -> Output:
         """A batch of serialized balance/raw samples -> the serialized wrenches to publish
         (Output), with the same state as process() on the decoded batch: the one call of the live
         path.
@@ -352,36 +459,66 @@ class LiveCalibrator:
         call, which at 1 kHz (one sample a wake-up) is every sample. The rest of the batch, from
         the first sample it declines (or the one that raised an overload), goes through process().
         decode(messages) -> (stamps_ns (N,), outputs (N, 6) in the input's unit, frame ids);
-        input_scale: to mV."""
-        wrench, ready = self._through_kernel(messages, now_s, input_scale, encoder.middle,
-                                             uncertainty_wanted)
+        input_scale: to mV.
+        """
+        wrench, ready = self._through_kernel(
+            messages, now_s, input_scale, encoder.middle, uncertainty_wanted
+        )
         if len(wrench) == len(messages):
             return Output(wrench, ready, accelerated=len(wrench))
         changed = self.overload_changed
-        stamps_ns, outputs, frame_ids = decode(messages[len(wrench):] if wrench else messages)
-        if input_scale != 1.0:          # ratiometric bridge outputs (input_units) to mV
+        stamps_ns, outputs, frame_ids = decode(messages[len(wrench) :] if wrench else messages)
+        if input_scale != 1.0:  # ratiometric bridge outputs (input_units) to mV
             outputs = outputs * input_scale
-        published = self.process(outputs, stamps_ns, frame_ids, now_s=now_s,
-                                 temperature_c=temperature_c,
-                                 uncertainty_wanted=uncertainty_wanted, defer_uncertainty=True)
+        published = self.process(
+            outputs,
+            stamps_ns,
+            frame_ids,
+            now_s=now_s,
+            temperature_c=temperature_c,
+            uncertainty_wanted=uncertainty_wanted,
+            defer_uncertainty=True,
+        )
         self.overload_changed = changed or self.overload_changed
         stamps = stamps_ns[published.indices]
-        return Output(wrench + encoder.encode(stamps, published.wrench), ready,
-                      published.uncertainty_later, stamps, encoder, accelerated=len(wrench),
-                      batch=published.batch)
+        return Output(
+            wrench + encoder.encode(stamps, published.wrench),
+            ready,
+            published.uncertainty_later,
+            stamps,
+            encoder,
+            accelerated=len(wrench),
+            batch=published.batch,
+        )
 
-    def _through_kernel(self, messages: list[bytes], now_s: float, input_scale: float,
-                        middle: bytes, uncertainty_wanted: bool) -> tuple[list, list]:
+    def _through_kernel(
+        self,
+        messages: list[bytes],
+        now_s: float,
+        input_scale: float,
+        middle: bytes,
+        uncertainty_wanted: bool,
+    ) -> tuple[list, list]:
         """The leading samples the C kernel takes: (wrench bytes, uncertainty bytes), with the
-        input monitor, counters and overload fed as process() feeds them."""
+        input monitor, counters and overload fed as process() feeds them.
+        """
         self.overload_changed = False
-        if not lone_sample.available or self.window is not None or self.lowpass.cutoff_hz > 0 \
-                or self.overload.active:
+        if (
+            not lone_sample.available
+            or self.window is not None
+            or self.lowpass.cutoff_hz > 0
+            or self.overload.active
+        ):
             return [], []
         # the plan, for (calibration, zero and tare, input scale, frame): made again on a change
         made_for = self._lone_plan_for
-        if made_for is None or made_for[0] is not self.active or made_for[1] is not self.tare \
-                or made_for[2] != input_scale or made_for[3] is not middle:
+        if (
+            made_for is None
+            or made_for[0] is not self.active
+            or made_for[1] is not self.tare
+            or made_for[2] != input_scale
+            or made_for[3] is not middle
+        ):
             self._lone_plan = lone_sample.make_plan(self.active, self.tare, input_scale, middle)
             self._lone_plan_for = (self.active, self.tare, input_scale, middle)
         plan = self._lone_plan
@@ -401,9 +538,10 @@ class LiveCalibrator:
             stamps.append(stamp_ns)
             frames.append(frame_id.decode('utf-8', 'replace'))
             outside += out
-            if exceeds:     # the overload is raised: held from here, the pure core takes the rest
-                self.overload_changed = overload.update(np.array([loads_total]), np.zeros(1, bool),
-                                                        now_s)
+            if exceeds:  # the overload is raised: held from here, the pure core takes the rest
+                self.overload_changed = overload.update(
+                    np.array([loads_total]), np.zeros(1, bool), now_s
+                )
                 break
         if wrench:
             self.uncertainty_wanted = uncertainty_wanted
@@ -418,24 +556,44 @@ class LiveCalibrator:
         return self.window
 
     def finish_window(self) -> TareResult:
-        """Evaluate the full window: adopt the zero or tare load if steady, else keep the old one."""
+        """Evaluate the full window: adopt the zero or tare load if steady, else keep the old
+        one.
+        """
         window, self.window = self.window, None
         tare = self.tare
-        result = evaluate_window(window, self.active, max_ratio=self.settings.tare_max_ratio, zero_mv=tare.zero_mv,
-                                 zero_temperature_c=tare.zero_temperature_c, zero_direction=tare.zero_direction,
-                                 load_direction=self.history.direction)
+        result = evaluate_window(
+            window,
+            self.active,
+            max_ratio=self.settings.tare_max_ratio,
+            zero_mv=tare.zero_mv,
+            zero_temperature_c=tare.zero_temperature_c,
+            zero_direction=tare.zero_direction,
+            load_direction=self.history.direction,
+        )
         if not result.ok:
             return replace(result, message=result.message + f'; the previous {window.kind} stays')
         if window.kind == 'zero':
             # a tare load was taken above the old zero: it no longer holds once the zero moves
-            cleared = '; the tare load was cleared (take ~/tare again with the model on)' \
-                if tare.tare_load is not None else ''
-            self.tare = TareState(tare.balance, result.zero_mv, window.temperature_c, self.history.direction.copy(),
-                                  now_iso())
+            cleared = (
+                '; the tare load was cleared (take ~/tare again with the model on)'
+                if tare.tare_load is not None
+                else ''
+            )
+            self.tare = TareState(
+                tare.balance,
+                result.zero_mv,
+                window.temperature_c,
+                self.history.direction.copy(),
+                now_iso(),
+            )
             result = replace(result, message=result.message + cleared)
         else:
-            self.tare = replace(tare, tare_load=result.tare_load, tare_taken_at=now_iso(),
-                                tare_sigma=result.tare_sigma)
+            self.tare = replace(
+                tare,
+                tare_load=result.tare_load,
+                tare_taken_at=now_iso(),
+                tare_sigma=result.tare_sigma,
+            )
         self.lowpass.reset()
         return result
 
@@ -449,35 +607,72 @@ class LiveCalibrator:
         self.lowpass.reset()
         if had is None:
             return 'clear_tare: there was no tare load; the electrical zero stays'
-        return 'clear_tare: tare load removed (it was ' + \
-            ', '.join(f'{c}={v:+.3f}' for c, v in zip(COMPONENTS, self.active.installation.to_tunnel(had))) + \
-            ' in tunnel axes); the electrical zero stays'
+        return (
+            'clear_tare: tare load removed (it was '
+            + ', '.join(
+                f'{c}={v:+.3f}'
+                for c, v in zip(COMPONENTS, self.active.installation.to_tunnel(had))
+            )
+            + ' in tunnel axes); the electrical zero stays'
+        )
 
     # --- /diagnostics ---------------------------------------------------------------------------
     def _uncertainty_state(self) -> str:
         from ..model.uncertainty import has_uncertainty
+
         if not self.settings.publish_uncertainty:
             return 'off (publish_uncertainty false)'
         if not has_uncertainty(self.active.model):
-            return 'not available: the calibration carries no coefficient covariance (e.g. the memo matrices)'
-        return 'published' if self.uncertainty_wanted else 'no subscriber: not computed until one subscribes'
+            return (
+                'not available: the calibration carries no coefficient covariance (e.g. the '
+                'memo matrices)'
+            )
+        return (
+            'published'
+            if self.uncertainty_wanted
+            else 'no subscriber: not computed until one subscribes'
+        )
 
-    def report(self, *, period_s: float, last_sample_age_s: float | None, temperature_age_s: float | None,
-               refit_running: bool, tare_source: str, node_name: str,
-               tare_refused: str = '') -> list[StatusReport]:
+    def report(
+        self,
+        *,
+        period_s: float,
+        last_sample_age_s: float | None,
+        temperature_age_s: float | None,
+        refit_running: bool,
+        tare_source: str,
+        node_name: str,
+        tare_refused: str = '',
+    ) -> list[StatusReport]:
         interval = self.inputs.interval_ns
         state = LiveState(
-            period_s=period_s, counters=self.counters, last_sample_age_s=last_sample_age_s,
-            stale_after_s=self.settings.stale_after_s, temperature_age_s=temperature_age_s,
-            fallback_reason=self.fallback_reason, tare_zero_mv=self.tare.zero_mv, refit_running=refit_running,
-            tare_load=self.tare.tare_load, tare_source=tare_source, tare_refused=tare_refused,
+            period_s=period_s,
+            counters=self.counters,
+            last_sample_age_s=last_sample_age_s,
+            stale_after_s=self.settings.stale_after_s,
+            temperature_age_s=temperature_age_s,
+            fallback_reason=self.fallback_reason,
+            tare_zero_mv=self.tare.zero_mv,
+            refit_running=refit_running,
+            tare_load=self.tare.tare_load,
+            tare_source=tare_source,
+            tare_refused=tare_refused,
             input_problems=self.inputs.problems(),
-            input_values=(('nominal_interval_ms', 'unknown' if interval is None else f'{interval * 1e-6:.4g}'),
-                          ('wrench_uncertainty', self._uncertainty_state()),
-                          ('frame_ids_seen_from_other_balances', ', '.join(sorted(self.inputs.foreign_frames))
-                           or 'none')),
+            input_values=(
+                (
+                    'nominal_interval_ms',
+                    'unknown' if interval is None else f'{interval * 1e-6:.4g}',
+                ),
+                ('wrench_uncertainty', self._uncertainty_state()),
+                (
+                    'frame_ids_seen_from_other_balances',
+                    ', '.join(sorted(self.inputs.foreign_frames)) or 'none',
+                ),
+            ),
             overload=self.overload.components if self.overload.active else None,
-            overload_values=self.overload.values(), lowpass_hz=self.settings.lowpass_hz)
+            overload_values=self.overload.values(),
+            lowpass_hz=self.settings.lowpass_hz,
+        )
         reports = diagnostics(self.active, state, node_name)
         self.counters.start_period()
         self.inputs.start_period()

@@ -1,4 +1,5 @@
-"""The active zero and tare of a live calibrator, persisted beside its calibration and restored at start-up.
+"""The active zero and tare of a live calibrator, persisted beside its calibration and restored at
+start-up.
 
 The file (YAML, replaced atomically) holds the electrical zero (mV, with the temperature and load
 direction at that moment, for models with such terms) and the tare load (N, N·m, balance
@@ -9,14 +10,15 @@ model's weight loads the balance the other way once it is mounted inverted. The 
 only for the same owner (`restore_refusal`); a file of the first format records no owner and is
 never restored.
 """
+
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
 import datetime as _dt
 import hashlib
 import os
-import stat
-from dataclasses import dataclass, fields
 from pathlib import Path
+import stat
 
 import numpy as np
 import yaml
@@ -26,7 +28,7 @@ from ..tunnel_axes import Installation
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
 
 FORMAT = 'balance_calib/tare 2'
-OLDER_FORMATS = ('balance_calib/tare 1',)      # read, never restored: they record no owner
+OLDER_FORMATS = ('balance_calib/tare 1',)  # read, never restored: they record no owner
 MAX_BYTES = 1 << 16
 
 
@@ -34,19 +36,21 @@ MAX_BYTES = 1 << 16
 class TareOwner:
     """What a zero and tare were taken for; restored only when all four are the same."""
 
-    calibration_sha256: str      # of the calibration file's bytes ('' = unknown: never matches)
-    installation: str            # signed permutation '-FX,FY,-FZ,MX,MY,MZ' (Installation.spec)
-    namespace: str               # e.g. '/' or '/left'
-    node: str                    # e.g. 'balance_calibrator'
+    calibration_sha256: str  # of the calibration file's bytes ('' = unknown: never matches)
+    installation: str  # signed permutation '-FX,FY,-FZ,MX,MY,MZ' (Installation.spec)
+    namespace: str  # e.g. '/' or '/left'
+    node: str  # e.g. 'balance_calibrator'
     installation_name: str = ''  # e.g. 'upright', for messages only
 
     @classmethod
-    def of_node(cls, calibration_sha256: str, installation: Installation,
-                fully_qualified_name: str) -> TareOwner:
+    def of_node(
+        cls, calibration_sha256: str, installation: Installation, fully_qualified_name: str
+    ) -> TareOwner:
         """From an installation and a node's fully qualified name ('/left/balance_calibrator')."""
         namespace, _, node = fully_qualified_name.rpartition('/')
-        return cls(calibration_sha256, installation.spec, namespace or '/', node,
-                   installation.name)
+        return cls(
+            calibration_sha256, installation.spec, namespace or '/', node, installation.name
+        )
 
     def to_dict(self) -> dict:
         return {f.name: getattr(self, f.name) for f in fields(self)}
@@ -61,20 +65,27 @@ def calibration_sha256(path: str | Path) -> str:
 
 
 def restore_refusal(saved: TareOwner | None, current: TareOwner) -> str:
-    """'' when a zero and tare taken for `saved` belong to `current`, else why not ('; '-joined)."""
+    """'' when a zero and tare taken for `saved` belong to `current`, else why not (';
+    '-joined).
+    """
     if saved is None:
-        return ('the file records no calibration, installation, namespace or node '
-                '(an older tare file)')
+        return (
+            'the file records no calibration, installation, namespace or node (an older tare file)'
+        )
     reasons = []
     if not saved.calibration_sha256 or saved.calibration_sha256 != current.calibration_sha256:
-        reasons.append(f'taken with another calibration (file content sha256 '
-                       f'{saved.calibration_sha256[:12] or "unknown"}, '
-                       f'now {current.calibration_sha256[:12] or "unknown"})')
+        reasons.append(
+            f'taken with another calibration (file content sha256 '
+            f'{saved.calibration_sha256[:12] or "unknown"}, '
+            f'now {current.calibration_sha256[:12] or "unknown"})'
+        )
     if saved.installation != current.installation:
         was = saved.installation_name or saved.installation
         now = current.installation_name or current.installation
-        reasons.append(f'taken in the {was} installation ({saved.installation}), '
-                       f'now {now} ({current.installation})')
+        reasons.append(
+            f'taken in the {was} installation ({saved.installation}), '
+            f'now {now} ({current.installation})'
+        )
     if saved.namespace != current.namespace or saved.node != current.node:
         reasons.append(f'taken by node {_qualified(saved)}, this is {_qualified(current)}')
     return '; '.join(reasons)
@@ -87,48 +98,68 @@ def _qualified(owner: TareOwner) -> str:
 @dataclass(frozen=True)
 class TareState:
     balance: str
-    zero_mv: np.ndarray | None = None             # (6,) FXV..MZV
+    zero_mv: np.ndarray | None = None  # (6,) FXV..MZV
     zero_temperature_c: float | None = None
-    zero_direction: np.ndarray | None = None      # (6,) +-1
+    zero_direction: np.ndarray | None = None  # (6,) +-1
     zero_taken_at: str = ''
-    tare_load: np.ndarray | None = None           # (6,) FX..MZ, balance axes, N / N·m
+    tare_load: np.ndarray | None = None  # (6,) FX..MZ, balance axes, N / N·m
     tare_taken_at: str = ''
-    tare_sigma: np.ndarray | None = None          # (6,) standard uncertainty of the tare load, N / N·m
-    owner: TareOwner | None = None                # what they were taken for (None: not recorded)
+    tare_sigma: np.ndarray | None = None  # (6,) standard uncertainty of the tare load, N / N·m
+    owner: TareOwner | None = None  # what they were taken for (None: not recorded)
 
     def to_dict(self) -> dict:
         def plain(values, names):
             return None if values is None else {n: float(v) for n, v in zip(names, values)}
-        return {'format': FORMAT, 'balance': self.balance,
-                'zero_mv': plain(self.zero_mv, BRIDGE_OUTPUTS), 'zero_temperature_c': self.zero_temperature_c,
-                'zero_direction': plain(self.zero_direction, COMPONENTS), 'zero_taken_at': self.zero_taken_at,
-                'tare_load_balance_axes': plain(self.tare_load, COMPONENTS), 'tare_taken_at': self.tare_taken_at,
-                'tare_sigma_balance_axes': plain(self.tare_sigma, COMPONENTS),
-                'taken_for': None if self.owner is None else self.owner.to_dict()}
+
+        return {
+            'format': FORMAT,
+            'balance': self.balance,
+            'zero_mv': plain(self.zero_mv, BRIDGE_OUTPUTS),
+            'zero_temperature_c': self.zero_temperature_c,
+            'zero_direction': plain(self.zero_direction, COMPONENTS),
+            'zero_taken_at': self.zero_taken_at,
+            'tare_load_balance_axes': plain(self.tare_load, COMPONENTS),
+            'tare_taken_at': self.tare_taken_at,
+            'tare_sigma_balance_axes': plain(self.tare_sigma, COMPONENTS),
+            'taken_for': None if self.owner is None else self.owner.to_dict(),
+        }
 
 
 def now_iso() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')
 
 
-def tare_file_for(calibration_source: str, node_name: str, calibration_is_config: bool) -> Path | None:
-    """Beside the calibration: calibration.yaml -> calibration.tare.yaml (another node name or namespace
-    gets its own file). None for a shipped balance config: nothing is written into the package, and
-    no hidden state in a home directory changes what a fresh node reads (set `tare_file` instead)."""
+def tare_file_for(
+    calibration_source: str, node_name: str, calibration_is_config: bool
+) -> Path | None:
+    """Beside the calibration: calibration.yaml -> calibration.tare.yaml (another node name or
+    namespace gets its own file). None for a shipped balance config: nothing is written into the
+    package, and no hidden state in a home directory changes what a fresh node reads (set
+    `tare_file` instead).
+    """
     if calibration_is_config:
         return None
-    suffix = '' if node_name in ('', '/balance_calibrator') else '.' + node_name.strip('/').replace('/', '.')
+    suffix = (
+        ''
+        if node_name in ('', '/balance_calibrator')
+        else '.' + node_name.strip('/').replace('/', '.')
+    )
     source = Path(calibration_source)
     return source.with_name(f'{source.stem}{suffix}.tare.yaml')
 
 
 def save_tare(path: Path, state: TareState) -> None:
-    write_text_atomically(path, '# zero and tare of a balance_calibrator; written by the node\n'
-                          + yaml.safe_dump(state.to_dict(), sort_keys=False))
+    write_text_atomically(
+        path,
+        '# zero and tare of a balance_calibrator; written by the node\n'
+        + yaml.safe_dump(state.to_dict(), sort_keys=False),
+    )
 
 
 def load_tare(path: Path, balance: str) -> TareState | None:
-    """The persisted state, None if there is no file; ValueError naming the file if it is unusable."""
+    """The persisted state, None if there is no file; ValueError naming the file if it is
+    unusable.
+    """
     try:
         info = os.stat(path)
     except FileNotFoundError:
@@ -136,7 +167,9 @@ def load_tare(path: Path, balance: str) -> TareState | None:
     except OSError as err:
         raise ValueError(f'{path}: cannot read tare file: {err.strerror}') from None
     if not stat.S_ISREG(info.st_mode) or info.st_size > MAX_BYTES:
-        raise ValueError(f'{path}: not a tare file (not a regular file of at most {MAX_BYTES} bytes)')
+        raise ValueError(
+            f'{path}: not a tare file (not a regular file of at most {MAX_BYTES} bytes)'
+        )
     try:
         data = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as err:
@@ -157,12 +190,19 @@ def load_tare(path: Path, balance: str) -> TareState | None:
         if not np.all(np.isfinite(result)):
             raise ValueError(f'{path}: {key} holds a NaN or infinite value')
         return result
+
     temperature = data.get('zero_temperature_c')
-    return TareState(balance, vector('zero_mv', BRIDGE_OUTPUTS), None if temperature is None else float(temperature),
-                     vector('zero_direction', COMPONENTS), str(data.get('zero_taken_at') or ''),
-                     vector('tare_load_balance_axes', COMPONENTS), str(data.get('tare_taken_at') or ''),
-                     vector('tare_sigma_balance_axes', COMPONENTS),
-                     _owner(path, data.get('taken_for')))
+    return TareState(
+        balance,
+        vector('zero_mv', BRIDGE_OUTPUTS),
+        None if temperature is None else float(temperature),
+        vector('zero_direction', COMPONENTS),
+        str(data.get('zero_taken_at') or ''),
+        vector('tare_load_balance_axes', COMPONENTS),
+        str(data.get('tare_taken_at') or ''),
+        vector('tare_sigma_balance_axes', COMPONENTS),
+        _owner(path, data.get('taken_for')),
+    )
 
 
 def _owner(path: Path, recorded) -> TareOwner | None:
@@ -170,7 +210,8 @@ def _owner(path: Path, recorded) -> TareOwner | None:
     if recorded is None:
         return None
     names = [f.name for f in fields(TareOwner)]
-    if not isinstance(recorded, dict) or not all(isinstance(recorded.get(n, ''), str)
-                                                 for n in names):
+    if not isinstance(recorded, dict) or not all(
+        isinstance(recorded.get(n, ''), str) for n in names
+    ):
         raise ValueError(f'{path}: taken_for needs the strings {", ".join(names)}')
     return TareOwner(**{n: recorded.get(n, '') for n in names})

@@ -4,10 +4,11 @@ installation's axes, the envelope and the bridges' range, checked once.
 Pure (no rclpy): the live calibrator (live/calibrator_core.py), the offline reduction
 (aero/pipeline.py) and the coverage of a run all start from `activate`.
 """
+
 from __future__ import annotations
 
-import datetime as _dt
 from dataclasses import dataclass, field
+import datetime as _dt
 from functools import cached_property
 
 import numpy as np
@@ -22,23 +23,30 @@ MODEL_CHOICES = ('linear', 'quadratic', 'cubic', 'adopted')
 DEFAULT_ENVELOPE_MARGIN = 1.1
 DEFAULT_OUTPUT_RANGE_FACTOR = 2.0
 
+
 def six_axis_loads(model: BalanceModel, outputs_mv, extra=None) -> np.ndarray:
-    """Loads (N, 6) in FX..MZ order from the six raw channels (N, 6), whatever channels the model uses.
+    """Loads (N, 6) in FX..MZ order from the six raw channels (N, 6), whatever channels the model
+    uses.
 
     A one-channel thrust stand (inputs FXV, component FX) reads force.x and fills F_X only.
     """
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
     columns = [BRIDGE_OUTPUTS.index(name) for name in model.inputs]
     loads = np.zeros((outputs.shape[0], 6))
-    loads[:, [COMPONENTS.index(c) for c in model.components]] = model.loads(outputs[:, columns], extra)
+    loads[:, [COMPONENTS.index(c) for c in model.components]] = model.loads(
+        outputs[:, columns], extra
+    )
     return loads
 
 
 def six_axis(values, names, fill: float) -> np.ndarray:
-    """A per-component vector over `names` spread onto FX..MZ, `fill` where a component is absent."""
+    """A per-component vector over `names` spread onto FX..MZ, `fill` where a component is
+    absent.
+    """
     result = np.full(6, fill, dtype=float)
-    result[[COMPONENTS.index(n) if n in COMPONENTS else BRIDGE_OUTPUTS.index(n) for n in names]] = \
-        np.asarray(values, dtype=float)
+    result[
+        [COMPONENTS.index(n) if n in COMPONENTS else BRIDGE_OUTPUTS.index(n) for n in names]
+    ] = np.asarray(values, dtype=float)
     return result
 
 
@@ -47,52 +55,72 @@ class ActiveCalibration:
     """A calibration made ready for wind-on use: constant-free models, axes and envelope."""
 
     calibration: Calibration
-    source: str                     # file it was read from (for messages)
-    requested_model: str            # the `model` parameter: 'adopted', 'cubic', ...
-    model_name: str                 # the key of the model in calibration.models
-    model: BalanceModel             # without constant terms (§10.1)
-    requires: tuple[str, ...]       # live inputs it needs: 'temperature', 'load_history'
-    base_name: str                  # the model that runs when an input is missing
-    base_model: BalanceModel        # without constant terms
+    source: str  # file it was read from (for messages)
+    requested_model: str  # the `model` parameter: 'adopted', 'cubic', ...
+    model_name: str  # the key of the model in calibration.models
+    model: BalanceModel  # without constant terms (§10.1)
+    requires: tuple[str, ...]  # live inputs it needs: 'temperature', 'load_history'
+    base_name: str  # the model that runs when an input is missing
+    base_model: BalanceModel  # without constant terms
     installation: Installation
-    envelope: np.ndarray            # (6,) |load| above this (N, N·m) is outside the calibrated range
+    envelope: np.ndarray  # (6,) |load| above this (N, N·m) is outside the calibrated range
     output_range_mv: np.ndarray = field(default_factory=lambda: np.full(6, np.inf))
-    # (6,) |raw output| above this (mV) is a saturated bridge (inf for channels the calibration lacks)
+    # (6,) |raw output| above this (mV) is a saturated bridge (inf for channels the calibration
+    # lacks)
 
     @cached_property
     def iterative(self) -> bool:
-        """The model is R-091's iterative form (outputs from loads, inverted by Newton per sample)."""
+        """The model is R-091's iterative form (outputs from loads, inverted by Newton per
+        sample).
+        """
         return getattr(self.model, 'form', 'direct') == 'iterative'
 
     @cached_property
     def plan(self):
-        """What one sample needs, precomputed: input columns, component slots, powers, coefficients.
-        An iterative model has no polynomial of the outputs: columns and slots only (powers None)."""
+        """What one sample needs, precomputed: input columns, component slots, powers,
+        coefficients. An iterative model has no polynomial of the outputs: columns and slots only
+        (powers None).
+        """
         columns = np.array([BRIDGE_OUTPUTS.index(v) for v in self.model.inputs])
         positions = np.array([COMPONENTS.index(c) for c in self.model.components])
         if self.iterative:
             return columns, positions, None, None, None
         names, plain, absolute, has_absolute = self.model._exponents
         order = [self.model.inputs.index(v) for v in names if v in self.model.inputs]
-        return columns[order], positions, plain, absolute if has_absolute else None, \
-            np.array(self.model.coefficients)
+        return (
+            columns[order],
+            positions,
+            plain,
+            absolute if has_absolute else None,
+            np.array(self.model.coefficients),
+        )
 
     @cached_property
     def one_sample_terms(self) -> tuple[tuple[int, ...], ...] | None:
         """Per term, the raw-output columns to multiply (with repetition): the C kernel's form
         of the model (live/lone_sample.py); None when a term has an absolute value or a power
-        beyond 3 (the kernel does not apply then), or for an iterative model."""
+        beyond 3 (the kernel does not apply then), or for an iterative model.
+        """
         columns, _, plain, absolute, _ = self.plan
-        if plain is None or absolute is not None or plain.size == 0 or plain.max() > 3 or plain.min() < 0:
+        if (
+            plain is None
+            or absolute is not None
+            or plain.size == 0
+            or plain.max() > 3
+            or plain.min() < 0
+        ):
             return None
-        return tuple(tuple(int(columns[v]) for v in range(plain.shape[1]) for _ in range(int(plain[t, v])))
-                     for t in range(plain.shape[0]))
+        return tuple(
+            tuple(int(columns[v]) for v in range(plain.shape[1]) for _ in range(int(plain[t, v])))
+            for t in range(plain.shape[0])
+        )
 
     @cached_property
     def one_sample_index(self) -> np.ndarray | None:
         """one_sample_terms as an (n_terms, width) index into the six outputs followed by a 1.0
         (index 6): the design row of one sample is the product of each row's entries (the C
-        kernel's plan)."""
+        kernel's plan).
+        """
         terms = self.one_sample_terms
         if terms is None:
             return None
@@ -101,7 +129,9 @@ class ActiveCalibration:
 
     @cached_property
     def coefficients_six(self) -> np.ndarray:
-        """(6, n_terms) the model's coefficients in FX..MZ rows (zero rows for components it lacks)."""
+        """(6, n_terms) the model's coefficients in FX..MZ rows (zero rows for components it
+        lacks).
+        """
         _, positions, _, _, coefficients = self.plan
         six = np.zeros((6, coefficients.shape[1]))
         six[positions] = coefficients
@@ -110,7 +140,8 @@ class ActiveCalibration:
     @cached_property
     def unused_inputs(self) -> np.ndarray | None:
         """Columns of the six raw outputs that the calibration does not read (a 1-, 3- or 5-bridge
-        calibration), None when it reads all six: their values, NaN included, change nothing."""
+        calibration), None when it reads all six: their values, NaN included, change nothing.
+        """
         used = [BRIDGE_OUTPUTS.index(b) for b in self.calibration.bridge_outputs]
         unused = [i for i in range(6) if i not in used]
         return np.array(unused, dtype=np.intp) if unused else None
@@ -127,10 +158,14 @@ class ActiveCalibration:
     def absent_components(self) -> tuple[str, ...]:
         """Components of the published wrench (tunnel axes) that the calibration does not give
         (a 1-, 3- or 5-component balance): published as 0, their uncertainty NaN, never out of
-        the envelope or overloaded."""
+        the envelope or overloaded.
+        """
         present = set(self.calibration.components)
-        return tuple(COMPONENTS[i] for i, p in enumerate(self.installation.permutation)
-                     if COMPONENTS[p] not in present)
+        return tuple(
+            COMPONENTS[i]
+            for i, p in enumerate(self.installation.permutation)
+            if COMPONENTS[p] not in present
+        )
 
     @property
     def capacity(self) -> np.ndarray:
@@ -147,9 +182,14 @@ class ActiveCalibration:
         return (now - fitted).total_seconds() / 86400.0
 
 
-def activate(calibration: Calibration, model: str = 'adopted', installation: str | Installation = 'upright',
-             envelope_margin: float = DEFAULT_ENVELOPE_MARGIN, source: str = '',
-             output_range_factor: float = DEFAULT_OUTPUT_RANGE_FACTOR) -> ActiveCalibration:
+def activate(
+    calibration: Calibration,
+    model: str = 'adopted',
+    installation: str | Installation = 'upright',
+    envelope_margin: float = DEFAULT_ENVELOPE_MARGIN,
+    source: str = '',
+    output_range_factor: float = DEFAULT_OUTPUT_RANGE_FACTOR,
+) -> ActiveCalibration:
     """Check that `model` and `installation` make sense for `calibration` and prepare it.
 
     Raises ConfigError (model missing from the calibration, capacities or rated outputs not
@@ -158,42 +198,69 @@ def activate(calibration: Calibration, model: str = 'adopted', installation: str
     if not isinstance(installation, Installation):
         installation = parse_installation(installation)
     if not np.isfinite(envelope_margin) or not 0.5 <= envelope_margin <= 10.0:
-        raise ValueError(f'envelope_margin must be between 0.5 and 10 (x capacity), not {envelope_margin}')
+        raise ValueError(
+            f'envelope_margin must be between 0.5 and 10 (x capacity), not {envelope_margin}'
+        )
     if not np.isfinite(output_range_factor) or not 1.0 <= output_range_factor <= 100.0:
-        raise ValueError(f'output_range_factor must be between 1 and 100 (x rated output), not {output_range_factor}')
+        raise ValueError(
+            'output_range_factor must be between 1 and 100 (x rated output), not '
+            f'{output_range_factor}'
+        )
     _check_channels(calibration, source)
-    for what, values, names in (('capacity', calibration.capacity, calibration.components),
-                                ('rated_output_mv', calibration.rated_output_mv, calibration.bridge_outputs)):
-        bad = [f'{n}={v}' for n, v in zip(names, np.asarray(values, dtype=float)) if not (np.isfinite(v) and v > 0)]
+    for what, values, names in (
+        ('capacity', calibration.capacity, calibration.components),
+        ('rated_output_mv', calibration.rated_output_mv, calibration.bridge_outputs),
+    ):
+        bad = [
+            f'{n}={v}'
+            for n, v in zip(names, np.asarray(values, dtype=float))
+            if not (np.isfinite(v) and v > 0)
+        ]
         if bad:
-            raise ConfigError(f'{source or calibration.balance}: {what} must be positive finite numbers '
-                              f'({", ".join(bad)})')
-    chosen = calibration.model(model)            # ConfigError names the models it has
+            raise ConfigError(
+                f'{source or calibration.balance}: {what} must be positive finite numbers '
+                f'({", ".join(bad)})'
+            )
+    chosen = calibration.model(model)  # ConfigError names the models it has
     model_name = calibration.adopted if model in ('adopted', '') else model
     requires = calibration.requires(model_name)
-    base_name = calibration.base_model if calibration.base_model in calibration.models else model_name
+    base_name = (
+        calibration.base_model if calibration.base_model in calibration.models else model_name
+    )
     base = calibration.models[base_name]
-    if base.extra_variables:                      # a base that needs inputs itself is no fallback
+    if base.extra_variables:  # a base that needs inputs itself is no fallback
         base_name, base = model_name, chosen
-    return ActiveCalibration(calibration, source, model, model_name, chosen.without_constant(), requires,
-                             base_name, base.without_constant(), installation,
-                             float(envelope_margin) * six_axis(calibration.capacity, calibration.components, np.inf),
-                             float(output_range_factor) * np.abs(six_axis(calibration.rated_output_mv,
-                                                                          calibration.bridge_outputs, np.inf)))
+    return ActiveCalibration(
+        calibration,
+        source,
+        model,
+        model_name,
+        chosen.without_constant(),
+        requires,
+        base_name,
+        base.without_constant(),
+        installation,
+        float(envelope_margin) * six_axis(calibration.capacity, calibration.components, np.inf),
+        float(output_range_factor)
+        * np.abs(six_axis(calibration.rated_output_mv, calibration.bridge_outputs, np.inf)),
+    )
 
 
 def _check_channels(calibration: Calibration, source: str) -> None:
     """The live calibrator reads six raw channels (FXV..MZV in force.x..torque.z of balance/raw)
     and publishes six components (FX..MZ): a calibration under other names (a table's own
-    symbols) or with more bridge outputs than that (an 8-channel sensor) is refused in one line."""
+    symbols) or with more bridge outputs than that (an 8-channel sensor) is refused in one line.
+    """
     where = source or calibration.balance
     for what, names, known, verb in (
-            ('components', calibration.components, COMPONENTS, 'publishes'),
-            ('bridge outputs', calibration.bridge_outputs, BRIDGE_OUTPUTS, 'reads')):
+        ('components', calibration.components, COMPONENTS, 'publishes'),
+        ('bridge outputs', calibration.bridge_outputs, BRIDGE_OUTPUTS, 'reads'),
+    ):
         if set(names) <= set(known) and len(set(names)) == len(names):
             continue
         raise ConfigError(
             f'{where}: {what} {", ".join(names)}: balance_calibrator {verb} only '
             f'{", ".join(known)}, each once, so this calibration ({len(calibration.components)} '
             f'components from {len(calibration.bridge_outputs)} bridge outputs) cannot run live '
-            f'(balance-calib fit --axes names a table\'s loads and bridges as TM-663\'s)')
+            f"(balance-calib fit --axes names a table's loads and bridges as TM-663's)"
+        )

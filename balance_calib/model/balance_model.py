@@ -3,6 +3,7 @@
 TM-663 eqs. (1)-(18) are the instances with the term lists of `tm663.py`; any other term list
 (absolute-value, temperature, hysteresis terms, one channel) is the same object.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -12,7 +13,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
-from .terms import Term, as_variables, parse_terms, power_products, term_exponents
+from .terms import as_variables, parse_terms, power_products, Term, term_exponents
 from .tm663 import coefficient_number, tm663_terms
 
 
@@ -35,8 +36,10 @@ class BalanceModel:
         coefficients = np.asarray(self.coefficients, dtype=float)
         expected = (len(self.components), len(self.terms))
         if coefficients.shape != expected:
-            raise ValueError(f'model {self.name}: coefficients have shape {coefficients.shape}, '
-                             f'expected {expected} (components x terms)')
+            raise ValueError(
+                f'model {self.name}: coefficients have shape {coefficients.shape}, '
+                f'expected {expected} (components x terms)'
+            )
         if not np.all(np.isfinite(coefficients)):
             raise ValueError(f'model {self.name}: coefficients contain NaN or infinity')
         coefficients.setflags(write=False)
@@ -49,7 +52,13 @@ class BalanceModel:
 
     @classmethod
     def zeros(cls, name: str, terms: Sequence[Term], components=COMPONENTS, inputs=BRIDGE_OUTPUTS):
-        return cls(name, tuple(terms), np.zeros((len(components), len(terms))), tuple(components), tuple(inputs))
+        return cls(
+            name,
+            tuple(terms),
+            np.zeros((len(components), len(terms))),
+            tuple(components),
+            tuple(inputs),
+        )
 
     # --- properties ---------------------------------------------------------------------------
     @cached_property
@@ -60,7 +69,9 @@ class BalanceModel:
     def variables(self) -> tuple[str, ...]:
         """Every variable the terms need (inputs first)."""
         needed = {v for t in self.terms for v in t.variables}
-        return tuple(v for v in self.inputs if v in needed) + tuple(sorted(needed - set(self.inputs)))
+        return tuple(v for v in self.inputs if v in needed) + tuple(
+            sorted(needed - set(self.inputs))
+        )
 
     @cached_property
     def extra_variables(self) -> tuple[str, ...]:
@@ -74,46 +85,71 @@ class BalanceModel:
 
     def coefficient_number(self, component: str, term: str) -> int:
         """The memo's C index of a coefficient (eqs. (1)-(18) numbering)."""
-        return coefficient_number(self.components.index(component), self.term_index(term), len(self.terms))
+        return coefficient_number(
+            self.components.index(component), self.term_index(term), len(self.terms)
+        )
 
     # --- evaluation ---------------------------------------------------------------------------
     @cached_property
     def _exponents(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray, bool]:
-        """Variables, and the powers of each (plain, absolute) in each term: (n_terms, n_vars) ints."""
+        """Variables, and the powers of each (plain, absolute) in each term: (n_terms, n_vars)
+        ints.
+        """
         plain, absolute = term_exponents(self.terms, self.variables)
         return self.variables, plain, absolute, bool(absolute.any())
 
-    def design(self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
-        """(N, n_terms): every term on every sample, as products of powers (one numpy expression)."""
+    def design(
+        self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None
+    ) -> np.ndarray:
+        """(N, n_terms): every term on every sample, as products of powers (one numpy
+        expression).
+        """
         outputs = np.atleast_2d(np.asarray(bridge_outputs_mv, dtype=float))
         if outputs.shape[1] != len(self.inputs):
-            raise ValueError(f'expected {len(self.inputs)} columns ({", ".join(self.inputs)}), got {outputs.shape[1]}')
+            raise ValueError(
+                f'expected {len(self.inputs)} columns ({", ".join(self.inputs)}), got '
+                f'{outputs.shape[1]}'
+            )
         names, plain, absolute, has_absolute = self._exponents
-        extra_names = names[len([v for v in names if v in self.inputs]):]
+        extra_names = names[len([v for v in names if v in self.inputs]) :]
         missing = [v for v in extra_names if not extra or v not in extra]
         if missing:
-            raise KeyError(f'the model needs variable(s) {", ".join(missing)} that the data does not have')
-        columns = [outputs[:, self.inputs.index(v)] for v in names[:len(names) - len(extra_names)]]
-        given = extra or {}      # every extra name is in `extra` (checked above)
-        columns += [np.broadcast_to(np.asarray(given[v], dtype=float), (outputs.shape[0],)) for v in extra_names]
+            raise KeyError(
+                f'the model needs variable(s) {", ".join(missing)} that the data does not have'
+            )
+        columns = [
+            outputs[:, self.inputs.index(v)] for v in names[: len(names) - len(extra_names)]
+        ]
+        given = extra or {}  # every extra name is in `extra` (checked above)
+        columns += [
+            np.broadcast_to(np.asarray(given[v], dtype=float), (outputs.shape[0],))
+            for v in extra_names
+        ]
         values = np.column_stack(columns) if columns else np.zeros((outputs.shape[0], 0))
         return power_products(values, plain, absolute if has_absolute else None)
 
-    def loads(self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+    def loads(
+        self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None
+    ) -> np.ndarray:
         """Loads (N, n_components) from outputs (N, n_inputs), TM-663 eqs. (1)-(18)."""
         single = np.ndim(bridge_outputs_mv) == 1
         result = self.design(bridge_outputs_mv, extra) @ self.coefficients.T
         return result[0] if single else result
 
-    def jacobian(self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
-        """d loads / d outputs, shape (N, n_components, n_inputs)."""
+    def jacobian(
+        self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None
+    ) -> np.ndarray:
+        """D loads / d outputs, shape (N, n_components, n_inputs)."""
         outputs = np.atleast_2d(np.asarray(bridge_outputs_mv, dtype=float))
         n = outputs.shape[0]
         variables = as_variables(self.inputs, outputs, extra)
         jac = np.empty((n, len(self.components), len(self.inputs)))
         for i, name in enumerate(self.inputs):
-            d_design = np.column_stack([t.derivative(name, variables, n) for t in self.terms]) \
-                if self.terms else np.zeros((n, 0))
+            d_design = (
+                np.column_stack([t.derivative(name, variables, n) for t in self.terms])
+                if self.terms
+                else np.zeros((n, 0))
+            )
             jac[:, :, i] = d_design @ self.coefficients.T
         return jac
 
@@ -127,14 +163,26 @@ class BalanceModel:
         return replace(self, coefficients=coefficients)
 
     def restricted_to(self, term_names: Sequence[str], name: str | None = None) -> 'BalanceModel':
-        """The same coefficients on a sub-list of terms (e.g. the base model of an augmented one)."""
+        """The same coefficients on a sub-list of terms (e.g. the base model of an augmented
+        one).
+        """
         indices = [self.term_index(t) for t in term_names]
-        return replace(self, name=name or self.name, terms=tuple(self.terms[i] for i in indices),
-                       coefficients=self.coefficients[:, indices])
+        return replace(
+            self,
+            name=name or self.name,
+            terms=tuple(self.terms[i] for i in indices),
+            coefficients=self.coefficients[:, indices],
+        )
 
-    def with_coefficients(self, coefficients, name: str | None = None, **metadata) -> 'BalanceModel':
-        return replace(self, coefficients=np.asarray(coefficients, dtype=float), name=name or self.name,
-                       metadata={**self.metadata, **metadata})
+    def with_coefficients(
+        self, coefficients, name: str | None = None, **metadata
+    ) -> 'BalanceModel':
+        return replace(
+            self,
+            coefficients=np.asarray(coefficients, dtype=float),
+            name=name or self.name,
+            metadata={**self.metadata, **metadata},
+        )
 
     # --- files --------------------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -144,7 +192,9 @@ class BalanceModel:
             'components': list(self.components),
             'inputs': list(self.inputs),
             'terms': list(self.term_names),
-            'coefficients': {c: [float(x) for x in row] for c, row in zip(self.components, self.coefficients)},
+            'coefficients': {
+                c: [float(x) for x in row] for c, row in zip(self.components, self.coefficients)
+            },
             **({'metadata': dict(self.metadata)} if self.metadata else {}),
         }
 
@@ -165,7 +215,15 @@ class BalanceModel:
         except (TypeError, ValueError) as err:
             raise ValueError(f'{where}: {err}') from None
         if coefficients.shape[1] != len(terms):
-            raise ValueError(f'{where}: {coefficients.shape[1]} coefficients per component '
-                             f'but {len(terms)} terms')
-        return cls(str(data.get('name', 'custom')), terms, coefficients, components, inputs,
-                   dict(data.get('metadata', {}) or {}))
+            raise ValueError(
+                f'{where}: {coefficients.shape[1]} coefficients per component '
+                f'but {len(terms)} terms'
+            )
+        return cls(
+            str(data.get('name', 'custom')),
+            terms,
+            coefficients,
+            components,
+            inputs,
+            dict(data.get('metadata', {}) or {}),
+        )

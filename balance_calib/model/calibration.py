@@ -3,10 +3,11 @@
 What `balance_calibrator` loads and `refit` and `fit` write as calibration.yaml; reading and
 writing the file (and taking a balance config as a calibration) is calibration_file.py's.
 """
+
 from __future__ import annotations
 
-import datetime as _dt
 from dataclasses import dataclass, field
+import datetime as _dt
 from typing import Any, Mapping
 
 import numpy as np
@@ -19,39 +20,50 @@ from .balance_model import BalanceModel
 FORMAT = 'balance_calib/calibration 1'
 
 # Extra model variables and the live input each needs.
-VARIABLE_INPUTS = {'dT': 'temperature', 'dT2': 'temperature', 'dir_FX': 'load_history',
-                   'dir_FY': 'load_history', 'dir_FZ': 'load_history', 'dir_MX': 'load_history',
-                   'dir_MY': 'load_history', 'dir_MZ': 'load_history'}
+VARIABLE_INPUTS = {
+    'dT': 'temperature',
+    'dT2': 'temperature',
+    'dir_FX': 'load_history',
+    'dir_FY': 'load_history',
+    'dir_FZ': 'load_history',
+    'dir_MX': 'load_history',
+    'dir_MY': 'load_history',
+    'dir_MZ': 'load_history',
+}
 
 
 @dataclass(frozen=True)
 class Calibration:
     """The fitted models of one balance, the one adopted, and the balance's capacities (N, N·m)
-    and rated outputs (mV) per component and bridge output."""
+    and rated outputs (mV) per component and bridge output.
+    """
 
     balance: str
-    models: Mapping[str, BalanceModel]     # by name: 'linear', ..., 'cubic+temperature'
-    adopted: str                           # the model to use when the node asks for 'adopted'
-    base_model: str                        # the TM-663 model the adopted one builds on
-    capacity: np.ndarray                   # full scale per component
+    models: Mapping[str, BalanceModel]  # by name: 'linear', ..., 'cubic+temperature'
+    adopted: str  # the model to use when the node asks for 'adopted'
+    base_model: str  # the TM-663 model the adopted one builds on
+    capacity: np.ndarray  # full scale per component
     rated_output_mv: np.ndarray
     components: tuple[str, ...] = COMPONENTS
     bridge_outputs: tuple[str, ...] = BRIDGE_OUTPUTS
     sigma_pct_fs: Mapping[str, float] = field(default_factory=dict)
     fitted_at: str = ''
     reference_temperature_c: float | None = None
-    extra: Mapping[str, Any] = field(default_factory=dict)   # body, source bags, effects...
+    extra: Mapping[str, Any] = field(default_factory=dict)  # body, source bags, effects...
 
     def model(self, name: str = 'adopted') -> BalanceModel:
         key = self.adopted if name in ('adopted', '') else name
         if key not in self.models:
-            raise ConfigError(f'calibration of {self.balance} has no {key!r} model '
-                              f'(it has {", ".join(self.models)})')
+            raise ConfigError(
+                f'calibration of {self.balance} has no {key!r} model '
+                f'(it has {", ".join(self.models)})'
+            )
         return self.models[key]
 
     def requires(self, name: str = 'adopted') -> tuple[str, ...]:
         """Live inputs the model needs besides the bridge outputs: 'temperature',
-        'load_history'."""
+        'load_history'.
+        """
         needed = []
         for variable in self.model(name).extra_variables:
             kind = VARIABLE_INPUTS.get(variable, variable)
@@ -62,7 +74,8 @@ class Calibration:
     @property
     def output_unit(self) -> str:
         """The unit of the bridge outputs the models take: mV, or what a table gave that has no
-        conversion to mV (counts, -, mV/V without the excitation), as `fit` records it."""
+        conversion to mV (counts, -, mV/V without the excitation), as `fit` records it.
+        """
         return str((self.extra or {}).get('output_unit', 'mV'))
 
     @property
@@ -82,12 +95,14 @@ class Calibration:
             'components': list(self.components),
             'bridge_outputs': list(self.bridge_outputs),
             'capacity': {c: float(v) for c, v in zip(self.components, self.capacity)},
-            'rated_output_mv': {c: float(v) for c, v in zip(self.bridge_outputs,
-                                                            self.rated_output_mv)},
+            'rated_output_mv': {
+                c: float(v) for c, v in zip(self.bridge_outputs, self.rated_output_mv)
+            },
             'reference_temperature_c': self.reference_temperature_c,
             'sigma_pct_fs': {k: float(v) for k, v in self.sigma_pct_fs.items()},
             **({'extra': _plain(self.extra)} if self.extra else {}),
-            'models': {name: {k: v for k, v in m.to_dict().items()
-                              if k not in ('components', 'inputs')}
-                       for name, m in self.models.items()},
+            'models': {
+                name: {k: v for k, v in m.to_dict().items() if k not in ('components', 'inputs')}
+                for name, m in self.models.items()
+            },
         }

@@ -3,6 +3,7 @@
 Used to simulate a balance (a matrix as the truth gives the outputs that a load produces) and for
 tare outputs. The linear part gives the starting point; each step solves J(V) dV = L - f(V).
 """
+
 from __future__ import annotations
 
 from typing import Mapping
@@ -20,14 +21,23 @@ def linear_part(model: BalanceModel) -> np.ndarray:
     """(n_components, n_inputs) matrix of the first-order coefficients."""
     matrix = np.zeros((len(model.components), len(model.inputs)))
     for j, term in enumerate(model.terms):
-        if term.degree == 1 and len(term.factors) == 1 and not term.factors[0].absolute \
-                and term.factors[0].variable in model.inputs:
+        if (
+            term.degree == 1
+            and len(term.factors) == 1
+            and not term.factors[0].absolute
+            and term.factors[0].variable in model.inputs
+        ):
             matrix[:, model.inputs.index(term.factors[0].variable)] = model.coefficients[:, j]
     return matrix
 
 
-def outputs_for_loads(model: BalanceModel, loads, extra: Mapping[str, np.ndarray] | None = None,
-                      tolerance: float = 1e-12, max_iterations: int = 50) -> np.ndarray:
+def outputs_for_loads(
+    model: BalanceModel,
+    loads,
+    extra: Mapping[str, np.ndarray] | None = None,
+    tolerance: float = 1e-12,
+    max_iterations: int = 50,
+) -> np.ndarray:
     """Bridge outputs V (N, n_inputs) with model.loads(V) = loads (N, n_components).
 
     tolerance is relative to the norm of the linear part times a typical output, i.e. a load error
@@ -59,11 +69,13 @@ def outputs_for_loads(model: BalanceModel, loads, extra: Mapping[str, np.ndarray
         if not np.all(np.isfinite(outputs)):
             break
     error = targets - model.loads(outputs, extra)
-    bad = np.flatnonzero(np.any(~np.isfinite(error) | (np.abs(error) > 1e-6 * np.maximum(scale, 1.0)), axis=1))
+    bad = np.flatnonzero(
+        np.any(~np.isfinite(error) | (np.abs(error) > 1e-6 * np.maximum(scale, 1.0)), axis=1)
+    )
     if bad.size == 0:
         return outputs
     raise InverseDidNotConverge(
         f'Newton inverse of model {model.name} did not converge for {bad.size} of {len(targets)} '
         f'load(s), first at index {bad[0]} (loads {np.round(targets[bad[0]], 4).tolist()}); '
-        f'the load is probably outside the range the model is valid for')
-
+        f'the load is probably outside the range the model is valid for'
+    )

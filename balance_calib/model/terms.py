@@ -14,11 +14,12 @@ A term is written as a name that a person can read and a YAML file can hold:
 Variables are looked up by name in a mapping of equal-length arrays, so the same machinery serves
 six bridges, six bridges plus temperature, or the one channel of a thrust stand.
 """
+
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from functools import cached_property
+import re
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
@@ -41,7 +42,7 @@ class Factor:
 
     def evaluate(self, value: np.ndarray) -> np.ndarray:
         base = np.abs(value) if self.absolute else value
-        return base ** self.power
+        return base**self.power
 
     def derivative(self, value: np.ndarray) -> np.ndarray:
         """d(factor)/d(variable), elementwise."""
@@ -73,7 +74,9 @@ class Term:
                 order.append(key)
                 powers[key] = 0
             powers[key] += int(match.group(4) or 1)
-        return cls(tuple(Factor(var, powers[(var, absolute)], absolute) for var, absolute in order))
+        return cls(
+            tuple(Factor(var, powers[(var, absolute)], absolute) for var, absolute in order)
+        )
 
     @property
     def name(self) -> str:
@@ -97,7 +100,9 @@ class Term:
             column = column * factor.evaluate(np.asarray(variables[factor.variable], dtype=float))
         return column
 
-    def derivative(self, variable: str, variables: Mapping[str, np.ndarray], length: int) -> np.ndarray:
+    def derivative(
+        self, variable: str, variables: Mapping[str, np.ndarray], length: int
+    ) -> np.ndarray:
         """d(term)/d(variable) by the product rule, elementwise."""
         total = np.zeros(length)
         for i, factor in enumerate(self.factors):
@@ -106,7 +111,9 @@ class Term:
             part = factor.derivative(np.asarray(variables[variable], dtype=float))
             for j, other in enumerate(self.factors):
                 if j != i:
-                    part = part * other.evaluate(np.asarray(variables[other.variable], dtype=float))
+                    part = part * other.evaluate(
+                        np.asarray(variables[other.variable], dtype=float)
+                    )
             total = total + part
         return total
 
@@ -119,17 +126,22 @@ def parse_terms(names: Iterable[str]) -> tuple[Term, ...]:
     seen: dict[str, int] = {}
     for i, term in enumerate(terms):
         if term.name in seen:
-            raise ValueError(f'term {term.name} appears twice (positions {seen[term.name] + 1} and {i + 1})')
+            raise ValueError(
+                f'term {term.name} appears twice (positions {seen[term.name] + 1} and {i + 1})'
+            )
         seen[term.name] = i
     return terms
 
 
-def as_variables(names: Sequence[str], values: np.ndarray,
-                 extra: Mapping[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+def as_variables(
+    names: Sequence[str], values: np.ndarray, extra: Mapping[str, np.ndarray] | None = None
+) -> dict[str, np.ndarray]:
     """Named columns from an (N, len(names)) array, plus any extra named (N,) arrays."""
     values = np.atleast_2d(np.asarray(values, dtype=float))
     if values.shape[1] != len(names):
-        raise ValueError(f'expected {len(names)} columns ({", ".join(names)}), got {values.shape[1]}')
+        raise ValueError(
+            f'expected {len(names)} columns ({", ".join(names)}), got {values.shape[1]}'
+        )
     variables = {name: values[:, i] for i, name in enumerate(names)}
     for key, column in (extra or {}).items():
         variables[key] = np.broadcast_to(np.asarray(column, dtype=float), (values.shape[0],))
@@ -137,16 +149,22 @@ def as_variables(names: Sequence[str], values: np.ndarray,
 
 
 def term_exponents(terms: Sequence[Term], names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    """Powers (n_terms, n_vars) of each variable in each term: of its value, and of its absolute value."""
+    """Powers (n_terms, n_vars) of each variable in each term: of its value, and of its absolute
+    value.
+    """
     plain = np.zeros((len(terms), len(names)), dtype=np.int64)
     absolute = np.zeros_like(plain)
     for j, term in enumerate(terms):
         for factor in term.factors:
-            (absolute if factor.absolute else plain)[j, list(names).index(factor.variable)] += factor.power
+            (absolute if factor.absolute else plain)[j, list(names).index(factor.variable)] += (
+                factor.power
+            )
     return plain, absolute
 
 
-def power_products(values: np.ndarray, plain: np.ndarray, absolute: np.ndarray | None) -> np.ndarray:
+def power_products(
+    values: np.ndarray, plain: np.ndarray, absolute: np.ndarray | None
+) -> np.ndarray:
     """(N, n_terms) = prod_v values[:, v] ** plain[:, v] * |values[:, v]| ** absolute[:, v]."""
     matrix = np.prod(values[:, None, :] ** plain[None, :, :], axis=2)
     if absolute is not None and absolute.any():
@@ -154,12 +172,21 @@ def power_products(values: np.ndarray, plain: np.ndarray, absolute: np.ndarray |
     return matrix
 
 
-def design_matrix(terms: Sequence[Term], variables: Mapping[str, np.ndarray], length: int) -> np.ndarray:
+def design_matrix(
+    terms: Sequence[Term], variables: Mapping[str, np.ndarray], length: int
+) -> np.ndarray:
     """(N, n_terms) matrix whose column j is term j evaluated on every sample."""
     missing = sorted({v for t in terms for v in t.variables} - set(variables))
     if missing:
-        raise KeyError(f'the model needs variable(s) {", ".join(missing)} that the data does not have')
+        raise KeyError(
+            f'the model needs variable(s) {", ".join(missing)} that the data does not have'
+        )
     names = tuple(dict.fromkeys(v for t in terms for v in t.variables))
-    values = np.column_stack([np.broadcast_to(np.asarray(variables[v], dtype=float), (length,)) for v in names]) \
-        if names else np.zeros((length, 0))
+    values = (
+        np.column_stack(
+            [np.broadcast_to(np.asarray(variables[v], dtype=float), (length,)) for v in names]
+        )
+        if names
+        else np.zeros((length, 0))
+    )
     return power_products(values, *term_exponents(terms, names))

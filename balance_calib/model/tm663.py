@@ -6,30 +6,33 @@ component, C1-C42), eqs. (7)-(12) (quadratic, 28 terms, C1-C168) and eqs. (13)-(
 number C_{k*n_terms + j + 1}. Fitting, evaluation, YAML files and printed tables all derive
 from the lists below.
 """
+
 from __future__ import annotations
 
 from itertools import combinations
 
 from ..units import BRIDGE_OUTPUTS
-from .terms import Term, parse_terms
+from .terms import parse_terms, Term
 
 MODEL_ORDERS = ('linear', 'quadratic', 'cubic')
 
 
 def _names(order: str, outputs=BRIDGE_OUTPUTS) -> list[str]:
-    names = ['1'] + list(outputs)                                  # eqs. (1)-(6)
+    names = ['1'] + list(outputs)  # eqs. (1)-(6)
     if order in ('quadratic', 'cubic'):
-        names += [f'{v}^2' for v in outputs]                       # C8-C13 of eq. (7)
+        names += [f'{v}^2' for v in outputs]  # C8-C13 of eq. (7)
         names += [f'{a}*{b}' for a, b in combinations(outputs, 2)]  # C14-C28 of eq. (7)
     if order == 'cubic':
-        names += [f'{v}^3' for v in outputs]                       # C29-C34 of eq. (13)
+        names += [f'{v}^3' for v in outputs]  # C29-C34 of eq. (13)
     if order not in MODEL_ORDERS:
         raise ValueError(f'unknown model {order!r}; expected one of {", ".join(MODEL_ORDERS)}')
     return names
 
 
 def tm663_terms(order: str, outputs=BRIDGE_OUTPUTS) -> tuple[Term, ...]:
-    """The term list of TM-663 §2.1 (linear), §2.2 (quadratic) or §2.3 (cubic), in the memo's order."""
+    """The term list of TM-663 §2.1 (linear), §2.2 (quadratic) or §2.3 (cubic), in the memo's
+    order.
+    """
     return parse_terms(_names(order, outputs))
 
 

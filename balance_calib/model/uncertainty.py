@@ -11,6 +11,7 @@ For an iterative (R-091) model V = A·g(L) the same is computed in output space 
 and mapped to loads by the inverse Jacobian: cov_L = J⁻¹ diag(σ_V² (1 + g C gᵀ)) J⁻ᵀ.
 The pieces are stored by the fit in each model's `metadata.uncertainty` in calibration.yaml.
 """
+
 from __future__ import annotations
 
 from typing import Mapping
@@ -25,8 +26,9 @@ class UncertaintyUnavailable(ValueError):
 
 
 def covariance_and_sigma(model) -> tuple[np.ndarray, np.ndarray] | None:
-    """The model's unscaled coefficient covariance and residual σ per component (cached), or None when
-    the calibration carries none (the memo's published matrices)."""
+    """The model's unscaled coefficient covariance and residual σ per component (cached), or None
+    when the calibration carries none (the memo's published matrices).
+    """
     cached = _CACHE.get(id(model))
     if cached is not None and cached[0] is model:
         return cached[1], cached[2]
@@ -57,20 +59,31 @@ def has_uncertainty(calibration_or_model, model: str = 'adopted') -> bool:
 def require_covariance(calibration_or_model, model: str = 'adopted') -> None:
     chosen = _resolve(calibration_or_model, model)
     if covariance_and_sigma(chosen) is None:
-        raise UncertaintyUnavailable(f'model {getattr(chosen, "name", "?")} carries no coefficient covariance '
-                                     f'(metadata.uncertainty); refit it with balance-calib fit or refit')
+        raise UncertaintyUnavailable(
+            f'model {getattr(chosen, "name", "?")} carries no coefficient covariance '
+            f'(metadata.uncertainty); refit it with balance-calib fit or refit'
+        )
 
 
-def load_standard_uncertainty(calibration_or_model, outputs_mv, extra: Mapping[str, np.ndarray] | None = None,
-                              *, model: str = 'adopted', tare_sigma=None, loads=None, design=None) -> np.ndarray:
+def load_standard_uncertainty(
+    calibration_or_model,
+    outputs_mv,
+    extra: Mapping[str, np.ndarray] | None = None,
+    *,
+    model: str = 'adopted',
+    tare_sigma=None,
+    loads=None,
+    design=None,
+) -> np.ndarray:
     """(N, n_components) standard uncertainty (k = 1) of each load, N / N·m, model component order.
 
     outputs_mv (N, n_inputs) as passed to model.loads; extra likewise. tare_sigma: optional
     (n_components,) standard uncertainty of a live load tare, added in quadrature. NaN rows where
-    the model has no stored covariance or the outputs are not finite. loads: optional (N, n_components)
-    the model's loads at these outputs if the caller has them already (an iterative model then skips
-    its Newton solve). design: optional (N, n_terms) design rows of a direct model at these outputs,
-    if the caller has them already (the live calibrator: those its loads came from).
+    the model has no stored covariance or the outputs are not finite. loads: optional (N,
+    n_components) the model's loads at these outputs if the caller has them already (an iterative
+    model then skips its Newton solve). design: optional (N, n_terms) design rows of a direct model
+    at these outputs, if the caller has them already (the live calibrator: those its loads came
+    from).
     """
     chosen = _resolve(calibration_or_model, model)
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
@@ -83,16 +96,26 @@ def load_standard_uncertainty(calibration_or_model, outputs_mv, extra: Mapping[s
     covariance, sigma = pieces
     good = outputs[finite]
     if getattr(chosen, 'form', 'direct') == 'iterative':
-        loads = np.atleast_2d(chosen.loads(good) if loads is None else np.asarray(loads, dtype=float)[finite])
+        loads = np.atleast_2d(
+            chosen.loads(good) if loads is None else np.asarray(loads, dtype=float)[finite]
+        )
         design, jac = chosen.design_and_output_jacobian(loads)
         h = np.einsum('ij,jk,ik->i', design, covariance, design)
         variance_out = sigma[None, :] ** 2 * (1.0 + h)[:, None]
         inverse = np.linalg.inv(jac)
-        variance = np.einsum('nmk,nk->nm', inverse ** 2, variance_out)
+        variance = np.einsum('nmk,nk->nm', inverse**2, variance_out)
     else:
-        sub_extra = None if extra is None else {
-            k: (np.asarray(v)[finite] if np.ndim(v) and np.shape(v)[0] == n else v) for k, v in extra.items()}
-        design = chosen.design(good, sub_extra) if design is None else np.atleast_2d(design)[finite]
+        sub_extra = (
+            None
+            if extra is None
+            else {
+                k: (np.asarray(v)[finite] if np.ndim(v) and np.shape(v)[0] == n else v)
+                for k, v in extra.items()
+            }
+        )
+        design = (
+            chosen.design(good, sub_extra) if design is None else np.atleast_2d(design)[finite]
+        )
         variance = _direct_variance(design, covariance, sigma)
     if tare_sigma is not None:
         variance = variance + np.asarray(tare_sigma, dtype=float)[None, :] ** 2
@@ -101,29 +124,40 @@ def load_standard_uncertainty(calibration_or_model, outputs_mv, extra: Mapping[s
 
 
 def _direct_variance(design: np.ndarray, covariance: np.ndarray, sigma: np.ndarray) -> np.ndarray:
-    """(N, n_components) u² = σ² (1 + x (XᵀX)⁻¹ xᵀ) for design rows x (N, n_terms) of a direct model."""
+    """(N, n_components) u² = σ² (1 + x (XᵀX)⁻¹ xᵀ) for design rows x (N, n_terms) of a direct
+    model.
+    """
     h = np.einsum('ij,jk,ik->i', design, covariance, design)
     return sigma[None, :] ** 2 * (1.0 + h)[:, None]
 
 
-def with_fitted_covariance(model, bridge_outputs_mv, residuals, extra: Mapping[str, np.ndarray] | None = None):
+def with_fitted_covariance(
+    model, bridge_outputs_mv, residuals, extra: Mapping[str, np.ndarray] | None = None
+):
     """A least-squares-fitted BalanceModel with `metadata.uncertainty` from its own fitted points:
     (XᵀX)⁻¹ by SVD of the unit-norm-scaled design (rank-deficient directions left out) and the
-    residual σ per component with N − rank degrees of freedom. For refit's calibration.yaml."""
+    residual σ per component with N − rank degrees of freedom. For refit's calibration.yaml.
+    """
     design = model.design(bridge_outputs_mv, extra)
     residuals = np.atleast_2d(np.asarray(residuals, dtype=float))
     covariance, rank = unscaled_covariance(design)
     dof = max(design.shape[0] - rank, 1)
-    sigma = np.sqrt((residuals ** 2).sum(axis=0) / dof)
+    sigma = np.sqrt((residuals**2).sum(axis=0) / dof)
     return with_covariance(model, covariance, sigma, dof)
 
 
 def with_covariance(model, covariance: np.ndarray, sigma, dof: int):
     """The model with `metadata.uncertainty` = this (n_terms, n_terms) unscaled covariance (XᵀX)⁻¹
-    and residual σ (n_components,), N / N·m, as calibration.yaml stores them."""
-    return model.with_coefficients(model.coefficients, uncertainty={
-        'residual_sigma': np.asarray(sigma, dtype=float).tolist(),
-        'covariance_unscaled': np.asarray(covariance, dtype=float).tolist(), 'dof': int(dof)})
+    and residual σ (n_components,), N / N·m, as calibration.yaml stores them.
+    """
+    return model.with_coefficients(
+        model.coefficients,
+        uncertainty={
+            'residual_sigma': np.asarray(sigma, dtype=float).tolist(),
+            'covariance_unscaled': np.asarray(covariance, dtype=float).tolist(),
+            'dof': int(dof),
+        },
+    )
 
 
 def unscaled_covariance(design: np.ndarray) -> tuple[np.ndarray, int]:

@@ -5,6 +5,7 @@ arguments before `--ros-args` it prints the node's module docstring, its paramet
 default, type, range, read-only, description: node_parameters.TABLES, the table the node declares)
 and how to set them, then exits 0. Otherwise it returns and the node starts as usual.
 """
+
 from __future__ import annotations
 
 import inspect
@@ -25,9 +26,15 @@ launchless_scripts/ros topic echo|hz TOPIC (no ros2 CLI needed)."""
 
 
 def wants_help(args: Sequence[str] | None) -> bool:
-    argv = list(sys.argv[1:] if args is None else args[1:] if args and not str(args[0]).startswith('-') else args)
+    argv = list(
+        sys.argv[1:]
+        if args is None
+        else args[1:]
+        if args and not str(args[0]).startswith('-')
+        else args
+    )
     if '--ros-args' in argv:
-        argv = argv[:argv.index('--ros-args')]
+        argv = argv[: argv.index('--ros-args')]
     return '-h' in argv or '--help' in argv
 
 
@@ -40,8 +47,10 @@ def node_name(module) -> str:
 
 def parameter_table(module) -> list[tuple[str, str, str]]:
     """(name, default, description) for every parameter the node declares: its table's."""
-    return [(name, show_default(spec), spec.description)
-            for name, spec in TABLES.get(node_name(module), {}).items()]
+    return [
+        (name, show_default(spec), spec.description)
+        for name, spec in TABLES.get(node_name(module), {}).items()
+    ]
 
 
 def parameter_lines(node: str) -> list[str]:
@@ -51,15 +60,25 @@ def parameter_lines(node: str) -> list[str]:
     table = TABLES.get(node, {})
     if not table:
         return []
-    lines = ['Parameters (NAME = default  (type, range, read-only); docs/parameters.md has the '
-             'same table):']
+    lines = [
+        'Parameters (NAME = default  (type, range, read-only); docs/parameters.md has the '
+        'same table):'
+    ]
     for name, spec in table.items():
-        facts = ', '.join(fact for fact in (spec.kind, range_text(spec),
-                                            'read-only' if spec.read_only else '') if fact)
+        facts = ', '.join(
+            fact
+            for fact in (spec.kind, range_text(spec), 'read-only' if spec.read_only else '')
+            if fact
+        )
         lines.append(f'  {name} = {show_default(spec)}  ({facts})')
-        lines += textwrap.wrap(spec.description, 96, initial_indent=' ' * 6,
-                               subsequent_indent=' ' * 6, break_on_hyphens=False,
-                               break_long_words=False)
+        lines += textwrap.wrap(
+            spec.description,
+            96,
+            initial_indent=' ' * 6,
+            subsequent_indent=' ' * 6,
+            break_on_hyphens=False,
+            break_long_words=False,
+        )
     if any(spec.read_only for spec in table.values()):
         lines.append('  (read-only: set at start-up only, with -p or --params-file)')
     return lines + ['']
@@ -80,7 +99,8 @@ def exit_if_help(module_name: str, args: Sequence[str] | None = None) -> None:
         try:
             print(help_text(module_name))
             sys.stdout.flush()
-        except BrokenPipeError:     # `NODE --help | head`: the reader is gone
+        except BrokenPipeError:  # `NODE --help | head`: the reader is gone
             from ..closed_pipe import stdout_closed
+
             stdout_closed()
         sys.exit(0)

@@ -7,6 +7,7 @@ value is refused with our one-line reason rather than rclpy's (or a traceback), 
 for a double parameter (tare_timeout_s:=5) means the double. A node that takes changes at runtime
 (balance_calibrator) checks them in its own on-set callback with the same check.
 """
+
 from __future__ import annotations
 
 import math
@@ -43,7 +44,7 @@ def descriptor(spec: Spec) -> ParameterDescriptor:
         low = -math.inf if spec.low is None else float(spec.low)
         high = math.inf if spec.high is None else float(spec.high)
         result.floating_point_range = [FloatingPointRange(from_value=low, to_value=high)]
-    if spec.choices or spec.low_open:     # what a range cannot say: rclpy's ranges are closed
+    if spec.choices or spec.low_open:  # what a range cannot say: rclpy's ranges are closed
         result.additional_constraints = range_text(spec)
     return result
 
@@ -56,7 +57,7 @@ def declare_table(node, table: Mapping[str, Spec], check: Check | None = None) -
     parameter) for a bad value from the command line or a params file.
     """
     check = check or table_checker(table)
-    overrides = getattr(node, '_parameter_overrides', {})     # command line and params files
+    overrides = getattr(node, '_parameter_overrides', {})  # command line and params files
     for name, spec in table.items():
         if name in overrides:
             value = _checked(check, name, overrides[name].value)
@@ -67,7 +68,7 @@ def declare_table(node, table: Mapping[str, Spec], check: Check | None = None) -
         default = Parameter.Type.STRING_ARRAY if not spec.has_default else spec.default
         try:
             declared = node.declare_parameter(name, default, descriptor(spec))
-        except ParameterException as err:      # what our check let through and rclpy did not
+        except ParameterException as err:  # what our check let through and rclpy did not
             raise ParameterError(f'parameter {name}: {err}') from None
         values[name] = _checked(check, name, declared.value)
     return values
@@ -78,15 +79,17 @@ def _checked(check: Check, name: str, value: object) -> object:
         return check(name, value)
     except ParameterError:
         raise
-    except ValueError as err:           # a check of the node's own (a file, a unit)
+    except ValueError as err:  # a check of the node's own (a file, a unit)
         raise ParameterError(str(err)) from None
 
 
 def value_getter(node):
     """value(name): the parameter's current value (None for a string array never set)."""
+
     def value(name):
         try:
             return node.get_parameter(name).value
         except ParameterUninitializedException:
             return None
+
     return value

@@ -1,32 +1,35 @@
-"""balance_calibrator: balance/raw (mV) -> balance/wrench (N, N·m, tunnel axes) with the active calibration.
+"""balance_calibrator: balance/raw (mV) -> balance/wrench (N, N·m, tunnel axes) with the active
+calibration.
 
-Topics (relative: `--ros-args -r __ns:=/left` runs a second balance beside the first): in balance/raw,
-balance/temperature; out balance/wrench, balance/wrench_uncertainty (when the calibration carries
-its covariance and someone subscribes), balance/overload (std_msgs/Bool, transient local), /diagnostics. Services
-(std_srvs/Trigger): ~/zero (electrical zero, output space: only with nothing on the balance),
-~/tare (tare load, e.g. the model's weight wind-off: load space, the calibration on the full outputs),
-~/clear_tare, ~/refit. ~/zero and ~/tare refuse a window that is not steady and say why; both are
-kept in <calibration>.tare.yaml beside the calibration file and restored at start-up for the same
-calibration content, installation, namespace and node (live/tare_store.py). QoS through
-the standard overrides, e.g. -p qos_overrides./balance/raw.subscription.reliability:=best_effort.
+Topics (relative: `--ros-args -r __ns:=/left` runs a second balance beside the first): in
+balance/raw, balance/temperature; out balance/wrench, balance/wrench_uncertainty (when the
+calibration carries its covariance and someone subscribes), balance/overload (std_msgs/Bool,
+transient local), /diagnostics. Services (std_srvs/Trigger): ~/zero (electrical zero, output space:
+only with nothing on the balance), ~/tare (tare load, e.g. the model's weight wind-off: load space,
+the calibration on the full outputs), ~/clear_tare, ~/refit. ~/zero and ~/tare refuse a window that
+is not steady and say why; both are kept in <calibration>.tare.yaml beside the calibration file and
+restored at start-up for the same calibration content, installation, namespace and node
+(live/tare_store.py). QoS through the standard overrides, e.g. -p
+qos_overrides./balance/raw.subscription.reliability:=best_effort.
 
-This node translates; live/session.py does the work (math in live/calibrator_core.py; each sample in
-one C call where it applies, live/lone_sample.py). balance/raw
-is read serialized by a thread of its own (nodes/_raw_input.py) in batches of what is waiting; the
-executor runs the services, parameters and timers and never wakes for a sample. ~/tare and ~/zero
-await a future that the reader completes once the window is full; ~/refit runs the pipeline in a
-separate process and the session swaps the new calibration in between two batches.
+This node translates; live/session.py does the work (math in live/calibrator_core.py; each sample
+in one C call where it applies, live/lone_sample.py). balance/raw is read serialized by a thread of
+its own (nodes/_raw_input.py) in batches of what is waiting; the executor runs the services,
+parameters and timers and never wakes for a sample. ~/tare and ~/zero await a future that the
+reader completes once the window is full; ~/refit runs the pipeline in a separate process and the
+session swaps the new calibration in between two batches.
 """
+
 from __future__ import annotations
 
+from functools import partial
 import gc
 import sys
-from functools import partial
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
+import rclpy
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import ParameterException
@@ -42,7 +45,7 @@ from std_msgs.msg import Bool
 from std_srvs.srv import Trigger
 
 from balance_calib.calibration_file import ConfigError
-from balance_calib.live.parameters import PARAMETERS, check_parameter
+from balance_calib.live.parameters import check_parameter, PARAMETERS
 from balance_calib.live.raw_codec import wrench_arrays
 from balance_calib.live.session import CalibratorSession
 
@@ -50,14 +53,18 @@ from ._parameters import declare_table, value_getter
 from ._raw_input import RawInput
 
 WRENCH_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-OVERLOAD_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+OVERLOAD_QOS = QoSProfile(
+    depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
+)
 MAX_BATCH = 1000
 SWITCH_INTERVAL_S = 0.0005
 
 
 class BalanceCalibrator(Node):
     def __init__(self, *, refit_function=None, **kwargs):
-        """refit_function: run_refit's signature, run in a thread; None = the pipeline in its own process."""
+        """refit_function: run_refit's signature, run in a thread; None = the pipeline in its
+        own process.
+        """
         super().__init__('balance_calibrator', **kwargs)
         try:
             declare_table(self, PARAMETERS, check_parameter)
@@ -65,42 +72,75 @@ class BalanceCalibrator(Node):
             raise ConfigError(f'invalid parameter: {err}') from None
         self._refit_function = refit_function
         self.session = CalibratorSession(
-            value_getter(self), self.get_fully_qualified_name(), self._log,
-            lambda messages: wrench_arrays([deserialize_message(m, WrenchStamped) for m in messages]))
+            value_getter(self),
+            self.get_fully_qualified_name(),
+            self._log,
+            lambda messages: wrench_arrays(
+                [deserialize_message(m, WrenchStamped) for m in messages]
+            ),
+        )
         value = self.session.value
         overrides = QoSOverridingOptions.with_default_policies()
-        self._wrench_pub = self.create_publisher(WrenchStamped, 'balance/wrench', WRENCH_QOS,
-                                                 qos_overriding_options=overrides)
-        # who reads the uncertainty, kept by the publisher's matched event: asking rmw at every batch
-        # cost 5-15 µs a sample at 1 kHz (cold caches); asked still while the count is 0 (and
+        self._wrench_pub = self.create_publisher(
+            WrenchStamped, 'balance/wrench', WRENCH_QOS, qos_overriding_options=overrides
+        )
+        # who reads the uncertainty, kept by the publisher's matched event: asking rmw at every
+        # batch cost 5-15 µs a sample at 1 kHz (cold caches); asked still while the count is 0 (and
         # publish_uncertainty is on), so that the first batch after a subscriber matches does not
         # wait for the executor to deliver the event
         self._uncertainty_readers = 0
         self._uncertainty_pub = self.create_publisher(
-            WrenchStamped, 'balance/wrench_uncertainty', WRENCH_QOS, qos_overriding_options=overrides,
-            event_callbacks=PublisherEventCallbacks(matched=self._on_uncertainty_matched))
+            WrenchStamped,
+            'balance/wrench_uncertainty',
+            WRENCH_QOS,
+            qos_overriding_options=overrides,
+            event_callbacks=PublisherEventCallbacks(matched=self._on_uncertainty_matched),
+        )
         self._overload_pub = self.create_publisher(Bool, 'balance/overload', OVERLOAD_QOS)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        qos = QoSProfile(depth=int(value('input_depth')), reliability=ReliabilityPolicy.RELIABLE
-                         if self.session.reliability == 'reliable' else ReliabilityPolicy.BEST_EFFORT)
-        self._raw_input = RawInput(self, WrenchStamped, 'balance/raw', qos, self._on_raw, max_batch=MAX_BATCH,
-                                   qos_overriding_options=overrides, thread_name='balance_raw')
-        self.create_subscription(Temperature, 'balance/temperature',
-                                 lambda msg: self.session.on_temperature(msg.temperature), qos)
-        # A suspended coroutine keeps its callback group busy: ~/refit must not block ~/tare and the rest
+        qos = QoSProfile(
+            depth=int(value('input_depth')),
+            reliability=ReliabilityPolicy.RELIABLE
+            if self.session.reliability == 'reliable'
+            else ReliabilityPolicy.BEST_EFFORT,
+        )
+        self._raw_input = RawInput(
+            self,
+            WrenchStamped,
+            'balance/raw',
+            qos,
+            self._on_raw,
+            max_batch=MAX_BATCH,
+            qos_overriding_options=overrides,
+            thread_name='balance_raw',
+        )
+        self.create_subscription(
+            Temperature,
+            'balance/temperature',
+            lambda msg: self.session.on_temperature(msg.temperature),
+            qos,
+        )
+        # A suspended coroutine keeps its callback group busy: ~/refit must not block ~/tare and
+        # the rest
         services = ReentrantCallbackGroup()
-        self.create_service(Trigger, '~/tare', partial(self._on_window, 'tare'), callback_group=services)
-        self.create_service(Trigger, '~/zero', partial(self._on_window, 'zero'), callback_group=services)
+        self.create_service(
+            Trigger, '~/tare', partial(self._on_window, 'tare'), callback_group=services
+        )
+        self.create_service(
+            Trigger, '~/zero', partial(self._on_window, 'zero'), callback_group=services
+        )
         self.create_service(Trigger, '~/clear_tare', self._on_clear_tare, callback_group=services)
         self.create_service(Trigger, '~/refit', self._on_refit, callback_group=services)
-        self._diagnostics_timer = self.create_timer(value('diagnostics_period_s'), self._on_diagnostics)
+        self._diagnostics_timer = self.create_timer(
+            value('diagnostics_period_s'), self._on_diagnostics
+        )
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._overload_pub.publish(Bool(data=False))
         self._raw_input.start()
 
     def _log(self, level: str, line: str) -> None:
-        logger = self.get_logger()       # rclpy wants one severity per call site
+        logger = self.get_logger()  # rclpy wants one severity per call site
         if level == 'info':
             logger.info(line)
         elif level == 'warning':
@@ -115,19 +155,23 @@ class BalanceCalibrator(Node):
         return super().destroy_node()
 
     def _on_raw(self, messages: list[bytes]) -> None:
-        """In the reader thread: one batch of serialized samples (the uncertainty only for subscribers)."""
-        wanted = self._uncertainty_readers > 0 or (self.session.live.settings.publish_uncertainty
-                                                   and self._uncertainty_pub.get_subscription_count() > 0)
+        """In the reader thread: one batch of serialized samples (the uncertainty only for
+        subscribers).
+        """
+        wanted = self._uncertainty_readers > 0 or (
+            self.session.live.settings.publish_uncertainty
+            and self._uncertainty_pub.get_subscription_count() > 0
+        )
         out = self.session.on_samples(messages, wanted)
         if out is None:
             return
-        if out.overload is not None:         # an interlock hears it first
+        if out.overload is not None:  # an interlock hears it first
             self._overload_pub.publish(Bool(data=out.overload))
         publish = self._wrench_pub.publish
         for data in out.wrench:
             publish(data)
         publish = self._uncertainty_pub.publish
-        for data in out.uncertainty():       # computed after the wrenches went out
+        for data in out.uncertainty():  # computed after the wrenches went out
             publish(data)
 
     def _on_uncertainty_matched(self, status) -> None:
@@ -164,7 +208,8 @@ class BalanceCalibrator(Node):
             response.success, response.message = False, refused
             return response
         response.success, response.message, new_file = self.session.finish_refit(await done)
-        if new_file is not None:         # a balance config stays as it is: the node now reads the new file
+        # a balance config stays as it is: the node now reads the new file
+        if new_file is not None:
             self.set_parameters([Parameter('calibration_file', value=new_file)])
         return response
 
@@ -178,30 +223,40 @@ class BalanceCalibrator(Node):
     def _apply_parameters(self, parameters) -> None:
         if self.session.apply({p.name for p in parameters}):
             self.destroy_timer(self._diagnostics_timer)
-            self._diagnostics_timer = self.create_timer(self.session.value('diagnostics_period_s'),
-                                                        self._on_diagnostics)
+            self._diagnostics_timer = self.create_timer(
+                self.session.value('diagnostics_period_s'), self._on_diagnostics
+            )
 
     def _on_diagnostics(self):
         array = DiagnosticArray()
         array.header.stamp = self.get_clock().now().to_msg()
-        array.status = [DiagnosticStatus(level=bytes([r.level]), name=r.name, message=r.message,
-                                         hardware_id=r.hardware_id,
-                                         values=[KeyValue(key=k, value=v) for k, v in r.values])
-                        for r in self.session.report()]
+        array.status = [
+            DiagnosticStatus(
+                level=bytes([r.level]),
+                name=r.name,
+                message=r.message,
+                hardware_id=r.hardware_id,
+                values=[KeyValue(key=k, value=v) for k, v in r.values],
+            )
+            for r in self.session.report()
+        ]
         self._diagnostics_pub.publish(array)
 
 
 def main(args=None):
     from ._help import exit_if_help
-    exit_if_help(__name__, args)     # --help: print the parameters and exit before rclpy starts
+
+    exit_if_help(__name__, args)  # --help: print the parameters and exit before rclpy starts
     rclpy.init(args=args)
     node = None
     status = 0
     try:
         node = BalanceCalibrator()
-        gc.freeze()       # start-up's objects (numpy, scipy, rclpy) out of the collector's way: shorter pauses
-        # a service callback (a refit's new calibration read and checked) holds the GIL for up to the
-        # switch interval while a sample waits in the reader thread: 0.5 ms instead of Python's 5 ms
+        # start-up's objects (numpy, scipy, rclpy) out of the collector's way: shorter pauses
+        gc.freeze()
+        # a service callback (a refit's new calibration read and checked) holds the GIL for up to
+        # the switch interval while a sample waits in the reader thread: 0.5 ms instead of Python's
+        # 5 ms
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -10,6 +10,7 @@ summary and metadata.yaml are complete afterwards. While it records, what it rec
 the file every FLUSH_PERIOD_S (one chunk each), so a refit of the bag still being recorded reads it
 up to a second ago.
 """
+
 import importlib
 import signal
 import sys
@@ -34,16 +35,24 @@ QUEUE_DEPTH = 1000  # a recorder would rather buffer than drop
 
 def offered_qos_as_dict(qos: QoSProfile) -> dict:
     """An offered QoS profile in rosbag2's v9 YAML vocabulary ('reliable', 'keep_last', ...)."""
+
     def duration(value):
-        return {'sec': value.nanoseconds // 1_000_000_000,
-                'nsec': value.nanoseconds % 1_000_000_000}
-    return {'history': qos.history.name.lower(), 'depth': qos.depth,
-            'reliability': qos.reliability.name.lower(),
-            'durability': qos.durability.name.lower(),
-            'deadline': duration(qos.deadline), 'lifespan': duration(qos.lifespan),
-            'liveliness': qos.liveliness.name.lower(),
-            'liveliness_lease_duration': duration(qos.liveliness_lease_duration),
-            'avoid_ros_namespace_conventions': qos.avoid_ros_namespace_conventions}
+        return {
+            'sec': value.nanoseconds // 1_000_000_000,
+            'nsec': value.nanoseconds % 1_000_000_000,
+        }
+
+    return {
+        'history': qos.history.name.lower(),
+        'depth': qos.depth,
+        'reliability': qos.reliability.name.lower(),
+        'durability': qos.durability.name.lower(),
+        'deadline': duration(qos.deadline),
+        'lifespan': duration(qos.lifespan),
+        'liveliness': qos.liveliness.name.lower(),
+        'liveliness_lease_duration': duration(qos.liveliness_lease_duration),
+        'avoid_ros_namespace_conventions': qos.avoid_ros_namespace_conventions,
+    }
 
 
 def subscription_qos(offered: list[QoSProfile]) -> QoSProfile:
@@ -51,10 +60,13 @@ def subscription_qos(offered: list[QoSProfile]) -> QoSProfile:
     reliable = all(q.reliability == ReliabilityPolicy.RELIABLE for q in offered)
     transient_local = all(q.durability == DurabilityPolicy.TRANSIENT_LOCAL for q in offered)
     return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=QUEUE_DEPTH,
+        history=HistoryPolicy.KEEP_LAST,
+        depth=QUEUE_DEPTH,
         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-        durability=(DurabilityPolicy.TRANSIENT_LOCAL if transient_local
-                    else DurabilityPolicy.VOLATILE))
+        durability=(
+            DurabilityPolicy.TRANSIENT_LOCAL if transient_local else DurabilityPolicy.VOLATILE
+        ),
+    )
 
 
 def message_class(msgtype: str):
@@ -64,10 +76,9 @@ def message_class(msgtype: str):
 
 
 class BalanceRecorder(Node):
-
     def __init__(self):
         super().__init__('balance_recorder')
-        parameters = declare_table(self, PARAMETERS)      # read once, here (read-only)
+        parameters = declare_table(self, PARAMETERS)  # read once, here (read-only)
         topics, output = parameters['topics'], parameters['output']
         self._default_topics = {self.resolve_topic_name(topic) for topic in DEFAULT_TOPICS}
         if not output:
@@ -102,25 +113,35 @@ class BalanceRecorder(Node):
             self._pending.remove(topic)
             msgtype = types[topic][0]
             if len(types[topic]) > 1:
-                self.get_logger().warn(f'{topic} has several types {types[topic]}; '
-                                       f'recording {msgtype}')
+                self.get_logger().warn(
+                    f'{topic} has several types {types[topic]}; recording {msgtype}'
+                )
             offered = [p.qos_profile for p in publishers if p.topic_type == msgtype]
             try:
                 msg_class = message_class(msgtype)
                 self._writer.add_topic(
-                    topic, msgtype, qos_profiles_yaml([offered_qos_as_dict(q) for q in offered]),
-                    type_description_hash=str(publishers[0].topic_type_hash))
+                    topic,
+                    msgtype,
+                    qos_profiles_yaml([offered_qos_as_dict(q) for q in offered]),
+                    type_description_hash=str(publishers[0].topic_type_hash),
+                )
             except (BagError, ImportError, AttributeError) as error:
                 self.get_logger().error(f'cannot record {topic}: {error}')
                 continue
             self._recording[topic] = self.create_subscription(
-                msg_class, topic, self._writer_for(topic), subscription_qos(offered), raw=True)
+                msg_class, topic, self._writer_for(topic), subscription_qos(offered), raw=True
+            )
             self.get_logger().info(f'recording {topic} ({msgtype})')
 
     def _writer_for(self, topic):
         def write(serialized: bytes, message_info: dict):
-            self._writer.write(topic, self.get_clock().now().nanoseconds, serialized,
-                               message_info.get('source_timestamp'))
+            self._writer.write(
+                topic,
+                self.get_clock().now().nanoseconds,
+                serialized,
+                message_info.get('source_timestamp'),
+            )
+
         return write
 
     def destroy_node(self):
@@ -131,15 +152,17 @@ class BalanceRecorder(Node):
                 # After a signal the context is shut down and no executor can run; messages
                 # already received are still in the reader's queue, so take them directly.
                 write = self._writer_for(topic)
-                while (taken := subscription.handle.take_message(subscription.msg_type,
-                                                                 True)) is not None:
+                while (
+                    taken := subscription.handle.take_message(subscription.msg_type, True)
+                ) is not None:
                     write(*taken)
             counts = self._writer.close()
         super().destroy_node()
         # Logged once the node is gone, as the shut-down context can no longer reach /rosout.
         summary = ', '.join(f'{topic}: {count}' for topic, count in counts.items())
-        self.get_logger().info(f'bag {self._writer.path} closed; messages written: '
-                               f'{summary or "none"}')
+        self.get_logger().info(
+            f'bag {self._writer.path} closed; messages written: {summary or "none"}'
+        )
         if self._pending:
             # the defaults cover every interface topic and a run publishes only some of them: a
             # silent default topic is not news, a silent topic the user added is
@@ -153,7 +176,8 @@ class BalanceRecorder(Node):
 
 def main(args=None):
     from ._help import exit_if_help
-    exit_if_help(__name__, args)     # --help: print the parameters and exit before rclpy starts
+
+    exit_if_help(__name__, args)  # --help: print the parameters and exit before rclpy starts
     # rclpy's own handlers for SIGINT and SIGTERM (ALL) shut the context down, so spin() returns
     # or raises ExternalShutdownException and the bag is closed in destroy_node() either way.
     # With SIGINT's default action in place, rclpy's handler does not chain to Python's, so

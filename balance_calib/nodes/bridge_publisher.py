@@ -6,15 +6,16 @@ Modes (parameter `mode`):
                 /calibration/gravity when the body is rotated, /calibration/applied_load when a
                 point settles (all NaN while weights are changed), /balance/raw (mV) and
                 /balance/temperature (°C). Simulated by simulation.balance_sim.simulate_campaign.
-  wind_on       an angle-of-attack sweep (simulation/wind_on.py) or a CSV of balance-axis loads; also
-                /balance/truth: the true aerodynamic load in tunnel axes, N / N·m, stamped like
-                the raw sample it belongs to (a test and diagnostic topic, not a public interface).
-                With `aero_model` (a config/models file) the run is physical (TM-663 §10.3): a
-                wind-off α/φ sweep, the wind-on α sweep at `dynamic_pressure_pa`, wind-off again;
-                the balance feels the air loads plus the model's weight at each attitude, at the
-                attitude the sting's deflection gives; /model/attitude (support angles) and
-                /tunnel/dynamic_pressure with every raw sample, and the true coefficients on
-                /aero/truth (body) and /aero/truth_wind (wind axes), also not public interfaces.
+  wind_on       an angle-of-attack sweep (simulation/wind_on.py) or a CSV of balance-axis loads;
+                also /balance/truth: the true aerodynamic load in tunnel axes, N / N·m, stamped
+                like the raw sample it belongs to (a test and diagnostic topic, not a public
+                interface). With `aero_model` (a config/models file) the run is physical (TM-663
+                §10.3): a wind-off α/φ sweep, the wind-on α sweep at `dynamic_pressure_pa`,
+                wind-off again; the balance feels the air loads plus the model's weight at each
+                attitude, at the attitude the sting's deflection gives; /model/attitude (support
+                angles) and /tunnel/dynamic_pressure with every raw sample, and the true
+                coefficients on /aero/truth (body) and /aero/truth_wind (wind axes), also not
+                public interfaces.
   replay        the messages of bag(s) as `ros2 bag play` sends them (header stamps as recorded).
   thrust_stand  the lab manual's thrust stand (simulation/thrust_stand.py): strain channel on
                 /balance/raw force.x (mV), /thrust_stand/chamber_pressure (gauge) and
@@ -25,15 +26,16 @@ The node precomputes a timeline of events (simulation/timeline.py) and a timer p
 that are due; events of one sampling instant share the header stamp: the node clock when the
 first of them is published. Parameters are read at start-up.
 """
+
 from __future__ import annotations
 
 import importlib
 import sys
 import time
 
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 import numpy as np
 import rclpy
-from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -42,20 +44,29 @@ from rclpy.task import Future
 from rclpy.time import Time
 from sensor_msgs.msg import FluidPressure, Temperature
 
+from balance_calib.aero.model_file import load_model
 from balance_calib.bags.errors import BagError
 from balance_calib.config import ConfigError, load_balance_config
-from balance_calib.simulation import timeline as tl
-from balance_calib.simulation.replay import read_recorded_messages
+from balance_calib.parameter_table import defaults
 from balance_calib.refit.gates import acceptance_limits
 from balance_calib.schedule_file import schedule_for
-from balance_calib.aero.model_file import load_model
-from balance_calib.simulation.wind_on import aero_run_profile, aoa_sweep_profile, csv_profile, wind_on_outputs
-from balance_calib.simulation.balance_sim import (noise_mv_for_load_sigma, paced_settings,
-                                                  simulate_campaign, table17_noise)
+from balance_calib.simulation import timeline as tl
+from balance_calib.simulation.balance_sim import (
+    noise_mv_for_load_sigma,
+    paced_settings,
+    simulate_campaign,
+    table17_noise,
+)
 from balance_calib.simulation.effects import parse_effects
-from balance_calib.tunnel_axes import parse_installation
-from balance_calib.parameter_table import defaults
 from balance_calib.simulation.publisher_parameters import PARAMETERS as TABLE
+from balance_calib.simulation.replay import read_recorded_messages
+from balance_calib.simulation.wind_on import (
+    aero_run_profile,
+    aoa_sweep_profile,
+    csv_profile,
+    wind_on_outputs,
+)
+from balance_calib.tunnel_axes import parse_installation
 
 from ._parameters import declare_table
 
@@ -75,21 +86,26 @@ class StartupError(ValueError):
 class BridgePublisher(Node):
     def __init__(self, **kwargs):
         super().__init__('bridge_publisher', **kwargs)
-        try:     # every parameter read once, here (read-only); mode, rate_hz, speed... checked
+        try:  # every parameter read once, here (read-only); mode, rate_hz, speed... checked
             self._settings = declare_table(self, TABLE)
         except ValueError as err:
             raise StartupError(str(err)) from None
         self.mode = str(self._settings['mode'])
-        self.done = Future()                    # completes when the run is over and exit_when_done
+        self.done = Future()  # completes when the run is over and exit_when_done
         self._outputs = {}
         self._frame_id = ''
         self._recorded = None
-        builder = {'calibration': self._calibration, 'wind_on': self._wind_on,
-                   'replay': self._replay, 'thrust_stand': self._thrust_stand}[self.mode]
+        builder = {
+            'calibration': self._calibration,
+            'wind_on': self._wind_on,
+            'replay': self._replay,
+            'thrust_stand': self._thrust_stand,
+        }[self.mode]
         try:
             self._build = builder()
             self._timeline = self._build(0)
-        except (ConfigError, BagError, ValueError, KeyError, ArithmeticError) as err:   # Newton: loads out of range
+        # Newton: loads out of range
+        except (ConfigError, BagError, ValueError, KeyError, ArithmeticError) as err:
             raise StartupError(f'{self.mode} mode: {err}') from None
         self._cycle = 0
         self._cursor = 0
@@ -98,11 +114,13 @@ class BridgePublisher(Node):
         self._stamp_ns = 0
         self._waiting_since = None
         self._ready_at = None
-        self.failure = ''                       # why the run gave up (then done completes too)
+        self.failure = ''  # why the run gave up (then done completes too)
         tick_hz = min(max(float(self._settings['rate_hz']), 20.0), 250.0)
         self._timer = self.create_timer(1.0 / tick_hz, self._on_tick)
-        self.get_logger().info(f'{self.mode}: {len(self._timeline)} events over '
-                               f'{self._timeline.duration_s / self._settings["speed"]:.1f} s')
+        self.get_logger().info(
+            f'{self.mode}: {len(self._timeline)} events over '
+            f'{self._timeline.duration_s / self._settings["speed"]:.1f} s'
+        )
 
     # --- modes: each returns build(cycle) -> Timeline -----------------------------------------
     def _publisher(self, kind, msg_type, topic, qos=EVENT_QOS):
@@ -112,7 +130,9 @@ class BridgePublisher(Node):
         config = load_balance_config(self._settings['balance'])
         truth_name = str(self._settings['truth_model'])
         if truth_name not in config.matrices:
-            raise ConfigError(f'truth_model {truth_name!r}: {config.name} has {", ".join(config.matrices)}')
+            raise ConfigError(
+                f'truth_model {truth_name!r}: {config.name} has {", ".join(config.matrices)}'
+            )
         noise = self._settings['noise_sigma_pct_fs']
         noise = table17_noise(config) if noise < 0 else np.full(6, float(noise))
         self._frame_id = config.name
@@ -121,27 +141,42 @@ class BridgePublisher(Node):
         return config, config.matrices[truth_name], noise
 
     def _temperature_every(self) -> int:
-        return max(1, round(self._settings['rate_hz'] / max(self._settings['temperature_rate_hz'], 1e-9)))
+        return max(
+            1, round(self._settings['rate_hz'] / max(self._settings['temperature_rate_hz'], 1e-9))
+        )
 
     def _calibration(self):
         config, truth, noise = self._balance()
         schedule_file = str(self._settings['schedule_file'])
         schedule = config.schedule
-        if schedule_file:     # within capacity as the refit's capacity gate will judge it
-            schedule = schedule_for(config, schedule_file, acceptance_limits(config).capacity_margin)
+        if schedule_file:  # within capacity as the refit's capacity gate will judge it
+            schedule = schedule_for(
+                config, schedule_file, acceptance_limits(config).capacity_margin
+            )
         schedule = tl.select_points(schedule, self._settings['points'])
         effects = parse_effects(self._settings['effects'])
-        rate, duration, transition = float(self._settings['rate_hz']), float(self._settings['point_duration_s']), \
-            float(self._settings['transition_s'])
+        rate, duration, transition = (
+            float(self._settings['rate_hz']),
+            float(self._settings['point_duration_s']),
+            float(self._settings['transition_s']),
+        )
         self._publisher(tl.GRAVITY, Vector3Stamped, '/calibration/gravity')
         self._publisher(tl.APPLIED_LOAD, WrenchStamped, '/calibration/applied_load')
 
         def build(cycle):
-            settings = paced_settings(rate, duration, transition, noise,
-                                      int(self._settings['seed']) + cycle,
-                                      float(self._settings['physical_seconds_per_point']))
-            campaign = simulate_campaign(config, truth, schedule=schedule, settings=settings, effects=effects)
+            settings = paced_settings(
+                rate,
+                duration,
+                transition,
+                noise,
+                int(self._settings['seed']) + cycle,
+                float(self._settings['physical_seconds_per_point']),
+            )
+            campaign = simulate_campaign(
+                config, truth, schedule=schedule, settings=settings, effects=effects
+            )
             return tl.campaign_timeline(campaign, transition, self._temperature_every())
+
         return build
 
     def _wind_on(self):
@@ -155,26 +190,48 @@ class BridgePublisher(Node):
             samples_per_condition = 1
         else:
             step = float(self._settings['alpha_step_deg'])
-            alphas = np.arange(self._settings['alpha_start_deg'], self._settings['alpha_end_deg'] + step / 2, step)
-            profile = aoa_sweep_profile(config.capacity, installation, rate, alphas_deg=alphas,
-                                        hold_s=self._settings['hold_s'], wind_off_s=self._settings['wind_off_s'],
-                                        model_weight_n=self._settings['model_weight_n'])
+            alphas = np.arange(
+                self._settings['alpha_start_deg'], self._settings['alpha_end_deg'] + step / 2, step
+            )
+            profile = aoa_sweep_profile(
+                config.capacity,
+                installation,
+                rate,
+                alphas_deg=alphas,
+                hold_s=self._settings['hold_s'],
+                wind_off_s=self._settings['wind_off_s'],
+                model_weight_n=self._settings['model_weight_n'],
+            )
             samples_per_condition = max(1, round(self._settings['hold_s'] * rate))
         # noise_sigma_pct_fs is the σ of a held point's mean, as in calibration mode
-        noise_mv = noise_mv_for_load_sigma(truth.without_constant(), config.capacity, noise) \
-            * np.sqrt(samples_per_condition)
+        noise_mv = noise_mv_for_load_sigma(
+            truth.without_constant(), config.capacity, noise
+        ) * np.sqrt(samples_per_condition)
         zero_mv = float(self._settings['electrical_zero_mv'])
-        effects = parse_effects(self._settings['effects'])     # the balance's own effects, wind-on too
+        # the balance's own effects, wind-on too
+        effects = parse_effects(self._settings['effects'])
         self._publisher(tl.TRUTH, WrenchStamped, '/balance/truth', RAW_QOS)
 
         def build(cycle):
-            raw = wind_on_outputs(truth, profile.loads_balance, electrical_zero_mv=zero_mv, noise_mv=noise_mv,
-                                  seed=int(self._settings['seed']) + cycle, effects=effects, times_s=profile.times_s,
-                                  temperature_c=float(self._settings['temperature_c']),
-                                  rated_output_mv=config.rated_output_mv)
-            return tl.wind_on_timeline(profile.times_s, raw, profile.aero_tunnel,
-                                       float(self._settings['temperature_c']),
-                                       self._temperature_every())
+            raw = wind_on_outputs(
+                truth,
+                profile.loads_balance,
+                electrical_zero_mv=zero_mv,
+                noise_mv=noise_mv,
+                seed=int(self._settings['seed']) + cycle,
+                effects=effects,
+                times_s=profile.times_s,
+                temperature_c=float(self._settings['temperature_c']),
+                rated_output_mv=config.rated_output_mv,
+            )
+            return tl.wind_on_timeline(
+                profile.times_s,
+                raw,
+                profile.aero_tunnel,
+                float(self._settings['temperature_c']),
+                self._temperature_every(),
+            )
+
         return build
 
     def _aero_run(self, config, truth, noise, installation, rate):
@@ -183,21 +240,41 @@ class BridgePublisher(Node):
         if weight > 0:
             cg = np.asarray(self._settings['model_cg_m'], dtype=float)
             if cg.shape != (3,):
-                raise ValueError(f'model_cg_m must be three numbers [x, y, z] in m, not {list(cg)}')
+                raise ValueError(
+                    f'model_cg_m must be three numbers [x, y, z] in m, not {list(cg)}'
+                )
         elif model.weight_declared:
             weight, cg = model.weight_n, model.centre_of_gravity_m
         else:
-            raise ValueError(f'{model.path}: the model file says estimate; give the simulated model its true '
-                             f'weight and CG with model_weight_n and model_cg_m')
+            raise ValueError(
+                f'{model.path}: the model file says estimate; give the simulated model its true '
+                f'weight and CG with model_weight_n and model_cg_m'
+            )
         step = float(self._settings['alpha_step_deg'])
-        alphas = np.arange(self._settings['alpha_start_deg'], self._settings['alpha_end_deg'] + step / 2, step)
-        wind_off = [(r, a) for r in self._settings['wind_off_rolls_deg'] for a in self._settings['wind_off_alphas_deg']]
-        profile = aero_run_profile(model, installation, rate, q_pa=float(self._settings['dynamic_pressure_pa']),
-                                   weight_n=weight, cg_m=cg, alphas_deg=alphas, hold_s=float(self._settings['hold_s']),
-                                   wind_off_attitudes_deg=wind_off,
-                                   wind_off_hold_s=float(self._settings['wind_off_hold_s']))
+        alphas = np.arange(
+            self._settings['alpha_start_deg'], self._settings['alpha_end_deg'] + step / 2, step
+        )
+        wind_off = [
+            (r, a)
+            for r in self._settings['wind_off_rolls_deg']
+            for a in self._settings['wind_off_alphas_deg']
+        ]
+        profile = aero_run_profile(
+            model,
+            installation,
+            rate,
+            q_pa=float(self._settings['dynamic_pressure_pa']),
+            weight_n=weight,
+            cg_m=cg,
+            alphas_deg=alphas,
+            hold_s=float(self._settings['hold_s']),
+            wind_off_attitudes_deg=wind_off,
+            wind_off_hold_s=float(self._settings['wind_off_hold_s']),
+        )
         samples_per_hold = max(1, round(float(self._settings['hold_s']) * rate))
-        noise_mv = noise_mv_for_load_sigma(truth.without_constant(), config.capacity, noise) * np.sqrt(samples_per_hold)
+        noise_mv = noise_mv_for_load_sigma(
+            truth.without_constant(), config.capacity, noise
+        ) * np.sqrt(samples_per_hold)
         effects = parse_effects(self._settings['effects'])
         self._publisher(tl.TRUTH, WrenchStamped, '/balance/truth', RAW_QOS)
         self._publisher(ATTITUDE, Vector3Stamped, '/model/attitude', RAW_QOS)
@@ -207,35 +284,56 @@ class BridgePublisher(Node):
         wind_on = profile.q_pa > 0
 
         def build(cycle):
-            raw = wind_on_outputs(truth, profile.loads_balance, electrical_zero_mv=float(self._settings['electrical_zero_mv']),
-                                  noise_mv=noise_mv, seed=int(self._settings['seed']) + cycle, effects=effects,
-                                  times_s=profile.times_s, temperature_c=float(self._settings['temperature_c']),
-                                  rated_output_mv=config.rated_output_mv)
+            raw = wind_on_outputs(
+                truth,
+                profile.loads_balance,
+                electrical_zero_mv=float(self._settings['electrical_zero_mv']),
+                noise_mv=noise_mv,
+                seed=int(self._settings['seed']) + cycle,
+                effects=effects,
+                times_s=profile.times_s,
+                temperature_c=float(self._settings['temperature_c']),
+                rated_output_mv=config.rated_output_mv,
+            )
             times = profile.times_s
-            return tl.merge(tl.wind_on_timeline(times, raw, profile.aero_tunnel, float(self._settings['temperature_c']),
-                                                self._temperature_every()),
-                            tl.events(times, ATTITUDE, profile.support_attitude),
-                            tl.events(times, DYNAMIC_PRESSURE, profile.q_pa),
-                            tl.events(times[wind_on], AERO_TRUTH, profile.body_coefficients[wind_on]),
-                            tl.events(times[wind_on], AERO_TRUTH_WIND, profile.wind_coefficients[wind_on]))
+            return tl.merge(
+                tl.wind_on_timeline(
+                    times,
+                    raw,
+                    profile.aero_tunnel,
+                    float(self._settings['temperature_c']),
+                    self._temperature_every(),
+                ),
+                tl.events(times, ATTITUDE, profile.support_attitude),
+                tl.events(times, DYNAMIC_PRESSURE, profile.q_pa),
+                tl.events(times[wind_on], AERO_TRUTH, profile.body_coefficients[wind_on]),
+                tl.events(times[wind_on], AERO_TRUTH_WIND, profile.wind_coefficients[wind_on]),
+            )
+
         return build
 
     def _replay(self):
         paths = [p.strip() for p in str(self._settings['bag']).split(',') if p.strip()]
         if not paths:
-            raise ValueError('parameter bag is empty: give the bag directory or .mcap file to replay')
+            raise ValueError(
+                'parameter bag is empty: give the bag directory or .mcap file to replay'
+            )
         recorded = read_recorded_messages(paths)
         for index, topic in enumerate(sorted(recorded.msgtypes)):
             package, _, name = recorded.msgtypes[topic].partition('/msg/')
             try:
                 msg_type = getattr(importlib.import_module(f'{package}.msg'), name)
             except (ImportError, AttributeError):
-                self.get_logger().warn(f'replay: skipping {topic}: message type {recorded.msgtypes[topic]} '
-                                       f'is not available here')
+                self.get_logger().warn(
+                    f'replay: skipping {topic}: message type {recorded.msgtypes[topic]} '
+                    f'is not available here'
+                )
                 continue
             self._outputs[topic] = self.create_publisher(msg_type, topic, RAW_QOS)
         self._recorded = recorded
-        replay_timeline = tl.Timeline(recorded.times_s, np.full(len(recorded), -1), np.zeros((len(recorded), 6)))
+        replay_timeline = tl.Timeline(
+            recorded.times_s, np.full(len(recorded), -1), np.zeros((len(recorded), 6))
+        )
         return lambda cycle: replay_timeline
 
     def _thrust_stand(self):
@@ -243,12 +341,18 @@ class BridgePublisher(Node):
             module = importlib.import_module('balance_calib.simulation.thrust_stand')
             simulator = module.ThrustStandSimulator(seed=int(self._settings['seed']))
         except (ImportError, AttributeError) as err:
-            raise StartupError(f'thrust_stand mode is not available: balance_calib.simulation.thrust_stand.'
-                               f'ThrustStandSimulator cannot be loaded ({err})') from None
+            raise StartupError(
+                f'thrust_stand mode is not available: balance_calib.simulation.thrust_stand.'
+                f'ThrustStandSimulator cannot be loaded ({err})'
+            ) from None
         self._frame_id = 'thrust_stand'
         self._publisher(tl.RAW, WrenchStamped, '/balance/raw', RAW_QOS)
-        self._publisher(tl.CHAMBER_PRESSURE, FluidPressure, '/thrust_stand/chamber_pressure', RAW_QOS)
-        self._publisher(tl.AMBIENT_PRESSURE, FluidPressure, '/thrust_stand/ambient_pressure', RAW_QOS)
+        self._publisher(
+            tl.CHAMBER_PRESSURE, FluidPressure, '/thrust_stand/chamber_pressure', RAW_QOS
+        )
+        self._publisher(
+            tl.AMBIENT_PRESSURE, FluidPressure, '/thrust_stand/ambient_pressure', RAW_QOS
+        )
         self._publisher(tl.APPLIED_LOAD, WrenchStamped, '/calibration/applied_load')
         rate, duration = float(self._settings['rate_hz']), float(simulator.duration_s)
         times = (np.arange(int(duration * rate)) + 0.5) / rate
@@ -259,9 +363,13 @@ class BridgePublisher(Node):
             loads = np.zeros((len(applied), 6))
             loads[:, 0] = applied[:, 1]
             loads[np.isnan(applied[:, 1])] = np.nan
-            return tl.merge(tl.thrust_stand_timeline(times, sample.strain_mv, sample.chamber_gauge_pa,
-                                                     sample.ambient_pa),
-                            tl.events(applied[:, 0], tl.APPLIED_LOAD, loads))
+            return tl.merge(
+                tl.thrust_stand_timeline(
+                    times, sample.strain_mv, sample.chamber_gauge_pa, sample.ambient_pa
+                ),
+                tl.events(applied[:, 0], tl.APPLIED_LOAD, loads),
+            )
+
         return build
 
     # --- playing ------------------------------------------------------------------------------
@@ -271,15 +379,28 @@ class BridgePublisher(Node):
             wanted = int(self._settings['wait_for_subscribers'])
             raw = self._outputs.get(tl.RAW) or self._outputs.get('/balance/raw')
             # the physical wind-on run's attitude and q∞ are as necessary as the raw samples
-            gated = [raw] + [self._outputs[k] for k in (ATTITUDE, DYNAMIC_PRESSURE) if k in self._outputs]
-            # a campaign's gravity and applied-load events are published once each: a recorder whose
-            # subscriptions to them match after /balance/raw's would lose the first orientation
-            events = [self._outputs[k] for k in (tl.GRAVITY, tl.APPLIED_LOAD)
-                      if k in self._outputs and self.mode == 'calibration']
-            if wanted > 0 and raw is not None and (min(p.get_subscription_count() for p in gated) < wanted
-                                                   or any(p.get_subscription_count() < 1 for p in events)):
-                what = (f'{wanted} subscriber(s) on /balance/raw'
-                        + (' and the attitude and dynamic pressure' if len(gated) > 1 else ''))
+            gated = [raw] + [
+                self._outputs[k] for k in (ATTITUDE, DYNAMIC_PRESSURE) if k in self._outputs
+            ]
+            # a campaign's gravity and applied-load events are published once each: a recorder
+            # whose subscriptions to them match after /balance/raw's would lose the first
+            # orientation
+            events = [
+                self._outputs[k]
+                for k in (tl.GRAVITY, tl.APPLIED_LOAD)
+                if k in self._outputs and self.mode == 'calibration'
+            ]
+            if (
+                wanted > 0
+                and raw is not None
+                and (
+                    min(p.get_subscription_count() for p in gated) < wanted
+                    or any(p.get_subscription_count() < 1 for p in events)
+                )
+            ):
+                what = f'{wanted} subscriber(s) on /balance/raw' + (
+                    ' and the attitude and dynamic pressure' if len(gated) > 1 else ''
+                )
                 if self._waiting_since is None:
                     self.get_logger().info(f'waiting for {what}')
                     self._waiting_since = now
@@ -303,15 +424,17 @@ class BridgePublisher(Node):
         if limit <= 0 or waited < limit:
             return
         seen = ', '.join(f'{p.topic_name} {p.get_subscription_count()}' for p in gated + events)
-        self.failure = (f'gave up after {limit:g} s waiting for {what} '
-                        f'(subscribers seen: {seen}); start the subscribers first, or set '
-                        'wait_for_subscribers or wait_for_subscribers_timeout_s')
+        self.failure = (
+            f'gave up after {limit:g} s waiting for {what} '
+            f'(subscribers seen: {seen}); start the subscribers first, or set '
+            'wait_for_subscribers or wait_for_subscribers_timeout_s'
+        )
         self._timer.cancel()
         if not self.done.done():
             self.done.set_result(False)
 
     def _stamp(self, time_s: float, now: Time):
-        if time_s != self._last_time_s:      # a new sampling instant: a new, strictly later stamp
+        if time_s != self._last_time_s:  # a new sampling instant: a new, strictly later stamp
             self._stamp_ns = max(now.nanoseconds, self._stamp_ns + 1)
             self._last_time_s = time_s
         return Time(nanoseconds=self._stamp_ns).to_msg()
@@ -327,10 +450,20 @@ class BridgePublisher(Node):
         stamp = self._stamp(float(self._timeline.times_s[index]), now)
         if kind in (tl.RAW, tl.APPLIED_LOAD, tl.TRUTH, AERO_TRUTH, AERO_TRUTH_WIND):
             msg = WrenchStamped()
-            msg.header.frame_id = {tl.RAW: self._frame_id, tl.APPLIED_LOAD: 'balance', AERO_TRUTH: 'body',
-                                   AERO_TRUTH_WIND: 'wind'}.get(kind, 'tunnel')
-            (msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z,
-             msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z) = (float(v) for v in values)
+            msg.header.frame_id = {
+                tl.RAW: self._frame_id,
+                tl.APPLIED_LOAD: 'balance',
+                AERO_TRUTH: 'body',
+                AERO_TRUTH_WIND: 'wind',
+            }.get(kind, 'tunnel')
+            (
+                msg.wrench.force.x,
+                msg.wrench.force.y,
+                msg.wrench.force.z,
+                msg.wrench.torque.x,
+                msg.wrench.torque.y,
+                msg.wrench.torque.z,
+            ) = (float(v) for v in values)
         elif kind in (tl.GRAVITY, ATTITUDE):
             msg = Vector3Stamped()
             msg.header.frame_id = 'balance' if kind == tl.GRAVITY else 'tunnel'
@@ -345,8 +478,10 @@ class BridgePublisher(Node):
         self._outputs[kind].publish(msg)
 
     def _finish(self, now: Time):
-        self.get_logger().info(f'campaign complete ({self.mode}, cycle {self._cycle + 1}): '
-                               f'{len(self._timeline)} events in {(now - self._start).nanoseconds * 1e-9:.1f} s')
+        self.get_logger().info(
+            f'campaign complete ({self.mode}, cycle {self._cycle + 1}): '
+            f'{len(self._timeline)} events in {(now - self._start).nanoseconds * 1e-9:.1f} s'
+        )
         if self._settings['loop']:
             self._cycle += 1
             self._timeline = self._build(self._cycle)
@@ -359,13 +494,16 @@ class BridgePublisher(Node):
             deadline = time.monotonic() + 3.0
             for publisher in self._outputs.values():
                 if publisher.get_subscription_count() > 0:
-                    publisher.wait_for_all_acked(Duration(seconds=max(deadline - time.monotonic(), 0.0)))
+                    publisher.wait_for_all_acked(
+                        Duration(seconds=max(deadline - time.monotonic(), 0.0))
+                    )
             self.done.set_result(True)
 
 
 def main(args=None):
     from ._help import exit_if_help
-    exit_if_help(__name__, args)     # --help: print the parameters and exit before rclpy starts
+
+    exit_if_help(__name__, args)  # --help: print the parameters and exit before rclpy starts
     rclpy.init(args=args)
     node = None
     status = 0
@@ -381,7 +519,7 @@ def main(args=None):
         rclpy.logging.get_logger('bridge_publisher').error(str(err))
         status = 1
     except RuntimeError:
-        if rclpy.ok():      # a signal during spin's wait-set setup (ros2/ros2cli#854) is a shutdown
+        if rclpy.ok():  # a signal during spin's wait-set setup (ros2/ros2cli#854) is a shutdown
             raise
     finally:
         if node is not None:

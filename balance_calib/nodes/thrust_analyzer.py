@@ -1,4 +1,5 @@
-"""thrust_analyzer: measured against theoretical thrust coefficient of the lab manual's thrust stand.
+"""thrust_analyzer: measured against theoretical thrust coefficient of the lab manual's thrust
+stand.
 
 Subscribes (best effort, so any publisher's QoS matches):
   /balance/wrench                 geometry_msgs/WrenchStamped   thrust F_t = wrench.force.x, N
@@ -29,16 +30,17 @@ STALE while an input is missing or older than `stale_after_s`. Its key/values (n
 The nozzle, the windows and the report (std_srvs/Trigger service ~/report, and on shutdown) are
 set by the parameters of thrust_stand/analyzer_parameters.py's table.
 """
+
 from __future__ import annotations
 
+from collections import deque
 import math
 import sys
-from collections import deque
 
-import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
+import numpy as np
+import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -46,7 +48,7 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import FluidPressure
 from std_srvs.srv import Trigger
 
-from balance_calib.thrust_stand.analysis import ThrustComparison, compare_with_theory, window_mean
+from balance_calib.thrust_stand.analysis import compare_with_theory, ThrustComparison, window_mean
 from balance_calib.thrust_stand.analyzer_parameters import PARAMETERS
 from balance_calib.thrust_stand.nozzle import Nozzle
 from balance_calib.thrust_stand.report import write_report
@@ -55,8 +57,10 @@ from ._parameters import declare_table
 
 STATUS_NAME = 'thrust_analyzer: thrust coefficient'
 HARDWARE_ID = 'thrust_stand'
-INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=200, reliability=ReliabilityPolicy.BEST_EFFORT)
-MAX_WINDOW_SAMPLES = 200_000   # bounds memory whatever the input rate
+INPUT_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=200, reliability=ReliabilityPolicy.BEST_EFFORT
+)
+MAX_WINDOW_SAMPLES = 200_000  # bounds memory whatever the input rate
 
 
 def _text(value) -> str:
@@ -89,13 +93,15 @@ class SignalWindow:
 
 
 class ThrustAnalyzer(Node):
-
     def __init__(self):
         super().__init__('thrust_analyzer')
-        p = declare_table(self, PARAMETERS)      # read once, here (read-only)
-        self._nozzle = Nozzle(throat_diameter_m=p['throat_diameter_m'],
-                              exit_diameter_m=p['exit_diameter_m'], gamma=p['gamma'],
-                              gas_constant_j_kg_k=p['gas_constant'])
+        p = declare_table(self, PARAMETERS)  # read once, here (read-only)
+        self._nozzle = Nozzle(
+            throat_diameter_m=p['throat_diameter_m'],
+            exit_diameter_m=p['exit_diameter_m'],
+            gamma=p['gamma'],
+            gas_constant_j_kg_k=p['gas_constant'],
+        )
         self._chamber_k = p['chamber_k']
         self._window_s = p['window_s']
         publish_period_s = p['publish_period_s']
@@ -104,17 +110,26 @@ class ThrustAnalyzer(Node):
         self._throat_sigma_m = p['throat_diameter_sigma_m']
         self._report_path = p['report_path']
 
-        self._signals = {'thrust': SignalWindow(), 'chamber': SignalWindow(), 'ambient': SignalWindow()}
-        self._topics = {'thrust': '/balance/wrench', 'chamber': '/thrust_stand/chamber_pressure',
-                        'ambient': '/thrust_stand/ambient_pressure'}
+        self._signals = {
+            'thrust': SignalWindow(),
+            'chamber': SignalWindow(),
+            'ambient': SignalWindow(),
+        }
+        self._topics = {
+            'thrust': '/balance/wrench',
+            'chamber': '/thrust_stand/chamber_pressure',
+            'ambient': '/thrust_stand/ambient_pressure',
+        }
         self._rejected = 0
         self._latest: ThrustComparison | None = None
         self._last_firing: ThrustComparison | None = None
         self.create_subscription(WrenchStamped, self._topics['thrust'], self._on_wrench, INPUT_QOS)
-        self.create_subscription(FluidPressure, self._topics['chamber'], self._pressure_callback('chamber'),
-                                 INPUT_QOS)
-        self.create_subscription(FluidPressure, self._topics['ambient'], self._pressure_callback('ambient'),
-                                 INPUT_QOS)
+        self.create_subscription(
+            FluidPressure, self._topics['chamber'], self._pressure_callback('chamber'), INPUT_QOS
+        )
+        self.create_subscription(
+            FluidPressure, self._topics['ambient'], self._pressure_callback('ambient'), INPUT_QOS
+        )
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_service(Trigger, '~/report', self._on_report)
         self.create_timer(publish_period_s, self._publish)
@@ -129,20 +144,27 @@ class ThrustAnalyzer(Node):
     def _pressure_callback(self, signal: str):
         def callback(msg: FluidPressure):
             self._add(signal, msg.fluid_pressure, msg.variance)
+
         return callback
 
     def _add(self, signal: str, value: float, variance: float):
         if not math.isfinite(value):
             self._rejected += 1
             return
-        self._signals[signal].add(self._now_ns(), float(value), float(variance) if math.isfinite(variance) else 0.0)
+        self._signals[signal].add(
+            self._now_ns(), float(value), float(variance) if math.isfinite(variance) else 0.0
+        )
 
     # --- analysis -------------------------------------------------------------------------------
     def _publish(self):
         now_ns = self._now_ns()
         status = DiagnosticStatus(name=STATUS_NAME, hardware_id=HARDWARE_ID)
-        missing = [self._topics[name] for name, window in self._signals.items()
-                   if window.newest_ns() is None or now_ns - window.newest_ns() > self._stale_after_s * 1e9]
+        missing = [
+            self._topics[name]
+            for name, window in self._signals.items()
+            if window.newest_ns() is None
+            or now_ns - window.newest_ns() > self._stale_after_s * 1e9
+        ]
         if missing:
             status.level = DiagnosticStatus.STALE
             status.message = f'no recent data on {", ".join(missing)}'
@@ -154,9 +176,14 @@ class ThrustAnalyzer(Node):
             ambient, ambient_var = self._signals['ambient'].window(since_ns)
             try:
                 comparison = compare_with_theory(
-                    window_mean(thrust), window_mean(chamber, chamber_var), window_mean(ambient, ambient_var),
-                    self._nozzle, thrust_relative_sigma=self._thrust_relative_sigma,
-                    throat_diameter_sigma_m=self._throat_sigma_m, chamber_k=self._chamber_k)
+                    window_mean(thrust),
+                    window_mean(chamber, chamber_var),
+                    window_mean(ambient, ambient_var),
+                    self._nozzle,
+                    thrust_relative_sigma=self._thrust_relative_sigma,
+                    throat_diameter_sigma_m=self._throat_sigma_m,
+                    chamber_k=self._chamber_k,
+                )
             except ValueError as error:
                 status.level = DiagnosticStatus.ERROR
                 status.message = f'cannot analyse the window: {error}'
@@ -201,25 +228,37 @@ class ThrustAnalyzer(Node):
         status.values = [KeyValue(key=key, value=_text(value)) for key, value in values.items()]
         if not c.firing:
             status.level = DiagnosticStatus.OK
-            status.message = f'not firing (p_G = {c.chamber_gauge_pa.mean:.4g} Pa, throat not choked)'
+            status.message = (
+                f'not firing (p_G = {c.chamber_gauge_pa.mean:.4g} Pa, throat not choked)'
+            )
         elif theory.flow_regime == 'shock in nozzle':
             status.level = DiagnosticStatus.WARN
-            status.message = (f'{c.cf_formatted}; normal shock inside the nozzle at p_a/p_c = '
-                              f'{c.ambient_pa.mean / c.chamber_pa:.3f}: the ideal C_F {theory.cf:.4f} does not apply')
+            status.message = (
+                f'{c.cf_formatted}; normal shock inside the nozzle at p_a/p_c = '
+                f'{c.ambient_pa.mean / c.chamber_pa:.3f}: the ideal C_F {theory.cf:.4f} does '
+                'not apply'
+            )
         else:
             status.level = DiagnosticStatus.OK
-            status.message = f'{c.cf_formatted} measured, {theory.cf:.4f} ideal (ratio {c.cf_ratio:.3f})'
+            status.message = (
+                f'{c.cf_formatted} measured, {theory.cf:.4f} ideal (ratio {c.cf_ratio:.3f})'
+            )
 
     # --- report ---------------------------------------------------------------------------------
     def write_report(self) -> str:
-        """Write the report; returns what was done (raises ValueError if nothing can be written)."""
+        """Write the report; returns what was done (raises ValueError if nothing can be
+        written).
+        """
         if not self._report_path:
             raise ValueError('parameter report_path is empty: no report requested')
         comparison = self._last_firing or self._latest
         if comparison is None:
             raise ValueError('no complete window of thrust, chamber and ambient pressure yet')
-        json_path, markdown_path = write_report(self._report_path, comparison,
-                                                {'window_s': self._window_s, 'rejected_samples': self._rejected})
+        json_path, markdown_path = write_report(
+            self._report_path,
+            comparison,
+            {'window_s': self._window_s, 'rejected_samples': self._rejected},
+        )
         return f'wrote {json_path} and {markdown_path}'
 
     def _on_report(self, request, response):
@@ -246,7 +285,8 @@ class ThrustAnalyzer(Node):
 
 def main(args=None):
     from ._help import exit_if_help
-    exit_if_help(__name__, args)     # --help: print the parameters and exit before rclpy starts
+
+    exit_if_help(__name__, args)  # --help: print the parameters and exit before rclpy starts
     # SIGINT and SIGTERM both shut the context down; the report is written in destroy_node().
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
     analyzer = None
@@ -255,7 +295,7 @@ def main(args=None):
         rclpy.spin(analyzer)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except ValueError as error:   # bad parameters
+    except ValueError as error:  # bad parameters
         rclpy.logging.get_logger('thrust_analyzer').error(str(error))
         return 1
     except RuntimeError:

@@ -31,6 +31,7 @@ Limits come from the balance config's `acceptance:` mapping, with the defaults b
 gives one line a person can act on. A failed gate raises nothing here: the pipeline decides
 (RefitError, unless forced).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -42,17 +43,17 @@ from ..config import BalanceConfig, ConfigError, LoadSchedule
 from ..fit.crossval import press_residuals
 from ..model.inverse import linear_part
 
-DEFAULT_SIGMA_LIMIT_PCT_FS = 0.25      # per component, or 3x the memo's Table 17 σ if larger
-DEFAULT_OUTLIER_ROBUST_SIGMAS = 7.0    # leave-one-out residual / (1.4826 MAD)
-DEFAULT_OUTLIER_FLOOR_PCT_FS = 0.05    # and at least this far off
+DEFAULT_SIGMA_LIMIT_PCT_FS = 0.25  # per component, or 3x the memo's Table 17 σ if larger
+DEFAULT_OUTLIER_ROBUST_SIGMAS = 7.0  # leave-one-out residual / (1.4826 MAD)
+DEFAULT_OUTLIER_FLOOR_PCT_FS = 0.05  # and at least this far off
 DEFAULT_SENSITIVITY_NOMINAL_TOLERANCE = 0.15
 DEFAULT_SENSITIVITY_ACTIVE_TOLERANCE = 0.05
 DEFAULT_BODY_WEIGHT_TOLERANCE = 0.10
 DEFAULT_CAPACITY_MARGIN = 0.05
-DEFAULT_ZERO_SHIFT_PCT_FS = 2.0        # between consecutive zero points of one block
-DEFAULT_MISSING_POINTS_SHARE = 0.10    # of the schedule's points, at most
+DEFAULT_ZERO_SHIFT_PCT_FS = 2.0  # between consecutive zero points of one block
+DEFAULT_MISSING_POINTS_SHARE = 0.10  # of the schedule's points, at most
 DEFAULT_MISSING_COMPONENT_SHARE = 0.20  # of the scheduled points loading one component, at most
-SCHEDULE_MATCH_PCT_FS = 0.5            # a found point is a scheduled one: every load this close
+SCHEDULE_MATCH_PCT_FS = 0.5  # a found point is a scheduled one: every load this close
 
 
 @dataclass(frozen=True)
@@ -76,20 +77,33 @@ def acceptance_limits(config: BalanceConfig, base_model: str = 'cubic') -> Accep
     if not isinstance(data, Mapping):
         raise ConfigError(f'{where}: expected a mapping')
     memo = config.table17_sigma_pct_fs.get(base_model, {}) if config.table17_sigma_pct_fs else {}
-    sigma = {c: max(DEFAULT_SIGMA_LIMIT_PCT_FS, 3.0 * float(memo.get(c, 0.0))) for c in config.components}
+    sigma = {
+        c: max(DEFAULT_SIGMA_LIMIT_PCT_FS, 3.0 * float(memo.get(c, 0.0)))
+        for c in config.components
+    }
     given = data.get('sigma_limit_pct_fs', {})
     if isinstance(given, (int, float)):
-        given = {c: given for c in config.components}
+        given = dict.fromkeys(config.components, given)
     if not isinstance(given, Mapping):
-        raise ConfigError(f'{where}.sigma_limit_pct_fs: expected a number or a mapping per component')
+        raise ConfigError(
+            f'{where}.sigma_limit_pct_fs: expected a number or a mapping per component'
+        )
     for component, value in given.items():
         if component not in config.components:
             raise ConfigError(f'{where}.sigma_limit_pct_fs: unknown component {component!r}')
         sigma[component] = _positive(value, f'{where}.sigma_limit_pct_fs.{component}')
     numbers = {}
-    for key in ('outlier_robust_sigmas', 'outlier_floor_pct_fs', 'sensitivity_nominal_tolerance',
-                'sensitivity_active_tolerance', 'body_weight_tolerance', 'capacity_margin',
-                'zero_shift_pct_fs', 'missing_points_share', 'missing_component_share'):
+    for key in (
+        'outlier_robust_sigmas',
+        'outlier_floor_pct_fs',
+        'sensitivity_nominal_tolerance',
+        'sensitivity_active_tolerance',
+        'body_weight_tolerance',
+        'capacity_margin',
+        'zero_shift_pct_fs',
+        'missing_points_share',
+        'missing_component_share',
+    ):
         if key in data:
             numbers[key] = _positive(data[key], f'{where}.{key}')
     unknown = set(data) - {'sigma_limit_pct_fs', *AcceptanceLimits.__dataclass_fields__}
@@ -112,7 +126,7 @@ def _positive(value, where: str) -> float:
 class Gate:
     name: str
     passed: bool
-    reason: str                              # one line
+    reason: str  # one line
     details: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -122,9 +136,14 @@ def failed(gates: Sequence[Gate]) -> list[Gate]:
 
 def gates_report(gates: Sequence[Gate], *, forced: bool) -> dict:
     """report.json's `acceptance` entry."""
-    return {'passed': not failed(gates), 'forced': bool(forced and failed(gates)),
-            'gates': [{'name': g.name, 'passed': g.passed, 'reason': g.reason, **_plain(g.details)}
-                      for g in gates]}
+    return {
+        'passed': not failed(gates),
+        'forced': bool(forced and failed(gates)),
+        'gates': [
+            {'name': g.name, 'passed': g.passed, 'reason': g.reason, **_plain(g.details)}
+            for g in gates
+        ],
+    }
 
 
 def _plain(value):
@@ -141,37 +160,65 @@ def _plain(value):
 
 # -- the gates ------------------------------------------------------------------------------------
 
-def data_gates(config: BalanceConfig, points, reduction, fits, cut=None, active=None,
-               limits: AcceptanceLimits | None = None,
-               schedule: LoadSchedule | None = None) -> list[Gate]:
+
+def data_gates(
+    config: BalanceConfig,
+    points,
+    reduction,
+    fits,
+    cut=None,
+    active=None,
+    limits: AcceptanceLimits | None = None,
+    schedule: LoadSchedule | None = None,
+) -> list[Gate]:
     """Gates on the data and the sensitivities, before the (slow) diagnosis. points: LoadPoints;
     fits: order -> ModelFit; cut: load_points.CutSummary or None; active: Calibration or None;
-    schedule: the one the campaign ran (None: the balance config's own)."""
+    schedule: the one the campaign ran (None: the balance config's own).
+    """
     limits = limits or acceptance_limits(config)
-    gates = [_sensitivity_gate(config, fits, limits),
-             schedule_gate(config, points, schedule if schedule is not None else config.schedule,
-                           limits)]
+    gates = [
+        _sensitivity_gate(config, fits, limits),
+        schedule_gate(
+            config, points, schedule if schedule is not None else config.schedule, limits
+        ),
+    ]
     if active is not None:
         gates.append(_active_gate(config, fits, active, limits))
-    gates += [_zero_gate(config, points, reduction, limits), _body_gate(config, reduction, limits),
-              _capacity_gate(config, points, limits)]
+    gates += [
+        _zero_gate(config, points, reduction, limits),
+        _body_gate(config, reduction, limits),
+        _capacity_gate(config, points, limits),
+    ]
     if cut is not None:
         gates += [_clipping_gate(cut), _marker_gate(cut)]
     return gates
 
 
-def fit_gates(config: BalanceConfig, points, sigma_pct_fs: Mapping[str, float], residuals: np.ndarray,
-              press: np.ndarray, limits: AcceptanceLimits | None = None, what: str = 'base model',
-              unexplained: Mapping[str, str] | None = None, structure=None) -> list[Gate]:
+def fit_gates(
+    config: BalanceConfig,
+    points,
+    sigma_pct_fs: Mapping[str, float],
+    residuals: np.ndarray,
+    press: np.ndarray,
+    limits: AcceptanceLimits | None = None,
+    what: str = 'base model',
+    unexplained: Mapping[str, str] | None = None,
+    structure=None,
+) -> list[Gate]:
     """σ and outlier gates on the model to be adopted: its σ (% FS), residuals and leave-one-out
     residuals (P, 6) N, N·m. unexplained: component -> what the diagnosis's unexplained structure
     there tracks (the outlier gate then names it as a cause besides a weight or marker error).
     structure: diagnosis.coherence.CampaignStructure or None; a flagged point that the campaign's
     structure on a component the diagnosis found something on predicts from the other points is
-    not an outlier (it is reported as explained)."""
+    not an outlier (it is reported as explained).
+    """
     limits = limits or acceptance_limits(config)
-    return [_sigma_gate(config, sigma_pct_fs, limits, what),
-            _outlier_gate(config, points, residuals, press, limits, what, unexplained or {}, structure)]
+    return [
+        _sigma_gate(config, sigma_pct_fs, limits, what),
+        _outlier_gate(
+            config, points, residuals, press, limits, what, unexplained or {}, structure
+        ),
+    ]
 
 
 def base_fit_arrays(reduction, base_fit) -> tuple[np.ndarray, np.ndarray]:
@@ -180,17 +227,26 @@ def base_fit_arrays(reduction, base_fit) -> tuple[np.ndarray, np.ndarray]:
     return base_fit.fit.residuals, press_residuals(design, base_fit.fit.residuals)
 
 
-def evaluate_gates(config: BalanceConfig, points, reduction, fits, base_model: str, cut=None,
-                   active=None, limits: AcceptanceLimits | None = None,
-                   schedule: LoadSchedule | None = None) -> list[Gate]:
+def evaluate_gates(
+    config: BalanceConfig,
+    points,
+    reduction,
+    fits,
+    base_model: str,
+    cut=None,
+    active=None,
+    limits: AcceptanceLimits | None = None,
+    schedule: LoadSchedule | None = None,
+) -> list[Gate]:
     """All gates, σ and outliers on the base model (no diagnosis)."""
     limits = limits or acceptance_limits(config, base_model)
     residuals, press = base_fit_arrays(reduction, fits[base_model])
-    return (fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits)
-            + data_gates(config, points, reduction, fits, cut, active, limits, schedule))
+    return fit_gates(
+        config, points, fits[base_model].sigma_pct_fs, residuals, press, limits
+    ) + data_gates(config, points, reduction, fits, cut, active, limits, schedule)
 
 
-OUTPUT_RANGE = (0.05, 20.0)     # largest |zeroed output| / rated output, per bridge
+OUTPUT_RANGE = (0.05, 20.0)  # largest |zeroed output| / rated output, per bridge
 
 
 def output_range_gate(config: BalanceConfig, reduction) -> Gate:
@@ -203,29 +259,57 @@ def output_range_gate(config: BalanceConfig, reduction) -> Gate:
     low, high = OUTPUT_RANGE
     bad = [i for i, r in enumerate(ratio) if not (low <= r <= high)]
     if bad:
-        text = ', '.join(f'{config.bridge_outputs[i]} {largest[i]:.3g} mV of {config.rated_output_mv[i]:.4g}'
-                         for i in bad)
-        hint = ('; recorded in V instead of mV?' if np.all(ratio[bad] < low) else
-                '; recorded in µV instead of mV?' if np.all(ratio[bad] > high) else '')
-        return Gate('output_range', False, f'bridge outputs outside {low:g}-{high:g}x their rated outputs '
-                                           f'(largest vs rated: {text}){hint}', details)
-    return Gate('output_range', True, f'bridge outputs reach {ratio.min():.2f}-{ratio.max():.2f}x their '
-                                      f'rated outputs', details)
+        text = ', '.join(
+            f'{config.bridge_outputs[i]} {largest[i]:.3g} mV of {config.rated_output_mv[i]:.4g}'
+            for i in bad
+        )
+        hint = (
+            '; recorded in V instead of mV?'
+            if np.all(ratio[bad] < low)
+            else '; recorded in µV instead of mV?'
+            if np.all(ratio[bad] > high)
+            else ''
+        )
+        return Gate(
+            'output_range',
+            False,
+            f'bridge outputs outside {low:g}-{high:g}x their rated outputs '
+            f'(largest vs rated: {text}){hint}',
+            details,
+        )
+    return Gate(
+        'output_range',
+        True,
+        f'bridge outputs reach {ratio.min():.2f}-{ratio.max():.2f}x their rated outputs',
+        details,
+    )
 
 
 def _sigma_gate(config, sigma, limits, what) -> Gate:
     over = [c for c in config.components if not (sigma[c] <= limits.sigma_limit_pct_fs[c])]
-    details = {'sigma_pct_fs': dict(sigma), 'limit_pct_fs': dict(limits.sigma_limit_pct_fs), 'model': what}
+    details = {
+        'sigma_pct_fs': dict(sigma),
+        'limit_pct_fs': dict(limits.sigma_limit_pct_fs),
+        'model': what,
+    }
     if over:
-        text = ', '.join(f'{c} {sigma[c]:.3g} % FS > {limits.sigma_limit_pct_fs[c]:.3g}' for c in over)
+        text = ', '.join(
+            f'{c} {sigma[c]:.3g} % FS > {limits.sigma_limit_pct_fs[c]:.3g}' for c in over
+        )
         return Gate('sigma', False, f'σ of the {what} beyond its limit: {text}', details)
     worst = max(config.components, key=lambda c: sigma[c] / limits.sigma_limit_pct_fs[c])
-    return Gate('sigma', True, f'σ of the {what} within limits (closest: {worst} {sigma[worst]:.3g} of '
-                               f'{limits.sigma_limit_pct_fs[worst]:.3g} % FS)', details)
+    return Gate(
+        'sigma',
+        True,
+        f'σ of the {what} within limits (closest: {worst} {sigma[worst]:.3g} of '
+        f'{limits.sigma_limit_pct_fs[worst]:.3g} % FS)',
+        details,
+    )
 
 
-def standardized_press(residuals: np.ndarray, press: np.ndarray,
-                       capacity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def standardized_press(
+    residuals: np.ndarray, press: np.ndarray, capacity: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Leave-one-out residuals in % of capacity, as they are and standardised.
 
     residuals, press (N, k) in-sample and leave-one-out residuals, N or N·m; capacity (k,).
@@ -239,12 +323,14 @@ def standardized_press(residuals: np.ndarray, press: np.ndarray,
     return press_pct, press_pct * scale
 
 
-def robust_sigma(standardized: np.ndarray, loaded: np.ndarray, *,
-                 tail_quantile: bool = False) -> np.ndarray:
+def robust_sigma(
+    standardized: np.ndarray, loaded: np.ndarray, *, tail_quantile: bool = False
+) -> np.ndarray:
     """(k,) robust σ of standardised residuals (N, k): 1.4826 MAD over the loaded points (N,)
     bool, or over all points when fewer than 10 are loaded (zero points carry almost no residual
     after TM-663 §5(4) and would shrink the scale). tail_quantile: at least the 90 % point of
-    |residual - median| / 1.6449 as well (wide-tailed mixtures of load levels)."""
+    |residual - median| / 1.6449 as well (wide-tailed mixtures of load levels).
+    """
     basis = standardized[loaded] if np.count_nonzero(loaded) >= 10 else standardized
     spread = np.abs(basis - np.median(basis, axis=0))
     robust = 1.4826 * np.median(spread, axis=0)
@@ -253,8 +339,9 @@ def robust_sigma(standardized: np.ndarray, loaded: np.ndarray, *,
     return robust
 
 
-def worst_first(flagged: np.ndarray, standardized: np.ndarray,
-                threshold: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def worst_first(
+    flagged: np.ndarray, standardized: np.ndarray, threshold: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """The flagged points, the worst first, and the component each is worst in.
 
     flagged, standardized (N, k); threshold (k,). Returns (rows (M,), components (M,)): rows
@@ -271,8 +358,9 @@ def worst_first(flagged: np.ndarray, standardized: np.ndarray,
     return rows, np.nanargmax(ratio, axis=1)
 
 
-def _outlier_gate(config, points, residuals, press, limits, what, unexplained=None,
-                  structure=None) -> Gate:
+def _outlier_gate(
+    config, points, residuals, press, limits, what, unexplained=None, structure=None
+) -> Gate:
     press_pct, standardized = standardized_press(residuals, press, config.capacity)
     robust = robust_sigma(standardized, ~points.is_zero_point)
     threshold = np.maximum(limits.outlier_robust_sigmas * robust, limits.outlier_floor_pct_fs)
@@ -283,45 +371,73 @@ def _outlier_gate(config, points, residuals, press, limits, what, unexplained=No
     rows, worst = worst_first(flagged, standardized, threshold)
     entries = []
     for i, k in zip(rows[:20], worst[:20]):
-        entries.append({'point': int(points.label[i]), 'orientation': int(points.orientation[i]),
-                        'component': config.components[k], 'residual_pct_fs': float(press_pct[i, k]),
-                        'robust_sigmas': float(abs(standardized[i, k]) / max(robust[k], 1e-12)),
-                        'applied_load': [float(x) for x in points.applied_loads[i]]})
+        entries.append(
+            {
+                'point': int(points.label[i]),
+                'orientation': int(points.orientation[i]),
+                'component': config.components[k],
+                'residual_pct_fs': float(press_pct[i, k]),
+                'robust_sigmas': float(abs(standardized[i, k]) / max(robust[k], 1e-12)),
+                'applied_load': [float(x) for x in points.applied_loads[i]],
+            }
+        )
     with np.errstate(divide='ignore', invalid='ignore'):
         largest = float(np.nanmax(np.abs(standardized) / np.maximum(robust, 1e-12)))
-    details = {'threshold_pct_fs': dict(zip(config.components, threshold)), 'points': entries,
-               'count': int(len(rows)), 'largest_robust_sigmas': largest, 'model': what}
+    details = {
+        'threshold_pct_fs': dict(zip(config.components, threshold)),
+        'points': entries,
+        'count': int(len(rows)),
+        'largest_robust_sigmas': largest,
+        'model': what,
+    }
     coherent = _explained_text(config, points, explained, structure)
     if coherent:
         details['explained_by_structure'] = coherent[1]
     if not len(rows):
         if coherent:
             return Gate('outliers', True, f'no point wrong on its own: {coherent[0]}', details)
-        return Gate('outliers', True, f'no point beyond {limits.outlier_robust_sigmas:g} robust σ '
-                                      f'(largest {largest:.1f}; leave-one-out residuals of the {what})', details)
+        return Gate(
+            'outliers',
+            True,
+            f'no point beyond {limits.outlier_robust_sigmas:g} robust σ '
+            f'(largest {largest:.1f}; leave-one-out residuals of the {what})',
+            details,
+        )
     first = entries[0]
-    more = f' and {len(rows) - 1} more (points {", ".join(str(e["point"]) for e in entries[1:6])}' \
-           f'{"…" if len(rows) > 6 else ""})' if len(rows) > 1 else ''
+    more = (
+        f' and {len(rows) - 1} more (points {", ".join(str(e["point"]) for e in entries[1:6])}'
+        f'{"…" if len(rows) > 6 else ""})'
+        if len(rows) > 1
+        else ''
+    )
     cause = 'a weight, unit or marker error?'
     tracks = (unexplained or {}).get(first['component'])
-    if tracks is not None:       # structure the diagnosis could not name, on the same component
-        cause = (f'a weight, unit or marker error, or the structure the diagnosis left unexplained on '
-                 f'{first["component"]} (it tracks {tracks}): an effect the model lacks?')
+    if tracks is not None:  # structure the diagnosis could not name, on the same component
+        cause = (
+            f'a weight, unit or marker error, or the structure the diagnosis left unexplained on '
+            f'{first["component"]} (it tracks {tracks}): an effect the model lacks?'
+        )
         details['unexplained_tracks'] = tracks
     besides = f'; besides, {coherent[0]}' if coherent else ''
-    return Gate('outliers', False,
-                f'point {first["point"]} (I_g {first["orientation"]}): its {first["component"]} load '
-                f'disagrees with its outputs by {first["residual_pct_fs"]:+.3g} % FS '
-                f'({first["robust_sigmas"]:.0f} robust σ; {cause}){more}{besides}', details)
+    return Gate(
+        'outliers',
+        False,
+        f'point {first["point"]} (I_g {first["orientation"]}): its {first["component"]} load '
+        f'disagrees with its outputs by {first["residual_pct_fs"]:+.3g} % FS '
+        f'({first["robust_sigmas"]:.0f} robust σ; {cause}){more}{besides}',
+        details,
+    )
 
 
 def _explained_by_structure(config, standardized, flagged, threshold, structure) -> np.ndarray:
     """(P, 6) flagged residuals that the campaign's structure predicts from the other points, on
-    components where the diagnosis adopted an effect or left structure unexplained."""
+    components where the diagnosis adopted an effect or left structure unexplained.
+    """
     explained = np.zeros_like(flagged)
     if structure is None:
         return explained
     from ..diagnosis.coherence import fit_structure
+
     for k, component in enumerate(config.components):
         if component not in structure.covered or not np.any(flagged[:, k]):
             continue
@@ -342,15 +458,17 @@ def _explained_text(config, points, explained, structure):
             labels = [int(points.label[i]) for i in rows]
             details[component] = {'points': labels, 'structure': structure.covered[component]}
             listed = ', '.join(str(x) for x in labels[:5]) + ('…' if len(labels) > 5 else '')
-            parts.append(f'{len(rows)} point(s) beyond the threshold on {component} '
-                         f'(points {listed}) follow {structure.covered[component]}, which the '
-                         f'other points share')
+            parts.append(
+                f'{len(rows)} point(s) beyond the threshold on {component} '
+                f'(points {listed}) follow {structure.covered[component]}, which the '
+                f'other points share'
+            )
     return '; '.join(parts) + ' (an effect the model lacks, not a weight or marker error)', details
 
 
 def _nominal_sensitivity(config) -> tuple[np.ndarray, str]:
     if 'linear' in config.matrices:
-        return np.diag(linear_part(config.matrices['linear'])), 'the config\'s linear matrix'
+        return np.diag(linear_part(config.matrices['linear'])), "the config's linear matrix"
     return config.capacity / config.rated_output_mv, 'capacity / rated output'
 
 
@@ -363,8 +481,11 @@ def _ratio_gate(name, config, fitted, reference, tolerance, against, hint_defaul
     with np.errstate(divide='ignore', invalid='ignore'):
         ratio = fitted / reference
     bad = [i for i, r in enumerate(ratio) if not (abs(r - 1.0) <= tolerance)]
-    details = {'ratio': dict(zip(config.components, ratio)), 'tolerance': tolerance,
-               'fitted_n_per_mv': dict(zip(config.components, fitted))}
+    details = {
+        'ratio': dict(zip(config.components, ratio)),
+        'tolerance': tolerance,
+        'fitted_n_per_mv': dict(zip(config.components, fitted)),
+    }
     if bad:
         text = ', '.join(f'{config.components[i]} ×{ratio[i]:.3g}' for i in bad)
         hint = hint_default
@@ -372,18 +493,33 @@ def _ratio_gate(name, config, fitted, reference, tolerance, against, hint_defaul
             hint = '; loads recorded in kgf?'
         elif np.all(np.isfinite(ratio)) and np.allclose(ratio[bad], 9.80665, rtol=0.05):
             hint = '; outputs or loads off by g?'
-        return Gate(name, False, f'sensitivities differ from {against} beyond ±{100 * tolerance:g} %: '
-                                 f'{text}{hint}', details)
+        return Gate(
+            name,
+            False,
+            f'sensitivities differ from {against} beyond ±{100 * tolerance:g} %: {text}{hint}',
+            details,
+        )
     worst = int(np.argmax(np.abs(ratio - 1)))
-    return Gate(name, True, f'sensitivities within ±{100 * tolerance:g} % of {against} (largest: '
-                            f'{config.components[worst]} ×{ratio[worst]:.4f})', details)
+    return Gate(
+        name,
+        True,
+        f'sensitivities within ±{100 * tolerance:g} % of {against} (largest: '
+        f'{config.components[worst]} ×{ratio[worst]:.4f})',
+        details,
+    )
 
 
 def _sensitivity_gate(config, fits, limits) -> Gate:
     reference, what = _nominal_sensitivity(config)
-    return _ratio_gate('sensitivity', config, _fitted_sensitivity(fits), reference,
-                       limits.sensitivity_nominal_tolerance, f'{config.name}\'s nominal ones ({what})',
-                       '; the wrong --balance, or loads or outputs in other units?')
+    return _ratio_gate(
+        'sensitivity',
+        config,
+        _fitted_sensitivity(fits),
+        reference,
+        limits.sensitivity_nominal_tolerance,
+        f"{config.name}'s nominal ones ({what})",
+        '; the wrong --balance, or loads or outputs in other units?',
+    )
 
 
 def _active_gate(config, fits, active, limits) -> Gate:
@@ -391,15 +527,33 @@ def _active_gate(config, fits, active, limits) -> Gate:
     try:
         reference = np.diag(linear_part(active.model(name)))
     except Exception as error:  # an active model without a linear part
-        return Gate('active_calibration', False, f'cannot compare with the active calibration ({error})')
-    if tuple(active.components) != tuple(config.components) or len(reference) != len(config.components):
-        return Gate('active_calibration', False, f'the active calibration ({active.balance}) has components '
-                                                 f'{list(active.components)}, this balance {list(config.components)}')
-    gate = _ratio_gate('active_calibration', config, _fitted_sensitivity(fits), reference,
-                       limits.sensitivity_active_tolerance, f'the active calibration ({active.balance})')
+        return Gate(
+            'active_calibration', False, f'cannot compare with the active calibration ({error})'
+        )
+    if tuple(active.components) != tuple(config.components) or len(reference) != len(
+        config.components
+    ):
+        return Gate(
+            'active_calibration',
+            False,
+            f'the active calibration ({active.balance}) has components '
+            f'{list(active.components)}, this balance {list(config.components)}',
+        )
+    gate = _ratio_gate(
+        'active_calibration',
+        config,
+        _fitted_sensitivity(fits),
+        reference,
+        limits.sensitivity_active_tolerance,
+        f'the active calibration ({active.balance})',
+    )
     if gate.passed and str(active.balance).lower() != str(config.name).lower():
-        return Gate('active_calibration', False, f'the active calibration is of balance {active.balance}, '
-                                                 f'this refit of {config.name}', gate.details)
+        return Gate(
+            'active_calibration',
+            False,
+            f'the active calibration is of balance {active.balance}, this refit of {config.name}',
+            gate.details,
+        )
     return gate
 
 
@@ -424,7 +578,11 @@ def _zero_gate(config, points, reduction, limits) -> Gate:
     change_pct = np.abs(change) / config.capacity * 100.0
     # noisy zero points differ more: the limit grows with their robust scatter (a turned body is
     # one pair far beyond the others, which leaves the median alone)
-    scatter = np.median(change_pct, axis=0) / 0.6745 if len(change_pct) >= 5 else np.zeros(change_pct.shape[1])
+    scatter = (
+        np.median(change_pct, axis=0) / 0.6745
+        if len(change_pct) >= 5
+        else np.zeros(change_pct.shape[1])
+    )
     limit = np.maximum(limits.zero_shift_pct_fs, limits.outlier_robust_sigmas * scatter)
     ratio = np.nan_to_num(change_pct / limit, nan=np.inf)
     worst = np.unravel_index(int(np.argmax(ratio)), change_pct.shape)
@@ -432,69 +590,131 @@ def _zero_gate(config, points, reduction, limits) -> Gate:
     details['limit_pct_fs'] = dict(zip(config.components, limit))
     if not change_pct[worst] <= limit[worst[1]]:
         b, a = before[worst[0]], after[worst[0]]
-        return Gate('zero_points', False, f'zero points {int(points.label[b])} and {int(points.label[a])} '
-                                          f'(I_g {int(points.orientation[b])}) differ by {change_pct[worst]:.3g} % FS '
-                                          f'in {config.components[worst[1]]}: the body was turned between them '
-                                          f'without a /calibration/gravity message?', details)
-    return Gate('zero_points', True, f'consecutive zero points of each block agree within {change_pct[worst]:.3g} % FS '
-                                     f'({config.components[worst[1]]})', details)
+        return Gate(
+            'zero_points',
+            False,
+            f'zero points {int(points.label[b])} and {int(points.label[a])} '
+            f'(I_g {int(points.orientation[b])}) differ by {change_pct[worst]:.3g} % FS '
+            f'in {config.components[worst[1]]}: the body was turned between them '
+            f'without a /calibration/gravity message?',
+            details,
+        )
+    return Gate(
+        'zero_points',
+        True,
+        f'consecutive zero points of each block agree within {change_pct[worst]:.3g} % FS '
+        f'({config.components[worst[1]]})',
+        details,
+    )
 
 
 def _body_gate(config, reduction, limits) -> Gate:
     weight = float(reduction.body.weight_n)
     declared = float(config.calibration_body.weight_n)
-    details = {'weight_n': weight, 'declared_n': declared, 'source': reduction.body_source,
-               'tolerance': limits.body_weight_tolerance}
+    details = {
+        'weight_n': weight,
+        'declared_n': declared,
+        'source': reduction.body_source,
+        'tolerance': limits.body_weight_tolerance,
+    }
     if not declared > 0:
-        return Gate('body_weight', False, f'declared calibration body weight {declared:g} N is not positive '
-                                          f'({config.path or config.name}: calibration_body.weight_n)', details)
+        return Gate(
+            'body_weight',
+            False,
+            f'declared calibration body weight {declared:g} N is not positive '
+            f'({config.path or config.name}: calibration_body.weight_n)',
+            details,
+        )
     if not weight > 0:
-        return Gate('body_weight', False, f'calibration body weight {weight:.4g} N ({reduction.body_source}) '
-                                          f'is not positive: gravity vectors or output signs reversed?', details)
+        return Gate(
+            'body_weight',
+            False,
+            f'calibration body weight {weight:.4g} N ({reduction.body_source}) '
+            f'is not positive: gravity vectors or output signs reversed?',
+            details,
+        )
     off = weight / declared - 1.0
     if not abs(off) <= limits.body_weight_tolerance:
-        return Gate('body_weight', False, f'calibration body weight {weight:.4g} N ({reduction.body_source}) is '
-                                          f'{100 * off:+.1f} % from the declared {declared:.4g} N '
-                                          f'(limit ±{100 * limits.body_weight_tolerance:g} %)', details)
-    return Gate('body_weight', True, f'body {weight:.2f} N ({reduction.body_source}), {100 * off:+.2f} % '
-                                     f'from the declared {declared:.2f} N', details)
+        return Gate(
+            'body_weight',
+            False,
+            f'calibration body weight {weight:.4g} N ({reduction.body_source}) is '
+            f'{100 * off:+.1f} % from the declared {declared:.4g} N '
+            f'(limit ±{100 * limits.body_weight_tolerance:g} %)',
+            details,
+        )
+    return Gate(
+        'body_weight',
+        True,
+        f'body {weight:.2f} N ({reduction.body_source}), {100 * off:+.2f} % '
+        f'from the declared {declared:.2f} N',
+        details,
+    )
 
 
 def _capacity_gate(config, points, limits) -> Gate:
     fraction = np.abs(points.applied_loads) / config.capacity
     worst = np.unravel_index(int(np.argmax(fraction)), fraction.shape)
-    details = {'max_fraction_of_capacity': dict(zip(config.components, fraction.max(axis=0))),
-               'margin': limits.capacity_margin}
+    details = {
+        'max_fraction_of_capacity': dict(zip(config.components, fraction.max(axis=0))),
+        'margin': limits.capacity_margin,
+    }
     if not fraction[worst] <= 1.0 + limits.capacity_margin:
         count = int(np.count_nonzero(np.any(fraction > 1.0 + limits.capacity_margin, axis=1)))
-        return Gate('capacity', False, f'point {int(points.label[worst[0]])}: applied {config.components[worst[1]]} '
-                                       f'{points.applied_loads[worst]:.4g} is {100 * fraction[worst]:.0f} % of '
-                                       f'capacity ({count} point(s) beyond {100 * (1 + limits.capacity_margin):g} %; '
-                                       f'wrong units or wrong --balance?)', details)
-    return Gate('capacity', True, f'applied loads within capacity (largest {100 * fraction[worst]:.1f} %, '
-                                  f'{config.components[worst[1]]})', details)
+        return Gate(
+            'capacity',
+            False,
+            f'point {int(points.label[worst[0]])}: applied {config.components[worst[1]]} '
+            f'{points.applied_loads[worst]:.4g} is {100 * fraction[worst]:.0f} % of '
+            f'capacity ({count} point(s) beyond {100 * (1 + limits.capacity_margin):g} %; '
+            f'wrong units or wrong --balance?)',
+            details,
+        )
+    return Gate(
+        'capacity',
+        True,
+        f'applied loads within capacity (largest {100 * fraction[worst]:.1f} %, '
+        f'{config.components[worst[1]]})',
+        details,
+    )
 
 
 def _clipping_gate(cut) -> Gate:
     if cut.clipped:
         bridge, value, samples, npoints = cut.clipped[0]
-        return Gate('clipping', False, f'bridge {bridge} is flat-topped at {value:.6g} mV in {samples} samples of '
-                                       f'{npoints} points: its amplifier or ADC clipped',
-                    {'clipped': [list(c) for c in cut.clipped]})
+        return Gate(
+            'clipping',
+            False,
+            f'bridge {bridge} is flat-topped at {value:.6g} mV in {samples} samples of '
+            f'{npoints} points: its amplifier or ADC clipped',
+            {'clipped': [list(c) for c in cut.clipped]},
+        )
     return Gate('clipping', True, 'no bridge flat-topped at its extremes')
 
 
 def _marker_gate(cut) -> Gate:
-    details = {'out_of_order': cut.markers_out_of_order, 'duplicate_stamps': cut.duplicate_marker_stamps}
+    details = {
+        'out_of_order': cut.markers_out_of_order,
+        'duplicate_stamps': cut.duplicate_marker_stamps,
+    }
     if cut.markers_out_of_order:
-        return Gate('marker_order', False, f'applied_load message {cut.first_marker_out_of_order + 1} is stamped '
-                                           f'before the one recorded ahead of it ({cut.markers_out_of_order} '
-                                           f'marker(s) out of time order): points cannot be trusted', details)
+        return Gate(
+            'marker_order',
+            False,
+            f'applied_load message {cut.first_marker_out_of_order + 1} is stamped '
+            f'before the one recorded ahead of it ({cut.markers_out_of_order} '
+            f'marker(s) out of time order): points cannot be trusted',
+            details,
+        )
     return Gate('marker_order', True, 'applied_load markers in time order', details)
 
 
-def match_schedule(applied_loads: np.ndarray, orientation: np.ndarray, schedule: LoadSchedule,
-                   tolerance: np.ndarray) -> np.ndarray:
+def match_schedule(
+    applied_loads: np.ndarray,
+    orientation: np.ndarray,
+    schedule: LoadSchedule,
+    tolerance: np.ndarray,
+) -> np.ndarray:
     """Which schedule row each found load point is, or -1 for a point the schedule does not have.
 
     Parameters
@@ -511,7 +731,7 @@ def match_schedule(applied_loads: np.ndarray, orientation: np.ndarray, schedule:
     """
     found = np.asarray(applied_loads, float)
     rows = np.asarray(schedule.loads, float)
-    close = np.all(np.abs(found[:, None, :] - rows[None, :, :]) <= tolerance, axis=2)     # (P, N)
+    close = np.all(np.abs(found[:, None, :] - rows[None, :, :]) <= tolerance, axis=2)  # (P, N)
     same_ig = np.asarray(orientation)[:, None] == np.asarray(schedule.orientation)[None, :]
     taken = np.zeros(len(rows), bool)
     match = np.full(len(found), -1)
@@ -524,8 +744,12 @@ def match_schedule(applied_loads: np.ndarray, orientation: np.ndarray, schedule:
     return match
 
 
-def schedule_gate(config: BalanceConfig, points, schedule: LoadSchedule | None,
-                  limits: AcceptanceLimits | None = None) -> Gate:
+def schedule_gate(
+    config: BalanceConfig,
+    points,
+    schedule: LoadSchedule | None,
+    limits: AcceptanceLimits | None = None,
+) -> Gate:
     """The load points found against the schedule the campaign ran: count and coverage.
 
     A campaign that lost a share of its points (applied_load markers dropped, a session or a
@@ -555,8 +779,10 @@ def schedule_gate(config: BalanceConfig, points, schedule: LoadSchedule | None,
         for sign, side in ((1.0, '+'), (-1.0, '-')):
             loading = sign * rows[:, k] > tolerance[k]
             if loading.any():
-                entry[side] = [int(np.count_nonzero(found & loading)),
-                               int(np.count_nonzero(loading))]
+                entry[side] = [
+                    int(np.count_nonzero(found & loading)),
+                    int(np.count_nonzero(loading)),
+                ]
         if not entry:
             continue
         got = sum(e[0] for e in entry.values())
@@ -566,19 +792,40 @@ def schedule_gate(config: BalanceConfig, points, schedule: LoadSchedule | None,
         if (of - got) / of > limits.missing_component_share or short:
             none = f' (none {component}{short[0]})' if short else ''
             lost.append(f'{component} {got} of {of}{none}')
-    details = {'expected': expected, 'found': expected - missing, 'missing': missing,
-               'not_in_schedule': extra, 'missing_share': share, 'coverage': coverage,
-               'limit_share': limits.missing_points_share,
-               'limit_component_share': limits.missing_component_share,
-               'missing_points': [int(p) for p in np.asarray(schedule.point)[~found][:50]]}
-    counts = (f'{expected - missing} of the {expected} scheduled points found ({missing} missing, '
-              f'{100 * share:.0f} %')
+    details = {
+        'expected': expected,
+        'found': expected - missing,
+        'missing': missing,
+        'not_in_schedule': extra,
+        'missing_share': share,
+        'coverage': coverage,
+        'limit_share': limits.missing_points_share,
+        'limit_component_share': limits.missing_component_share,
+        'missing_points': [int(p) for p in np.asarray(schedule.point)[~found][:50]],
+    }
+    counts = (
+        f'{expected - missing} of the {expected} scheduled points found ({missing} missing, '
+        f'{100 * share:.0f} %'
+    )
     unknown = f'; {extra} point(s) not in the schedule' if extra else ''
     if share > limits.missing_points_share or lost:
-        hint = ('; a campaign of another schedule (--schedule FILE)?' if extra > missing / 2
-                else '; applied_load markers or a session lost?')
+        hint = (
+            '; a campaign of another schedule (--schedule FILE)?'
+            if extra > missing / 2
+            else '; applied_load markers or a session lost?'
+        )
         coverage_text = '; lost coverage: ' + ', '.join(lost) if lost else ''
-        return Gate('schedule', False, f'{counts}, limit {100 * limits.missing_points_share:g} %)'
-                                       f'{coverage_text}{unknown}{hint}', details)
-    return Gate('schedule', True, f'{counts}, within {100 * limits.missing_points_share:g} %; '
-                                  f'every component covered){unknown}', details)
+        return Gate(
+            'schedule',
+            False,
+            f'{counts}, limit {100 * limits.missing_points_share:g} %)'
+            f'{coverage_text}{unknown}{hint}',
+            details,
+        )
+    return Gate(
+        'schedule',
+        True,
+        f'{counts}, within {100 * limits.missing_points_share:g} %; '
+        f'every component covered){unknown}',
+        details,
+    )

@@ -3,8 +3,8 @@
 interfaces.md: a load point's samples are the /balance/raw messages stamped from its applied_load
 message up to the next applied_load message; an all-NaN applied_load means "between points" and
 the samples after it belong to no point. Gravity is the last /calibration/gravity before the
-point. Each point is averaged per bridge after rejecting outliers (median ± k·MAD, the larger of the
-point's own MAD and the campaign's typical one).
+point. Each point is averaged per bridge after rejecting outliers (median ± k·MAD, the larger of
+the point's own MAD and the campaign's typical one).
 
 Everything is cut by the data's structure, never by arrays spanning wall time: markers are taken
 in stamp order (a marker whose stamp goes back against the recorder's order is counted for the
@@ -26,6 +26,7 @@ noise both estimate σ²; this one has fewer effective degrees of freedom (about
 It sees noise within a point only: scatter slower than a point (the loading hardware, drift)
 shows in the zero points, which the diagnosis compares with it. Memory: two (P, n) arrays.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -45,19 +46,23 @@ class CutSummary:
     points: int
     samples_used: int
     samples_rejected_outliers: int
-    samples_rejected_nan: int    # NaN, infinite or beyond 1000x the rated output
-    empty_points: int            # applied_load messages with no samples before the next one
-    markers_out_of_order: int = 0        # applied_load stamps going back against receive order
+    samples_rejected_nan: int  # NaN, infinite or beyond 1000x the rated output
+    empty_points: int  # applied_load messages with no samples before the next one
+    markers_out_of_order: int = 0  # applied_load stamps going back against receive order
     first_marker_out_of_order: int = -1  # its index (0-based, receive order), -1: none
     duplicate_marker_stamps: int = 0
-    samples_outside_points: int = 0      # raw samples in no point (between points, beyond a point's end)
-    pauses_s: tuple[float, ...] = ()     # pauses between sessions that were shortened, seconds
-    clipped: tuple[tuple[str, float, int, int], ...] = ()  # (bridge, mV, samples, points) flat-topped
+    # raw samples in no point (between points, beyond a point's end)
+    samples_outside_points: int = 0
+    pauses_s: tuple[float, ...] = ()  # pauses between sessions that were shortened, seconds
+    # (bridge, mV, samples, points) flat-topped
+    clipped: tuple[tuple[str, float, int, int], ...] = ()
     # per point (same order as the LoadPoints returned): variance of the mean output per bridge,
-    # mV² (successive differences, see the module's docstring; NaN with < 2 samples), samples averaged
-    point_labels: np.ndarray | None = field(default=None, compare=False, repr=False)          # (P,)
-    point_variance_mv2: np.ndarray | None = field(default=None, compare=False, repr=False)    # (P, n)
-    point_samples: np.ndarray | None = field(default=None, compare=False, repr=False)         # (P,)
+    # mV² (successive differences, see the module's docstring; NaN with < 2 samples), samples
+    # averaged
+    point_labels: np.ndarray | None = field(default=None, compare=False, repr=False)  # (P,)
+    # (P, n)
+    point_variance_mv2: np.ndarray | None = field(default=None, compare=False, repr=False)
+    point_samples: np.ndarray | None = field(default=None, compare=False, repr=False)  # (P,)
 
 
 # An applied load beyond this many rated loads is no calibration weight.
@@ -99,7 +104,7 @@ def successive_difference_variance(samples: np.ndarray) -> np.ndarray:
     white noise; a slow trend within the point adds only (its step per sample)² / 2.
     """
     steps = np.diff(np.asarray(samples, dtype=float), axis=0)
-    return np.sum(steps ** 2, axis=0) / (2.0 * len(steps))
+    return np.sum(steps**2, axis=0) / (2.0 * len(steps))
 
 
 def _flat_tops(values: np.ndarray, point_of_sample: np.ndarray, bridges) -> tuple:
@@ -123,14 +128,20 @@ def _flat_tops(values: np.ndarray, point_of_sample: np.ndarray, bridges) -> tupl
 
 
 def _orientation_index(gravity: np.ndarray, config: BalanceConfig | None) -> np.ndarray:
-    """I_g of each gravity vector when it matches the config's Fig. 3 directions, else 101, 102..."""
+    """I_g of each gravity vector when it matches the config's Fig. 3 directions, else 101,
+    102...
+    """
     known = dict(config.gravity_directions) if config else {}
     gravity = np.asarray(gravity, dtype=float)
     index = np.zeros(len(gravity), dtype=int)
     if known:
         keys = np.array(list(known))
         vectors = np.array([known[k] for k in keys], dtype=float)
-        close = np.all(np.abs(gravity[:, None, :] - vectors[None, :, :]) <= 1e-3 + 1e-5 * np.abs(vectors[None]), axis=2)
+        close = np.all(
+            np.abs(gravity[:, None, :] - vectors[None, :, :])
+            <= 1e-3 + 1e-5 * np.abs(vectors[None]),
+            axis=2,
+        )
         matched = np.any(close, axis=1)
         index[matched] = keys[np.argmax(close[matched], axis=1)]
     else:
@@ -148,16 +159,21 @@ def _orientation_index(gravity: np.ndarray, config: BalanceConfig | None) -> np.
     return index
 
 
-def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: float = 5.0,
-                    source: str = 'bag') -> tuple[LoadPoints, CutSummary]:
+def cut_load_points(
+    bag, config: BalanceConfig | None = None, *, outlier_mad: float = 5.0, source: str = 'bag'
+) -> tuple[LoadPoints, CutSummary]:
     """Load points from BagData (balance_calib.bags.reader.read_bags)."""
     raw, applied, gravity, temperature = bag.raw, bag.applied_load, bag.gravity, bag.temperature
     names = bag.topics
     if len(applied) == 0:
-        raise LoadPointError(f'{source} has no {names.applied_load} messages: cannot tell load points apart')
+        raise LoadPointError(
+            f'{source} has no {names.applied_load} messages: cannot tell load points apart'
+        )
     if len(gravity) == 0:
-        raise LoadPointError(f'{source} has no {names.gravity} messages: the orientation of the '
-                             f'calibration body is unknown')
+        raise LoadPointError(
+            f'{source} has no {names.gravity} messages: the orientation of the '
+            f'calibration body is unknown'
+        )
     order = np.argsort(raw.stamps_ns, kind='stable')
     stamps = raw.stamps_ns[order]
     values = np.asarray(raw.values, dtype=float)[order]
@@ -172,7 +188,9 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
     is_point = ~np.all(np.isnan(marker_loads), axis=1)
     if np.any(np.isnan(marker_loads[is_point])):
         bad = np.flatnonzero(is_point & np.any(np.isnan(marker_loads), axis=1))[0]
-        raise LoadPointError(f'{source}: {names.applied_load} message {bad + 1} has some but not all fields NaN')
+        raise LoadPointError(
+            f'{source}: {names.applied_load} message {bad + 1} has some but not all fields NaN'
+        )
     if np.any(~np.isfinite(marker_loads[is_point])):
         raise LoadPointError(f'{source}: {names.applied_load} has infinite loads')
     if config is not None:
@@ -184,26 +202,36 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
         if len(absurd):
             i = int(absurd[0])
             k = int(np.argmax(factor[i]))
-            raise LoadPointError(f'{source}: {names.applied_load} message {i + 1}: '
-                                 f'{config.components[k]} {marker_loads[i, k]:.4g} is beyond '
-                                 f'{ABSURD_LOAD_CAPACITIES:g}x its rated load {capacity[k]:g} '
-                                 f'({len(absurd)} such message(s)): a corrupted value or wrong '
-                                 f'units')
+            raise LoadPointError(
+                f'{source}: {names.applied_load} message {i + 1}: '
+                f'{config.components[k]} {marker_loads[i, k]:.4g} is beyond '
+                f'{ABSURD_LOAD_CAPACITIES:g}x its rated load {capacity[k]:g} '
+                f'({len(absurd)} such message(s)): a corrupted value or wrong '
+                f'units'
+            )
     point_index = np.flatnonzero(is_point)
     first_gravity = gravity.stamps_ns.min()
     if marker_stamps[point_index[0]] < first_gravity:
-        order_hint = (f'; {len(backwards)} {names.applied_load} message(s) are stamped out of time order '
-                      f'(first: message {int(backwards[0]) + 2})' if len(backwards) else '')
-        raise LoadPointError(f'{source} has no {names.gravity} messages before its first load point{order_hint}')
+        order_hint = (
+            f'; {len(backwards)} {names.applied_load} message(s) are stamped out of time order '
+            f'(first: message {int(backwards[0]) + 2})'
+            if len(backwards)
+            else ''
+        )
+        raise LoadPointError(
+            f'{source} has no {names.gravity} messages before its first load point{order_hint}'
+        )
 
     # a point ends at the next marker, or at most POINT_PERIODS typical marker periods after its
     # own: samples beyond (a session ended without a marker, a clock jump, a recorder left
     # running over a pause) belong to no point
     periods = np.diff(marker_stamps)
-    period = int(np.median(periods[periods > 0])) if np.any(periods > 0) else 10 ** 9
+    period = int(np.median(periods[periods > 0])) if np.any(periods > 0) else 10**9
     boundaries = np.append(marker_stamps, np.iinfo(np.int64).max)
-    point_ends = np.minimum(boundaries[point_index + 1],
-                            marker_stamps[point_index] + min(POINT_PERIODS * period, 2 ** 62))
+    point_ends = np.minimum(
+        boundaries[point_index + 1],
+        marker_stamps[point_index] + min(POINT_PERIODS * period, 2**62),
+    )
     starts = np.searchsorted(stamps, marker_stamps[point_index], side='left')
     ends = np.searchsorted(stamps, point_ends, side='left')
     outside = int(len(stamps) - np.sum(ends - starts))
@@ -215,7 +243,9 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
     point_gravity = g_vectors[g_at]
     norms = np.linalg.norm(point_gravity, axis=1)
     if np.any(np.abs(norms - 1.0) > 1e-3):
-        raise LoadPointError(f'{source}: {names.gravity} vectors must be unit vectors (got norm {norms.min():.4g})')
+        raise LoadPointError(
+            f'{source}: {names.gravity} vectors must be unit vectors (got norm {norms.min():.4g})'
+        )
 
     if len(temperature):
         t_order = np.argsort(temperature.stamps_ns, kind='stable')
@@ -227,8 +257,11 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
     times = np.full(len(point_index), np.nan)
     temps = np.full(len(point_index), np.nan)
     # no bridge gives 1000x its rated output; without a config, no amplifier gives 1e6 mV
-    plausible_mv = (1000.0 * np.abs(config.rated_output_mv) if config is not None
-                    else np.full(values.shape[1], 1e6))
+    plausible_mv = (
+        1000.0 * np.abs(config.rated_output_mv)
+        if config is not None
+        else np.full(values.shape[1], 1e6)
+    )
     used = outliers = nans = empty = 0
     inside_values, inside_points = [], []
     # robust scale (MAD) of each point's samples per bridge; the outlier limit is k x the larger of
@@ -245,8 +278,9 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
             medians[p] = np.median(block, axis=0)
             if len(block) >= 5:
                 scales[p] = np.median(np.abs(block - medians[p]), axis=0) * 1.4826
-    typical_scale = (np.nanmedian(scales, axis=0) if np.any(np.isfinite(scales))
-                     else np.zeros(values.shape[1]))
+    typical_scale = (
+        np.nanmedian(scales, axis=0) if np.any(np.isfinite(scales)) else np.zeros(values.shape[1])
+    )
     for p, (a, b) in enumerate(zip(starts, ends)):
         block = values[a:b]
         # a finite but absurd output (a flipped exponent bit) is as unusable as a NaN
@@ -260,8 +294,11 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
             empty += 1
             continue
         limit = outlier_mad * np.maximum(np.fmax(scales[p], typical_scale), 1e-12)
-        keep = np.all(np.abs(block - medians[p]) <= limit, axis=1) \
-            if len(block) >= 5 else np.ones(len(block), bool)
+        keep = (
+            np.all(np.abs(block - medians[p]) <= limit, axis=1)
+            if len(block) >= 5
+            else np.ones(len(block), bool)
+        )
         if not np.any(keep):  # no sample near the median of all bridges at once: keep them all
             keep = np.ones(len(block), bool)
         outliers += int(np.count_nonzero(~keep))
@@ -272,22 +309,47 @@ def cut_load_points(bag, config: BalanceConfig | None = None, *, outlier_mad: fl
             mean_variance[p] = successive_difference_variance(block[keep]) / counts[p]
         times[p] = block_stamps[keep].mean() / 1e9
         if len(temperature):
-            temps[p] = float(np.mean(np.interp(block_stamps[keep].astype(float), t_stamps, t_values)))
+            temps[p] = float(
+                np.mean(np.interp(block_stamps[keep].astype(float), t_stamps, t_values))
+            )
     has_samples = ~np.isnan(times)
     if not np.any(has_samples):
         raise LoadPointError(f'{source}: no {names.raw} samples fall inside any load point')
     keep_points = has_samples
     labels = np.arange(1, len(point_index) + 1)
     session_times, pauses = shorten_pauses(times[keep_points])
-    points = LoadPoints(labels[keep_points], means[keep_points], session_times, temps[keep_points],
-                        _orientation_index(point_gravity, config)[keep_points], point_gravity[keep_points],
-                        marker_loads[point_index][keep_points])
-    bridges = config.bridge_outputs if config else tuple(f'output {k + 1}' for k in range(values.shape[1]))
-    clipped = _flat_tops(np.concatenate(inside_values), np.concatenate(inside_points), bridges) \
-        if inside_values else ()
-    return points, CutSummary(int(keep_points.sum()), used, outliers, nans, empty,
-                              markers_out_of_order=len(backwards),
-                              first_marker_out_of_order=int(backwards[0] + 1) if len(backwards) else -1,
-                              duplicate_marker_stamps=duplicates, samples_outside_points=outside,
-                              pauses_s=pauses, clipped=clipped, point_labels=points.label.copy(),
-                              point_variance_mv2=mean_variance[keep_points], point_samples=counts[keep_points])
+    points = LoadPoints(
+        labels[keep_points],
+        means[keep_points],
+        session_times,
+        temps[keep_points],
+        _orientation_index(point_gravity, config)[keep_points],
+        point_gravity[keep_points],
+        marker_loads[point_index][keep_points],
+    )
+    bridges = (
+        config.bridge_outputs
+        if config
+        else tuple(f'output {k + 1}' for k in range(values.shape[1]))
+    )
+    clipped = (
+        _flat_tops(np.concatenate(inside_values), np.concatenate(inside_points), bridges)
+        if inside_values
+        else ()
+    )
+    return points, CutSummary(
+        int(keep_points.sum()),
+        used,
+        outliers,
+        nans,
+        empty,
+        markers_out_of_order=len(backwards),
+        first_marker_out_of_order=int(backwards[0] + 1) if len(backwards) else -1,
+        duplicate_marker_stamps=duplicates,
+        samples_outside_points=outside,
+        pauses_s=pauses,
+        clipped=clipped,
+        point_labels=points.label.copy(),
+        point_variance_mv2=mean_variance[keep_points],
+        point_samples=counts[keep_points],
+    )

@@ -11,14 +11,15 @@ variable that explains it, at most two panels wide, axes in words and units.
 Figures use `matplotlib.figure.Figure` with the Agg canvas (no pyplot state), so plotting is safe
 inside a node's worker thread. 100 dpi: a figure is about 1000 px wide.
 """
+
 from __future__ import annotations
 
-import re
 from pathlib import Path
+import re
 
 import numpy as np
 
-from .report_sections import PLOT_RANGE_PCT_FS, combined_load_mask
+from .report_sections import combined_load_mask, PLOT_RANGE_PCT_FS
 
 CLIP_PCT = PLOT_RANGE_PCT_FS
 DPI = 100
@@ -36,13 +37,15 @@ def _nice(name: str) -> str:
 
 def _save(figure, path: Path) -> Path:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
+
     FigureCanvasAgg(figure)
     figure.savefig(path, dpi=DPI)
     return Path(path)
 
 
-def residual_figure(residuals_pct: np.ndarray, labels, categories: np.ndarray, components, title: str,
-                    path: Path) -> Path:
+def residual_figure(
+    residuals_pct: np.ndarray, labels, categories: np.ndarray, components, title: str, path: Path
+) -> Path:
     """Six panels (3 rows x 2 columns) of residual % FS vs point number; returns path.
 
     residuals_pct (N, n_components); categories (N,) of 'single', 'combined', 'zero'.
@@ -58,41 +61,85 @@ def residual_figure(residuals_pct: np.ndarray, labels, categories: np.ndarray, c
         column, row = divmod(k, rows)
         axes = figure.add_subplot(rows, 2, 2 * row + column + 1)
         values = residuals_pct[:, k]
-        sigma = float(np.sqrt(np.mean(values ** 2)))
+        sigma = float(np.sqrt(np.mean(values**2)))
         beyond = int(np.sum(np.abs(values) > CLIP_PCT))
         axes.axhline(0.0, color='0.6', linewidth=0.8)
         for key, _, marker, colour in _CATEGORIES:
             chosen = categories == key
             inside = chosen & (np.abs(values) <= CLIP_PCT)
-            axes.plot(labels[inside], values[inside], linestyle='none', marker=marker, markersize=3.5,
-                      markerfacecolor=colour if marker != 'x' else None, markeredgewidth=0.8, color=colour)
+            axes.plot(
+                labels[inside],
+                values[inside],
+                linestyle='none',
+                marker=marker,
+                markersize=3.5,
+                markerfacecolor=colour if marker != 'x' else None,
+                markeredgewidth=0.8,
+                color=colour,
+            )
             for sign, edge_marker in ((1, '^'), (-1, 'v')):
                 out = chosen & (sign * values > CLIP_PCT)
                 if out.any():
-                    axes.plot(labels[out], np.full(out.sum(), sign * CLIP_PCT * 0.96), linestyle='none',
-                              marker=edge_marker, markersize=6, markerfacecolor='none', markeredgewidth=1.0,
-                              color=colour)
+                    axes.plot(
+                        labels[out],
+                        np.full(out.sum(), sign * CLIP_PCT * 0.96),
+                        linestyle='none',
+                        marker=edge_marker,
+                        markersize=6,
+                        markerfacecolor='none',
+                        markeredgewidth=1.0,
+                        color=colour,
+                    )
         axes.set_ylim(-CLIP_PCT * 1.04, CLIP_PCT * 1.04)
         axes.grid(True, linewidth=0.3)
         clipped = f'; {beyond} beyond ±{CLIP_PCT:g} %' if beyond else ''
-        axes.set_title(f'{_nice(component)}: σ = {sigma:.3f} %, 2σ = {2 * sigma:.3f} %{clipped}', fontsize=10)
+        axes.set_title(
+            f'{_nice(component)}: σ = {sigma:.3f} %, 2σ = {2 * sigma:.3f} %{clipped}', fontsize=10
+        )
         axes.set_ylabel(f'residual {_nice(component)} (% FS)', fontsize=9)
         if row == rows - 1:
             axes.set_xlabel('load point number', fontsize=9)
         axes.tick_params(labelsize=8)
-    handles = [Line2D([], [], linestyle='none', marker=m, color=c, markerfacecolor=c if m != 'x' else None,
-                      label=name) for _, name, m, c in _CATEGORIES]
-    handles.append(Line2D([], [], linestyle='none', marker='^', markerfacecolor='none', color='k',
-                          label=f'beyond ±{CLIP_PCT:g} % FS, drawn on the edge'))
-    figure.legend(handles=handles, loc='upper center', ncol=4, fontsize=9, frameon=False,
-                  bbox_to_anchor=(0.5, 1.0 - 0.45 / figure.get_figheight()))
+    handles = [
+        Line2D(
+            [],
+            [],
+            linestyle='none',
+            marker=m,
+            color=c,
+            markerfacecolor=c if m != 'x' else None,
+            label=name,
+        )
+        for _, name, m, c in _CATEGORIES
+    ]
+    handles.append(
+        Line2D(
+            [],
+            [],
+            linestyle='none',
+            marker='^',
+            markerfacecolor='none',
+            color='k',
+            label=f'beyond ±{CLIP_PCT:g} % FS, drawn on the edge',
+        )
+    )
+    figure.legend(
+        handles=handles,
+        loc='upper center',
+        ncol=4,
+        fontsize=9,
+        frameon=False,
+        bbox_to_anchor=(0.5, 1.0 - 0.45 / figure.get_figheight()),
+    )
     figure.suptitle(title, fontsize=12)
     figure.tight_layout(rect=(0, 0, 1, 1.0 - 0.75 / figure.get_figheight()))
     return _save(figure, path)
 
 
 def point_categories(points, config) -> np.ndarray:
-    """'single', 'combined' or 'zero' per load point (TM-663 Table 2 blocks when the config has them)."""
+    """'single', 'combined' or 'zero' per load point (TM-663 Table 2 blocks when the config has
+    them).
+    """
     categories = np.full(len(points.label), 'single', dtype=object)
     categories[combined_load_mask(points, config)] = 'combined'
     categories[np.asarray(points.is_zero_point)] = 'zero'
@@ -101,7 +148,11 @@ def point_categories(points, config) -> np.ndarray:
 
 _FACTOR_WORDS = [
     (re.compile(r'^dT$'), '(T − T_ref)', 'K'),
-    (re.compile(r'^dir_(\w+)$'), '{0} load direction, referred to the zero points (+1 rising, −1 falling)', ''),
+    (
+        re.compile(r'^dir_(\w+)$'),
+        '{0} load direction, referred to the zero points (+1 rising, −1 falling)',
+        '',
+    ),
     (re.compile(r'^\|(\w+)V\|$'), '|{0} bridge output|', 'mV'),
     (re.compile(r'^(\w+)V$'), '{0} bridge output', 'mV'),
     (re.compile(r'^drift_(sin|cos)_(\d+)$'), 'zero-drift {0} basis, harmonic {1}', ''),
@@ -109,7 +160,9 @@ _FACTOR_WORDS = [
 
 
 def describe_variable(name: str) -> tuple[str, str]:
-    """Words and unit for a diagnosis variable or term name ('dT*FXV' -> ('ΔT × F_X bridge output', 'K·mV'))."""
+    """Words and unit for a diagnosis variable or term name ('dT*FXV' -> ('ΔT × F_X bridge
+    output', 'K·mV')).
+    """
     if name.startswith('time'):
         return 'time since the first point', 'h'
     if name.startswith('orientation'):
@@ -128,20 +181,29 @@ def describe_variable(name: str) -> tuple[str, str]:
         exponent = int(power) if power.isdigit() else 1
         if exponent != 1:
             wrapped = ' ' in text and not (text.startswith('(') and text.endswith(')'))
-            text = f'({text}){_superscript(exponent)}' if wrapped else f'{text}{_superscript(exponent)}'
+            text = (
+                f'({text}){_superscript(exponent)}'
+                if wrapped
+                else f'{text}{_superscript(exponent)}'
+            )
         words.append(text)
         if unit:
             powers[unit] = powers.get(unit, 0) + exponent
-    return ' × '.join(words), '·'.join(u + (_superscript(n) if n != 1 else '') for u, n in powers.items())
+    return ' × '.join(words), '·'.join(
+        u + (_superscript(n) if n != 1 else '') for u, n in powers.items()
+    )
 
 
 def _superscript(number: int) -> str:
     return str(number).translate(str.maketrans('0123456789', '⁰¹²³⁴⁵⁶⁷⁸⁹'))
 
 
-def effect_figure(balance: str, effect, residuals_after: np.ndarray, capacity, components, path: Path) -> Path:
+def effect_figure(
+    balance: str, effect, residuals_after: np.ndarray, capacity, components, path: Path
+) -> Path:
     """Partial residual (residual of the adopted model + this effect, % FS) against the variable
-    that explains it, with the fitted effect; at most two panels per row."""
+    that explains it, with the fitted effect; at most two panels per row.
+    """
     from matplotlib.figure import Figure
 
     chosen = list(effect.components)
@@ -159,17 +221,34 @@ def effect_figure(balance: str, effect, residuals_after: np.ndarray, capacity, c
         contribution = np.asarray(effect.contribution[component], dtype=float) * scale
         partial = residuals_after[:, k] * scale + contribution
         axes = figure.add_subplot(rows, columns, i + 1)
-        axes.plot(x, partial, linestyle='none', marker='o', markersize=3, color='tab:blue',
-                  label='residual + effect')
+        axes.plot(
+            x,
+            partial,
+            linestyle='none',
+            marker='o',
+            markersize=3,
+            color='tab:blue',
+            label='residual + effect',
+        )
         order = np.argsort(x, kind='stable')
-        axes.plot(x[order], contribution[order], linestyle='none', marker='.', markersize=4, color='tab:red',
-                  label='fitted effect')
+        axes.plot(
+            x[order],
+            contribution[order],
+            linestyle='none',
+            marker='.',
+            markersize=4,
+            color='tab:red',
+            label='fitted effect',
+        )
         words, unit = describe_variable(variable)
         axes.set_xlabel(f'{words} ({unit})' if unit else words, fontsize=9)
         axes.set_ylabel(f'residual {_nice(component)} (% FS)', fontsize=9)
         axes.ticklabel_format(axis='x', useOffset=False, style='plain')
-        axes.set_title(f'{_nice(component)}: r = {effect.correlation[component]:.2f}, '
-                       f'removes {effect.removed_pct_fs[component]:.3f} % FS', fontsize=10)
+        axes.set_title(
+            f'{_nice(component)}: r = {effect.correlation[component]:.2f}, '
+            f'removes {effect.removed_pct_fs[component]:.3f} % FS',
+            fontsize=10,
+        )
         axes.grid(True, linewidth=0.3)
         axes.tick_params(labelsize=8)
         if i == 0:
@@ -180,7 +259,8 @@ def effect_figure(balance: str, effect, residuals_after: np.ndarray, capacity, c
 
 def residual_figures(result, directory: Path) -> list[Path]:
     """One figure per model (linear, quadratic, cubic, and the adopted one when the diagnosis
-    adopted effects), then one per effect."""
+    adopted effects), then one per effect.
+    """
     config = result.config
     labels = result.points.label
     capacity = np.asarray(config.capacity, dtype=float)
@@ -188,21 +268,45 @@ def residual_figures(result, directory: Path) -> list[Path]:
     figures = []
     for order, model_fit in result.fits.items():
         pct = model_fit.fit.residuals / capacity * 100.0
-        figures.append(residual_figure(pct, labels, categories, config.components,
-                                       f'{config.name}: residuals of the {order} model (cf. TM-663 Figs. 4-9)',
-                                       directory / f'residuals_{order}.png'))
+        figures.append(
+            residual_figure(
+                pct,
+                labels,
+                categories,
+                config.components,
+                f'{config.name}: residuals of the {order} model (cf. TM-663 Figs. 4-9)',
+                directory / f'residuals_{order}.png',
+            )
+        )
     diagnosis = result.diagnosis
     if diagnosis is not None and diagnosis.effects:
         adopted_labels = np.asarray(diagnosis.point_labels)
         adopted_categories = categories
         if not np.array_equal(adopted_labels, np.asarray(labels)):
             lookup = dict(zip(np.asarray(labels).tolist(), categories))
-            adopted_categories = np.array([lookup.get(label, 'single') for label in adopted_labels.tolist()], object)
+            adopted_categories = np.array(
+                [lookup.get(label, 'single') for label in adopted_labels.tolist()], object
+            )
         pct = diagnosis.residuals_after / capacity * 100.0
-        figures.append(residual_figure(pct, adopted_labels, adopted_categories, config.components,
-                                       f'{config.name}: residuals of the adopted model {diagnosis.adopted.name}',
-                                       directory / 'residuals_adopted.png'))
-        figures.extend(effect_figure(config.name, effect, diagnosis.residuals_after, capacity, config.components,
-                                     directory / f'effect_{effect.name}.png')
-                       for effect in diagnosis.effects)
+        figures.append(
+            residual_figure(
+                pct,
+                adopted_labels,
+                adopted_categories,
+                config.components,
+                f'{config.name}: residuals of the adopted model {diagnosis.adopted.name}',
+                directory / 'residuals_adopted.png',
+            )
+        )
+        figures.extend(
+            effect_figure(
+                config.name,
+                effect,
+                diagnosis.residuals_after,
+                capacity,
+                config.components,
+                directory / f'effect_{effect.name}.png',
+            )
+            for effect in diagnosis.effects
+        )
     return figures

@@ -5,6 +5,7 @@ temperature, true loads and load history. None of them is known to the refit: th
 diagnosis of the residuals (diagnosis/) has to find. Sizes are given in physical units; see
 `SIZES_NOTE` for what 'a few times the noise floor' means for them.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -21,15 +22,15 @@ from ..model.terms import parse_terms
 class SampleContext:
     """Per-sample facts an effect may depend on (S samples)."""
 
-    times_s: np.ndarray            # (S,)
-    temperature_c: np.ndarray      # (S,)
-    loads: np.ndarray              # (S, 6) true total load (applied + body), N / N·m
-    outputs_mv: np.ndarray         # (S, 6) outputs of the balance without effects (no zero, no noise)
-    direction: np.ndarray          # (S, 6) +1 if the load on that bridge last rose, -1 if it fell
-    rated_output_mv: np.ndarray    # (6,)
+    times_s: np.ndarray  # (S,)
+    temperature_c: np.ndarray  # (S,)
+    loads: np.ndarray  # (S, 6) true total load (applied + body), N / N·m
+    outputs_mv: np.ndarray  # (S, 6) outputs of the balance without effects (no zero, no noise)
+    direction: np.ndarray  # (S, 6) +1 if the load on that bridge last rose, -1 if it fell
+    rated_output_mv: np.ndarray  # (6,)
     reference_temperature_c: float
-    capacity: np.ndarray | None = None        # (6,) rated loads, N / N·m
-    gravity: np.ndarray | None = None         # (S, 3) unit gravity vector, balance axes
+    capacity: np.ndarray | None = None  # (6,) rated loads, N / N·m
+    gravity: np.ndarray | None = None  # (S, 3) unit gravity vector, balance axes
     settled_since_s: np.ndarray | None = None  # (S,) physical time the sample's load was reached
 
 
@@ -66,12 +67,18 @@ class Temperature(Effect):
 
     def outputs(self, outputs_mv, ctx):
         d_t = (ctx.temperature_c - ctx.reference_temperature_c)[:, None]
-        return outputs_mv + _vector(self.zero_mv_per_k) * d_t + _vector(self.sensitivity_per_k) * d_t * ctx.outputs_mv
+        return (
+            outputs_mv
+            + _vector(self.zero_mv_per_k) * d_t
+            + _vector(self.sensitivity_per_k) * d_t * ctx.outputs_mv
+        )
 
 
 @dataclass(frozen=True)
 class ZeroDrift(Effect):
-    """Zero wandering faster than the bracketing zero points follow: a sum of sines, mV per bridge."""
+    """Zero wandering faster than the bracketing zero points follow: a sum of sines, mV per
+    bridge.
+    """
 
     amplitude_mv: ArrayLike = 0.0
     period_s: float = 900.0
@@ -80,13 +87,17 @@ class ZeroDrift(Effect):
 
     def outputs(self, outputs_mv, ctx):
         t = ctx.times_s[:, None]
-        wave = np.sin(2 * np.pi * t / self.period_s + self.phase) + 0.5 * np.sin(2 * np.pi * t / (0.37 * self.period_s))
+        wave = np.sin(2 * np.pi * t / self.period_s + self.phase) + 0.5 * np.sin(
+            2 * np.pi * t / (0.37 * self.period_s)
+        )
         return outputs_mv + _vector(self.amplitude_mv) * wave / 1.5
 
 
 @dataclass(frozen=True)
 class Hysteresis(Effect):
-    """Output depends on whether the load on that bridge was rising or falling: ±h of rated output."""
+    """Output depends on whether the load on that bridge was rising or falling: ±h of rated
+    output.
+    """
 
     fraction_of_rated: ArrayLike = 0.0
     name = 'hysteresis'
@@ -118,16 +129,23 @@ class CrossTerms(Effect):
 
     def truth(self, model):
         names = list(model.term_names)
-        extra = [t.name for t in parse_terms({n for row in self.coefficients.values() for n in row})
-                 if t.name not in names]
+        extra = [
+            t.name
+            for t in parse_terms({n for row in self.coefficients.values() for n in row})
+            if t.name not in names
+        ]
         terms = tuple(model.terms) + parse_terms(sorted(extra))
-        coefficients = np.hstack([np.array(model.coefficients), np.zeros((len(model.components), len(extra)))])
+        coefficients = np.hstack(
+            [np.array(model.coefficients), np.zeros((len(model.components), len(extra)))]
+        )
         all_names = [t.name for t in terms]
         for component, row in self.coefficients.items():
             for term, value in row.items():
                 index = all_names.index(parse_terms([term])[0].name)
                 coefficients[model.components.index(component), index] += value
-        return BalanceModel(model.name + '+cross', terms, coefficients, model.components, model.inputs)
+        return BalanceModel(
+            model.name + '+cross', terms, coefficients, model.components, model.inputs
+        )
 
 
 @dataclass(frozen=True)
@@ -141,11 +159,10 @@ class HeavierBody(Effect):
         return self.weight_factor
 
 
-
-
 # --- alternative shapes ------------------------------------------------------------------------
 # Written from the physics, not from the diagnosis's candidate terms (diagnosis/candidates.py): the
 # diagnosis has to find these with terms that fit them only approximately.
+
 
 def _play(values: np.ndarray, half_width: np.ndarray) -> np.ndarray:
     """Play (backlash) operator on each column of values (S, n), starting at the first value."""
@@ -172,14 +189,15 @@ class PlayHysteresis(Effect):
 
     def outputs(self, outputs_mv, ctx):
         half = self.width_fraction * ctx.rated_output_mv
-        lag = (ctx.outputs_mv - _play(ctx.outputs_mv, half)) / half        # in [-1, 1]
+        lag = (ctx.outputs_mv - _play(ctx.outputs_mv, half)) / half  # in [-1, 1]
         return outputs_mv + _vector(self.fraction_of_rated) * ctx.rated_output_mv * lag
 
 
 @dataclass(frozen=True)
 class TurningPointHysteresis(Effect):
     """Loop offset growing with the distance the load travelled since its last turning point:
-    ±h x rated x (1 - exp(-|V - V_turn| / (scale x rated))), sign of the direction of travel."""
+    ±h x rated x (1 - exp(-|V - V_turn| / (scale x rated))), sign of the direction of travel.
+    """
 
     fraction_of_rated: ArrayLike = 0.0
     scale_fraction: float = 0.3
@@ -212,7 +230,8 @@ def lagged_temperature(times_s, temperature_c, lag_s: float) -> np.ndarray:
 class TemperatureShapes(Effect):
     """Temperature acting through dT² and/or a lagged gauge temperature:
     V += z2·dT'² and V *= 1 + s·dT' + s2·dT'², dT' the gauge temperature lagging the measured one
-    by a first-order lag of lag_s (0: no lag). The refit only sees the measured temperature."""
+    by a first-order lag of lag_s (0: no lag). The refit only sees the measured temperature.
+    """
 
     sensitivity_per_k: ArrayLike = 0.0
     sensitivity_per_k2: ArrayLike = 0.0
@@ -223,8 +242,8 @@ class TemperatureShapes(Effect):
     def outputs(self, outputs_mv, ctx):
         gauge = lagged_temperature(ctx.times_s, ctx.temperature_c, self.lag_s)
         d_t = (gauge - ctx.reference_temperature_c)[:, None]
-        gain = _vector(self.sensitivity_per_k) * d_t + _vector(self.sensitivity_per_k2) * d_t ** 2
-        return outputs_mv + _vector(self.zero_mv_per_k2) * d_t ** 2 + gain * ctx.outputs_mv
+        gain = _vector(self.sensitivity_per_k) * d_t + _vector(self.sensitivity_per_k2) * d_t**2
+        return outputs_mv + _vector(self.zero_mv_per_k2) * d_t**2 + gain * ctx.outputs_mv
 
 
 def _load_steps(ctx: SampleContext):
@@ -241,7 +260,8 @@ def _load_steps(ctx: SampleContext):
 @dataclass(frozen=True)
 class Creep(Effect):
     """Output relaxing after each load change with two time constants:
-    V(t) = V - c Σ_i ΔV_i Σ_j w_j exp(-(t - t_i)/τ_j) over the load steps i before t."""
+    V(t) = V - c Σ_i ΔV_i Σ_j w_j exp(-(t - t_i)/τ_j) over the load steps i before t.
+    """
 
     fraction: ArrayLike = 0.0
     time_constants_s: Sequence[float] = (40.0, 400.0)
@@ -250,7 +270,7 @@ class Creep(Effect):
 
     def outputs(self, outputs_mv, ctx):
         step_times, steps = _load_steps(ctx)
-        age = ctx.times_s[:, None] - step_times[None, :]                 # (S, M)
+        age = ctx.times_s[:, None] - step_times[None, :]  # (S, M)
         kernel = np.zeros_like(age)
         for tau, w in zip(self.time_constants_s, self.weights):
             kernel += w * np.exp(-np.clip(age, 0.0, None) / tau)
@@ -261,7 +281,8 @@ class Creep(Effect):
 @dataclass(frozen=True)
 class SupplyDrift(Effect):
     """The bridge supply (excitation) drifting: every bridge output x (1 + g(t)),
-    g = gain_per_hour x hours + the steps (time s, relative step) that have happened by then."""
+    g = gain_per_hour x hours + the steps (time s, relative step) that have happened by then.
+    """
 
     gain_per_hour: float = 0.0
     steps: Sequence[Sequence[float]] = ()
@@ -278,20 +299,25 @@ class SupplyDrift(Effect):
 @dataclass(frozen=True)
 class LoadSignBidirectional(Effect):
     """Sensitivity different for positive and negative *load* on a component (not output):
-    V_k += b_k x rated output_k x |L_k| / capacity_k."""
+    V_k += b_k x rated output_k x |L_k| / capacity_k.
+    """
 
     asymmetry: ArrayLike = 0.0
     name = 'bidirectional'
 
     def outputs(self, outputs_mv, ctx):
-        return outputs_mv + _vector(self.asymmetry) * ctx.rated_output_mv * np.abs(ctx.loads) / ctx.capacity
+        return (
+            outputs_mv
+            + _vector(self.asymmetry) * ctx.rated_output_mv * np.abs(ctx.loads) / ctx.capacity
+        )
 
 
 # --- outside every family: what the diagnosis must call "unexplained" ------------------------
 @dataclass(frozen=True)
 class NeighbourDeadBand(Effect):
     """A load on one component leaking into the next bridge only beyond a dead band:
-    V_target += a x rated_target x max(|L_source|/capacity - d, 0) / (1 - d)."""
+    V_target += a x rated_target x max(|L_source|/capacity - d, 0) / (1 - d).
+    """
 
     fraction_of_rated: float = 0.0
     source: int = 0
@@ -300,7 +326,7 @@ class NeighbourDeadBand(Effect):
     name = 'neighbour_dead_band'
 
     def outputs(self, outputs_mv, ctx):
-        source, target = int(self.source), int(self.target)      # a parameter string gives floats
+        source, target = int(self.source), int(self.target)  # a parameter string gives floats
         x = np.abs(ctx.loads[:, source]) / ctx.capacity[source]
         leak = np.clip(x - self.dead_band, 0.0, None) / (1.0 - self.dead_band)
         out = outputs_mv.copy()
@@ -311,7 +337,9 @@ class NeighbourDeadBand(Effect):
 @dataclass(frozen=True)
 class GravityTimeNonlinearity(Effect):
     """A bridge curvature that grows in time and flips with the gravity direction:
-    V_k += a x g_z x (t / campaign) x V_k |V_k| / rated_k (a mounting that settles under its own weight)."""
+    V_k += a x g_z x (t / campaign) x V_k |V_k| / rated_k (a mounting that settles under its own
+    weight).
+    """
 
     fraction_of_rated: ArrayLike = 0.0
     name = 'gravity_time'
@@ -324,17 +352,28 @@ class GravityTimeNonlinearity(Effect):
         return outputs_mv + _vector(self.fraction_of_rated) * g * (t / span)[:, None] * shape
 
 
-EFFECTS = {cls.name: cls for cls in (Temperature, ZeroDrift, Hysteresis, Bidirectional, CrossTerms, HeavierBody)}
-ALTERNATIVE_EFFECTS = {'play_hysteresis': PlayHysteresis, 'turning_hysteresis': TurningPointHysteresis,
-                       'temperature_shapes': TemperatureShapes, 'creep': Creep, 'supply_drift': SupplyDrift,
-                       'load_sign_bidirectional': LoadSignBidirectional,
-                       'neighbour_dead_band': NeighbourDeadBand, 'gravity_time': GravityTimeNonlinearity}
+EFFECTS = {
+    cls.name: cls
+    for cls in (Temperature, ZeroDrift, Hysteresis, Bidirectional, CrossTerms, HeavierBody)
+}
+ALTERNATIVE_EFFECTS = {
+    'play_hysteresis': PlayHysteresis,
+    'turning_hysteresis': TurningPointHysteresis,
+    'temperature_shapes': TemperatureShapes,
+    'creep': Creep,
+    'supply_drift': SupplyDrift,
+    'load_sign_bidirectional': LoadSignBidirectional,
+    'neighbour_dead_band': NeighbourDeadBand,
+    'gravity_time': GravityTimeNonlinearity,
+}
 
 
 def parse_effects(spec: str) -> list[Effect]:
     """Effects from a parameter string, e.g.
-    "temperature:sensitivity_per_k=2e-4; hysteresis:fraction_of_rated=3e-4; tare:weight_factor=1.01;
-     cross_terms:FX.FXV^2*FZV=40; bidirectional:asymmetry=1e-3|0|0|0|0|0; zero_drift:amplitude_mv=0.002,period_s=900"
+    "temperature:sensitivity_per_k=2e-4; hysteresis:fraction_of_rated=3e-4;
+    tare:weight_factor=1.01;
+     cross_terms:FX.FXV^2*FZV=40; bidirectional:asymmetry=1e-3|0|0|0|0|0;
+     zero_drift:amplitude_mv=0.002,period_s=900"
     Values are numbers, or per-bridge lists separated by |. Raises ValueError naming the bad part.
     """
     names = {'tare': HeavierBody, **EFFECTS, **ALTERNATIVE_EFFECTS}
@@ -345,7 +384,9 @@ def parse_effects(spec: str) -> list[Effect]:
         name, _, args = part.partition(':')
         name = name.strip()
         if name not in names:
-            raise ValueError(f'unknown effect {name!r} in {spec!r}; known: {", ".join(sorted(names))}')
+            raise ValueError(
+                f'unknown effect {name!r} in {spec!r}; known: {", ".join(sorted(names))}'
+            )
         kwargs: dict = {}
         cross: dict = {}
         for item in (a.strip() for a in args.split(',') if a.strip()):
@@ -362,7 +403,9 @@ def parse_effects(spec: str) -> list[Effect]:
             else:
                 kwargs[key.strip()] = number
         try:
-            effects.append(names[name](coefficients=cross) if name == 'cross_terms' else names[name](**kwargs))
+            effects.append(
+                names[name](coefficients=cross) if name == 'cross_terms' else names[name](**kwargs)
+            )
         except TypeError as err:
             raise ValueError(f'effect {name}: {err}') from None
     return effects

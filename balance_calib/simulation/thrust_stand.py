@@ -27,6 +27,7 @@ Signals: strain channel in mV (`force.x` of /balance/raw, the other five 0), cha
 pressure p_G in Pa (/thrust_stand/chamber_pressure) and ambient pressure p_a in Pa
 (/thrust_stand/ambient_pressure).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -34,8 +35,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..thrust_stand.calibration import CalibrationReadings
-from ..thrust_stand.nozzle import (DEFAULT_CHAMBER_K, STANDARD_ATMOSPHERE_PA, Nozzle, shock_free_ambient_ratio,
-                                   thrust_n as ideal_thrust_n)
+from ..thrust_stand.nozzle import (
+    DEFAULT_CHAMBER_K,
+    Nozzle,
+    shock_free_ambient_ratio,
+    STANDARD_ATMOSPHERE_PA,
+)
+from ..thrust_stand.nozzle import (
+    thrust_n as ideal_thrust_n,
+)
 from ..units import STANDARD_GRAVITY_M_S2
 
 # five lead fishing sinkers of "about 85 g", not identical (§3.1 item 12, §4.2)
@@ -48,20 +56,20 @@ FIRING_RING_AMPLITUDE = 0.3
 class Segment:
     """A stretch of the cycle with one valve / load state."""
 
-    kind: str                  # idle, firing, pressurise, loaded, unloaded, depressurise
+    kind: str  # idle, firing, pressurise, loaded, unloaded, depressurise
     start_s: float
     end_s: float
-    nozzle_open: bool          # False while plugged for the calibration
-    gauge_target_pa: float     # the chamber gauge pressure approaches this
-    applied_load_n: float      # weights + pan hanging on the stand (calibration), else 0
-    weights: int = 0           # how many weights on the pan (loaded steps)
+    nozzle_open: bool  # False while plugged for the calibration
+    gauge_target_pa: float  # the chamber gauge pressure approaches this
+    applied_load_n: float  # weights + pan hanging on the stand (calibration), else 0
+    weights: int = 0  # how many weights on the pan (loaded steps)
 
 
 @dataclass(frozen=True)
 class ThrustStandSample:
-    strain_mv: float | np.ndarray           # strain channel, mV
-    chamber_gauge_pa: float | np.ndarray    # p_G, gauge (manual footnote 5)
-    ambient_pa: float | np.ndarray          # p_a, absolute
+    strain_mv: float | np.ndarray  # strain channel, mV
+    chamber_gauge_pa: float | np.ndarray  # p_G, gauge (manual footnote 5)
+    ambient_pa: float | np.ndarray  # p_a, absolute
 
     def bridge_outputs_mv(self) -> np.ndarray:
         """(6,) or (N, 6): FXV = strain channel, the other five bridge outputs 0 (/balance/raw)."""
@@ -75,7 +83,8 @@ class ThrustStandSimulator:
     """The manual's stand: one strain channel, chamber and ambient pressure, in simulated time.
 
     Keyword parameters (SI; defaults give about 3.4 N ideal thrust at p_G = 0.5 MPa):
-      nozzle                  Nozzle (default the manual's D_t 2.5 mm, D_e 3.3 mm, γ 1.402, R 287.1)
+      nozzle                  Nozzle (default the manual's D_t 2.5 mm, D_e 3.3 mm, γ 1.402, R
+                              287.1)
       efficiency              measured / ideal thrust during firing, < 1 (default 0.75)
       calibration_slope_n_per_mv  true sensitivity a of the stand, N per mV (default 5.0)
       zero_offset_mv          strain reading with nothing applied (default 0.05)
@@ -86,7 +95,8 @@ class ThrustStandSimulator:
       ambient_pa              p_a (101325)
       chamber_k               T_c, for the record; the thrust does not depend on it (eq. (5))
       firings                 number of firings per cycle (2)
-      idle_s, firing_s, step_s  durations of idle/venting, firing and each calibration step (2, 3, 2 s)
+      idle_s, firing_s, step_s  durations of idle/venting, firing and each calibration step (2, 3,
+                                2 s)
       settle_s                time after a change before the reading counts as steady (0.5 s)
       pressure_rise_s, pressure_decay_s  first-order time constants of p_G (0.1 s, 0.6 s)
       ring_frequency_hz, ring_damping_ratio  the stand's ringing after a force step (10 Hz, 0.15)
@@ -95,22 +105,45 @@ class ThrustStandSimulator:
       seed                    noise generator seed
     """
 
-    def __init__(self, *, nozzle: Nozzle = Nozzle(), efficiency: float = 0.75,
-                 calibration_slope_n_per_mv: float = 5.0, zero_offset_mv: float = 0.05,
-                 weight_masses_kg=DEFAULT_WEIGHT_MASSES_KG, pan_mass_kg: float = 0.015,
-                 hysteresis_fraction: float = 0.01, firing_gauge_pa: float = 0.5e6,
-                 ambient_pa: float = STANDARD_ATMOSPHERE_PA, chamber_k: float = DEFAULT_CHAMBER_K,
-                 firings: int = 2, idle_s: float = 2.0, firing_s: float = 3.0, step_s: float = 2.0,
-                 settle_s: float = 0.5, pressure_rise_s: float = 0.1, pressure_decay_s: float = 0.6,
-                 ring_frequency_hz: float = 10.0, ring_damping_ratio: float = 0.15,
-                 strain_noise_mv: float = 0.001, gauge_noise_pa: float = 1500.0, ambient_noise_pa: float = 10.0,
-                 repeat: bool = True, seed: int | None = 0):
+    def __init__(
+        self,
+        *,
+        nozzle: Nozzle = Nozzle(),
+        efficiency: float = 0.75,
+        calibration_slope_n_per_mv: float = 5.0,
+        zero_offset_mv: float = 0.05,
+        weight_masses_kg=DEFAULT_WEIGHT_MASSES_KG,
+        pan_mass_kg: float = 0.015,
+        hysteresis_fraction: float = 0.01,
+        firing_gauge_pa: float = 0.5e6,
+        ambient_pa: float = STANDARD_ATMOSPHERE_PA,
+        chamber_k: float = DEFAULT_CHAMBER_K,
+        firings: int = 2,
+        idle_s: float = 2.0,
+        firing_s: float = 3.0,
+        step_s: float = 2.0,
+        settle_s: float = 0.5,
+        pressure_rise_s: float = 0.1,
+        pressure_decay_s: float = 0.6,
+        ring_frequency_hz: float = 10.0,
+        ring_damping_ratio: float = 0.15,
+        strain_noise_mv: float = 0.001,
+        gauge_noise_pa: float = 1500.0,
+        ambient_noise_pa: float = 10.0,
+        repeat: bool = True,
+        seed: int | None = 0,
+    ):
         if not 0 < efficiency <= 1:
             raise ValueError(f'efficiency must be in (0, 1], got {efficiency}')
         if calibration_slope_n_per_mv <= 0:
             raise ValueError('calibration_slope_n_per_mv must be positive')
-        if min(idle_s, firing_s, step_s, pressure_rise_s, pressure_decay_s) <= 0 or not 0 <= settle_s < step_s:
-            raise ValueError('durations and time constants must be positive, settle_s shorter than step_s')
+        if (
+            min(idle_s, firing_s, step_s, pressure_rise_s, pressure_decay_s) <= 0
+            or not 0 <= settle_s < step_s
+        ):
+            raise ValueError(
+                'durations and time constants must be positive, settle_s shorter than step_s'
+            )
         if firing_gauge_pa <= 0 or ambient_pa <= 0 or firings < 0:
             raise ValueError('firing_gauge_pa and ambient_pa must be positive, firings >= 0')
         self.nozzle = nozzle
@@ -174,14 +207,20 @@ class ThrustStandSimulator:
 
     def _pressure_in(self, segment: Segment, start_pa, elapsed_s):
         tau = self.pressure_rise_s if segment.gauge_target_pa > start_pa else self.pressure_decay_s
-        return segment.gauge_target_pa + (start_pa - segment.gauge_target_pa) * np.exp(-elapsed_s / tau)
+        return segment.gauge_target_pa + (start_pa - segment.gauge_target_pa) * np.exp(
+            -elapsed_s / tau
+        )
 
     def _segment_sets(self) -> np.ndarray:
         """Leaf-spring set (mV) during each segment: grows at each loaded step, then stays."""
         sets, total = [], 0.0
         for segment in self.segments:
             if segment.kind == 'loaded':
-                total += self.hysteresis_fraction * segment.applied_load_n / self.calibration_slope_n_per_mv
+                total += (
+                    self.hysteresis_fraction
+                    * segment.applied_load_n
+                    / self.calibration_slope_n_per_mv
+                )
             sets.append(total)
         return np.array(sets)
 
@@ -192,9 +231,17 @@ class ThrustStandSimulator:
         chamber = gauge + self.ambient_pa
         shock_free_chamber_pa = self.ambient_pa / self._shock_free_ratio
         ratio = self.nozzle.pe_over_pc()
-        ideal = ideal_thrust_n(np.maximum(chamber, shock_free_chamber_pa), self.ambient_pa,
-                               self.nozzle.throat_area_m2, self.nozzle.exit_area_m2, ratio, self.nozzle.gamma)
-        ramp = np.clip((chamber - self.ambient_pa) / (shock_free_chamber_pa - self.ambient_pa), 0.0, 1.0)
+        ideal = ideal_thrust_n(
+            np.maximum(chamber, shock_free_chamber_pa),
+            self.ambient_pa,
+            self.nozzle.throat_area_m2,
+            self.nozzle.exit_area_m2,
+            ratio,
+            self.nozzle.gamma,
+        )
+        ramp = np.clip(
+            (chamber - self.ambient_pa) / (shock_free_chamber_pa - self.ambient_pa), 0.0, 1.0
+        )
         thrust = np.where(chamber >= shock_free_chamber_pa, ideal, ideal * ramp)
         return self.efficiency * thrust
 
@@ -206,7 +253,9 @@ class ThrustStandSimulator:
     @property
     def firing_cf(self) -> float:
         """The C_F a perfect measurement of a steady firing gives: efficiency x eq. (12)."""
-        return self.firing_thrust_n / ((self.firing_gauge_pa + self.ambient_pa) * self.nozzle.throat_area_m2)
+        return self.firing_thrust_n / (
+            (self.firing_gauge_pa + self.ambient_pa) * self.nozzle.throat_area_m2
+        )
 
     def _cycle_time(self, time_s: np.ndarray) -> np.ndarray:
         if self.repeat:
@@ -215,8 +264,11 @@ class ThrustStandSimulator:
 
     def _noise_free(self, time_s):
         t = self._cycle_time(np.asarray(time_s, dtype=float))
-        index = np.clip(np.searchsorted([s.start_s for s in self.segments], t, side='right') - 1,
-                        0, len(self.segments) - 1)
+        index = np.clip(
+            np.searchsorted([s.start_s for s in self.segments], t, side='right') - 1,
+            0,
+            len(self.segments) - 1,
+        )
         gauge = np.zeros_like(t)
         force = np.zeros_like(t)
         strain_extra = self._set_mv[index]
@@ -224,7 +276,9 @@ class ThrustStandSimulator:
             mask = index == i
             if not np.any(mask):
                 continue
-            gauge[mask] = self._pressure_in(segment, self._start_gauge_pa[i], t[mask] - segment.start_s)
+            gauge[mask] = self._pressure_in(
+                segment, self._start_gauge_pa[i], t[mask] - segment.start_s
+            )
             if segment.nozzle_open:
                 force[mask] = self.thrust_at_gauge_pa(gauge[mask])
             else:
@@ -234,15 +288,17 @@ class ThrustStandSimulator:
         return strain, gauge, force
 
     def _ringing_mv(self, t: np.ndarray) -> np.ndarray:
-        """Deviation from the final value of a second-order step response, summed over force steps."""
+        """Deviation from the final value of a second-order step response, summed over force
+        steps.
+        """
         omega = 2 * np.pi * self.ring_frequency_hz
         zeta = self.ring_damping_ratio
-        omega_d = omega * np.sqrt(1 - zeta ** 2)
+        omega_d = omega * np.sqrt(1 - zeta**2)
         ringing = np.zeros_like(t)
         last_load_n = 0.0
         for segment in self.segments:
             if segment.kind == 'firing':
-                step = self.firing_thrust_n        # the valve opens fast; closing vents slowly, no ring
+                step = self.firing_thrust_n  # the valve opens fast; closing vents slowly, no ring
             elif segment.kind == 'loaded':
                 step = last_load_n = segment.applied_load_n
             elif segment.kind == 'unloaded':
@@ -256,13 +312,16 @@ class ThrustStandSimulator:
                 # thrust builds with the chamber pressure, not as a step: an overshoot from zero
                 shape = FIRING_RING_AMPLITUDE * decay * np.sin(omega_d * elapsed[active])
             else:
-                shape = -decay * np.cos(omega_d * elapsed[active])   # step response minus final value
+                # step response minus final value
+                shape = -decay * np.cos(omega_d * elapsed[active])
             ringing[active] += step / self.calibration_slope_n_per_mv * shape
         return ringing
 
     # --- what the node calls ------------------------------------------------------------------
     def sample(self, time_s) -> ThrustStandSample:
-        """The three signals at time_s (s from the start of the run; scalar or (N,) array), with noise."""
+        """The three signals at time_s (s from the start of the run; scalar or (N,) array), with
+        noise.
+        """
         scalar = np.ndim(time_s) == 0
         strain, gauge, _ = self._noise_free(np.atleast_1d(time_s))
         strain = strain + self.strain_noise_mv * self._rng.standard_normal(strain.shape)
@@ -279,7 +338,8 @@ class ThrustStandSimulator:
     def applied_load_events(self) -> tuple[tuple[float, float], ...]:
         """(time_s, F_X in N) for /calibration/applied_load during one cycle: NaN when a step
         begins (weights being changed), the load hanging (weights + pan; 0 for the unloaded,
-        zero points) once it has settled. Add k·duration_s in the k-th repetition."""
+        zero points) once it has settled. Add k·duration_s in the k-th repetition.
+        """
         events = []
         for segment in self.segments:
             if segment.kind in ('loaded', 'unloaded'):
@@ -289,11 +349,14 @@ class ThrustStandSimulator:
 
     def firing_windows(self) -> tuple[tuple[float, float], ...]:
         """(start_s, end_s) of the steady part of each firing in one cycle."""
-        return tuple((s.start_s + self.settle_s, s.end_s) for s in self.segments if s.kind == 'firing')
+        return tuple(
+            (s.start_s + self.settle_s, s.end_s) for s in self.segments if s.kind == 'firing'
+        )
 
     def calibration_readings(self, sample_rate_hz: float = 200.0) -> CalibrationReadings:
         """What the student writes down in §4.2: each step's steady strain reading (averaged),
-        with the weights' true masses. Uses (and advances) the noise generator."""
+        with the weights' true masses. Uses (and advances) the noise generator.
+        """
         loaded, unloaded = [], []
         for segment in self.segments:
             if segment.kind not in ('loaded', 'unloaded'):

@@ -5,6 +5,7 @@ The node walks the timeline in real time (times x `speed`) and only turns events
 Events at the same time are published in kind order (gravity, applied load, raw sample, ...),
 then in the order they were added, and share one header stamp.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -15,14 +16,22 @@ from ..config import LoadSchedule
 from .balance_sim import Campaign
 
 GRAVITY, APPLIED_LOAD, RAW, TRUTH, TEMPERATURE, CHAMBER_PRESSURE, AMBIENT_PRESSURE = range(7)
-KIND_NAMES = ('gravity', 'applied_load', 'raw', 'truth', 'temperature', 'chamber_pressure', 'ambient_pressure')
+KIND_NAMES = (
+    'gravity',
+    'applied_load',
+    'raw',
+    'truth',
+    'temperature',
+    'chamber_pressure',
+    'ambient_pressure',
+)
 
 
 @dataclass(frozen=True)
 class Timeline:
-    times_s: np.ndarray     # (E,) non-decreasing
-    kinds: np.ndarray       # (E,) one of the kinds above
-    values: np.ndarray      # (E, 6) payload: 6 loads or outputs, 3 gravity components, 1 scalar
+    times_s: np.ndarray  # (E,) non-decreasing
+    kinds: np.ndarray  # (E,) one of the kinds above
+    values: np.ndarray  # (E, 6) payload: 6 loads or outputs, 3 gravity components, 1 scalar
 
     def __len__(self) -> int:
         return len(self.times_s)
@@ -46,7 +55,7 @@ def events(times_s, kind: int, values) -> Timeline:
     if values.ndim <= 1:
         payload[:, 0] = np.broadcast_to(values, times.shape)
     else:
-        payload[:, :values.shape[1]] = values
+        payload[:, : values.shape[1]] = values
     return Timeline(times, np.full(len(times), kind), payload)
 
 
@@ -64,13 +73,16 @@ def decimate(times_s, every: int) -> np.ndarray:
     return np.arange(0, len(times_s), max(int(every), 1))
 
 
-def campaign_timeline(campaign: Campaign, transition_s: float, temperature_every: int = 1) -> Timeline:
+def campaign_timeline(
+    campaign: Campaign, transition_s: float, temperature_every: int = 1
+) -> Timeline:
     """A calibration campaign as interfaces.md has it on the wire.
 
     Per point p: when the body is rotated (orientation differs from the previous point, or first
     point), /calibration/gravity at the start of the transition; an all-NaN applied_load there
     ("weights being changed", only when there is a transition); the applied_load when the point
-    settles (start_s); the raw samples at their times; temperature every `temperature_every` samples.
+    settles (start_s); the raw samples at their times; temperature every `temperature_every`
+    samples.
     """
     n = len(campaign.point)
     changes = np.ones(n, dtype=bool)
@@ -86,22 +98,35 @@ def campaign_timeline(campaign: Campaign, transition_s: float, temperature_every
     return merge(*parts)
 
 
-def wind_on_timeline(times_s, raw_mv, truth_tunnel, temperature_c: float, temperature_every: int = 1) -> Timeline:
-    """Raw samples with the true aerodynamic load (tunnel axes) at the same time, and temperature."""
+def wind_on_timeline(
+    times_s, raw_mv, truth_tunnel, temperature_c: float, temperature_every: int = 1
+) -> Timeline:
+    """Raw samples with the true aerodynamic load (tunnel axes) at the same time, and
+    temperature.
+    """
     keep = decimate(times_s, temperature_every)
-    return merge(events(times_s, RAW, raw_mv), events(times_s, TRUTH, truth_tunnel),
-                 events(np.asarray(times_s)[keep], TEMPERATURE, temperature_c))
+    return merge(
+        events(times_s, RAW, raw_mv),
+        events(times_s, TRUTH, truth_tunnel),
+        events(np.asarray(times_s)[keep], TEMPERATURE, temperature_c),
+    )
 
 
-def thrust_stand_timeline(times_s, strain_mv, chamber_gauge_pa, ambient_pa, pressure_every: int = 1) -> Timeline:
+def thrust_stand_timeline(
+    times_s, strain_mv, chamber_gauge_pa, ambient_pa, pressure_every: int = 1
+) -> Timeline:
     """The thrust stand's one strain channel on /balance/raw force.x, and its two pressures."""
     times = np.asarray(times_s, dtype=float)
     raw = np.zeros((len(times), 6))
     raw[:, 0] = np.asarray(strain_mv, dtype=float)
     keep = decimate(times, pressure_every)
-    return merge(events(times, RAW, raw),
-                 events(times[keep], CHAMBER_PRESSURE, np.broadcast_to(chamber_gauge_pa, times.shape)[keep]),
-                 events(times[keep], AMBIENT_PRESSURE, np.broadcast_to(ambient_pa, times.shape)[keep]))
+    return merge(
+        events(times, RAW, raw),
+        events(
+            times[keep], CHAMBER_PRESSURE, np.broadcast_to(chamber_gauge_pa, times.shape)[keep]
+        ),
+        events(times[keep], AMBIENT_PRESSURE, np.broadcast_to(ambient_pa, times.shape)[keep]),
+    )
 
 
 def parse_point_ranges(spec: str) -> list[tuple[int, int]]:
@@ -114,7 +139,9 @@ def parse_point_ranges(spec: str) -> list[tuple[int, int]]:
         try:
             ranges.append((int(low), int(high)) if dash else (int(low), int(low)))
         except ValueError:
-            raise ValueError(f'points {spec!r}: {part!r} is not a point number or a range like 1-60') from None
+            raise ValueError(
+                f'points {spec!r}: {part!r} is not a point number or a range like 1-60'
+            ) from None
     return ranges
 
 
@@ -127,7 +154,13 @@ def select_points(schedule: LoadSchedule, spec: str) -> LoadSchedule:
     for low, high in ranges:
         mask |= (schedule.point >= low) & (schedule.point <= high)
     if not mask.any():
-        raise ValueError(f'points {spec!r}: no point of the schedule (points {schedule.point.min()}'
-                         f'-{schedule.point.max()}) is in that range')
-    return LoadSchedule(schedule.point[mask], schedule.orientation[mask], schedule.loads[mask],
-                        tuple(b for b, m in zip(schedule.byproduct, mask) if m))
+        raise ValueError(
+            f'points {spec!r}: no point of the schedule (points {schedule.point.min()}'
+            f'-{schedule.point.max()}) is in that range'
+        )
+    return LoadSchedule(
+        schedule.point[mask],
+        schedule.orientation[mask],
+        schedule.loads[mask],
+        tuple(b for b, m in zip(schedule.byproduct, mask) if m),
+    )

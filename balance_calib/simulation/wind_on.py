@@ -16,8 +16,10 @@ wind-on alike, which the calibrator's tare removes; its change with α is delibe
 `aero_run_profile` is the physical run of TM-663 §10.3 for the data reduction (aero/): a model
 file's reference lengths and moment reference centre, a dynamic pressure, the model's weight acting
 at its centre of gravity at each attitude, and the sting's deflection under the total load, so the
-balance feels what a real one does; a wind-off α/φ sweep first, the wind-on α sweep, wind-off again.
+balance feels what a real one does; a wind-off α/φ sweep first, the wind-on α sweep, wind-off
+again.
 """
+
 from __future__ import annotations
 
 import csv
@@ -48,13 +50,13 @@ class AeroModel:
     induced_drag_factor: float = 0.09
     cm0: float = 0.02
     cm_per_rad: float = -0.35
-    side_per_cl: tuple[float, float, float] = (0.02, 0.004, -0.006)   # CY, Cl, Cn per unit CL
+    side_per_cl: tuple[float, float, float] = (0.02, 0.004, -0.006)  # CY, Cl, Cn per unit CL
 
     def coefficients(self, alpha_deg) -> np.ndarray:
         """(N, 6) body-axis coefficients [CA, CY, CN, Cl, Cm, Cn] at each α (degrees)."""
         alpha = np.radians(np.atleast_1d(np.asarray(alpha_deg, dtype=float)))
         lift = self.cl_max * np.tanh(self.lift_slope_per_rad * alpha / self.cl_max)
-        drag = self.cd0 + self.induced_drag_factor * lift ** 2
+        drag = self.cd0 + self.induced_drag_factor * lift**2
         normal = lift * np.cos(alpha) + drag * np.sin(alpha)
         axial = drag * np.cos(alpha) - lift * np.sin(alpha)
         pitch = self.cm0 + self.cm_per_rad * alpha
@@ -62,73 +64,121 @@ class AeroModel:
         return np.column_stack([axial, side, normal, roll, pitch, yaw])
 
 
-def sweep_loads_tunnel(alpha_deg, capacity_tunnel, aero: AeroModel = AeroModel(),
-                       fractions=(LONGITUDINAL_FRACTION, LATERAL_FRACTION, LONGITUDINAL_FRACTION,
-                                  LATERAL_FRACTION, LONGITUDINAL_FRACTION, LATERAL_FRACTION)) -> np.ndarray:
-    """Tunnel-axis loads (N, 6), N / N·m, each component scaled to fraction x capacity at its peak."""
+def sweep_loads_tunnel(
+    alpha_deg,
+    capacity_tunnel,
+    aero: AeroModel = AeroModel(),
+    fractions=(
+        LONGITUDINAL_FRACTION,
+        LATERAL_FRACTION,
+        LONGITUDINAL_FRACTION,
+        LATERAL_FRACTION,
+        LONGITUDINAL_FRACTION,
+        LATERAL_FRACTION,
+    ),
+) -> np.ndarray:
+    """Tunnel-axis loads (N, 6), N / N·m, each component scaled to fraction x capacity at its
+    peak.
+    """
     coefficients = aero.coefficients(alpha_deg)
     peak = np.max(np.abs(coefficients), axis=0)
     peak[peak == 0] = 1.0
-    return coefficients / peak * np.asarray(fractions) * np.abs(np.asarray(capacity_tunnel, dtype=float))
+    return (
+        coefficients
+        / peak
+        * np.asarray(fractions)
+        * np.abs(np.asarray(capacity_tunnel, dtype=float))
+    )
 
 
 @dataclass(frozen=True)
 class WindOnProfile:
     """Per-sample loads of a wind-on run."""
 
-    times_s: np.ndarray            # (S,) sample times from the start of the run
-    condition: np.ndarray          # (S,) index into `label`; 0 is wind-off for a sweep
-    label: tuple[str, ...]         # per condition, e.g. 'wind off', 'alpha=+4.0 deg'
-    aero_tunnel: np.ndarray        # (S, 6) aerodynamic loads, tunnel axes (what a tared calibrator reads)
-    loads_balance: np.ndarray      # (S, 6) everything on the balance (aero + model weight), balance axes
+    times_s: np.ndarray  # (S,) sample times from the start of the run
+    condition: np.ndarray  # (S,) index into `label`; 0 is wind-off for a sweep
+    label: tuple[str, ...]  # per condition, e.g. 'wind off', 'alpha=+4.0 deg'
+    # (S, 6) aerodynamic loads, tunnel axes (what a tared calibrator reads)
+    aero_tunnel: np.ndarray
+    # (S, 6) everything on the balance (aero + model weight), balance axes
+    loads_balance: np.ndarray
 
 
-def aoa_sweep_profile(capacity, installation: Installation, rate_hz: float, *,
-                      alphas_deg=tuple(range(-2, 23, 2)), hold_s: float = 1.0, wind_off_s: float = 2.0,
-                      model_weight_n: float = 0.0, aero: AeroModel = AeroModel()) -> WindOnProfile:
+def aoa_sweep_profile(
+    capacity,
+    installation: Installation,
+    rate_hz: float,
+    *,
+    alphas_deg=tuple(range(-2, 23, 2)),
+    hold_s: float = 1.0,
+    wind_off_s: float = 2.0,
+    model_weight_n: float = 0.0,
+    aero: AeroModel = AeroModel(),
+) -> WindOnProfile:
     """Wind-off for wind_off_s, then each α held for hold_s, sampled at rate_hz."""
     if rate_hz <= 0 or hold_s <= 0 or wind_off_s < 0:
         raise ValueError('rate_hz and hold_s must be positive, wind_off_s not negative')
     alphas = np.asarray(alphas_deg, dtype=float)
     capacity_tunnel = installation.to_tunnel(np.asarray(capacity, dtype=float))
     conditions = np.vstack([np.zeros((1, 6)), sweep_loads_tunnel(alphas, capacity_tunnel, aero)])
-    counts = np.array([round(wind_off_s * rate_hz)] + [max(1, round(hold_s * rate_hz))] * len(alphas))
+    counts = np.array(
+        [round(wind_off_s * rate_hz)] + [max(1, round(hold_s * rate_hz))] * len(alphas)
+    )
     condition = np.repeat(np.arange(len(conditions)), counts)
     times = (np.arange(len(condition)) + 0.5) / rate_hz
     aero_tunnel = conditions[condition]
     weight_tunnel = np.array([0.0, 0.0, -float(model_weight_n), 0.0, 0.0, 0.0])
     labels = ('wind off',) + tuple(f'alpha={a:+.1f} deg' for a in alphas)
-    return WindOnProfile(times, condition, labels, aero_tunnel,
-                         installation.from_tunnel(aero_tunnel + weight_tunnel))
+    return WindOnProfile(
+        times,
+        condition,
+        labels,
+        aero_tunnel,
+        installation.from_tunnel(aero_tunnel + weight_tunnel),
+    )
 
 
 @dataclass(frozen=True)
 class AeroRunProfile:
     """Per-sample state of a simulated tunnel run (aero_run_profile)."""
 
-    times_s: np.ndarray            # (S,)
-    condition: np.ndarray          # (S,) hold index
-    label: tuple[str, ...]         # per hold
-    support_attitude: np.ndarray   # (S, 3) (φ, α, β) rad as the support reports it (/model/attitude)
-    q_pa: np.ndarray               # (S,) /tunnel/dynamic_pressure
-    attitude: np.ndarray           # (S, 3) the model's true attitude: support + deflection
-    body_coefficients: np.ndarray  # (S, 6) true C_AF, C_Y, C_N, C_l, C_m, C_n about the MRC (NaN wind-off)
-    wind_coefficients: np.ndarray  # (S, 6) true C_D, C_Y,w, C_L, C_l,s, C_m,s, C_n,s (NaN wind-off)
-    aero_tunnel: np.ndarray        # (S, 6) air loads about the balance centre, tunnel axes of §10.2
-    loads_tunnel: np.ndarray       # (S, 6) everything the balance carries (air + weight), tunnel axes
-    loads_balance: np.ndarray      # (S, 6) the same in balance calibration axes
+    times_s: np.ndarray  # (S,)
+    condition: np.ndarray  # (S,) hold index
+    label: tuple[str, ...]  # per hold
+    # (S, 3) (φ, α, β) rad as the support reports it (/model/attitude)
+    support_attitude: np.ndarray
+    q_pa: np.ndarray  # (S,) /tunnel/dynamic_pressure
+    attitude: np.ndarray  # (S, 3) the model's true attitude: support + deflection
+    # (S, 6) true C_AF, C_Y, C_N, C_l, C_m, C_n about the MRC (NaN wind-off)
+    body_coefficients: np.ndarray
+    # (S, 6) true C_D, C_Y,w, C_L, C_l,s, C_m,s, C_n,s (NaN wind-off)
+    wind_coefficients: np.ndarray
+    aero_tunnel: np.ndarray  # (S, 6) air loads about the balance centre, tunnel axes of §10.2
+    loads_tunnel: np.ndarray  # (S, 6) everything the balance carries (air + weight), tunnel axes
+    loads_balance: np.ndarray  # (S, 6) the same in balance calibration axes
 
 
-DEFAULT_WIND_OFF_ATTITUDES_DEG = tuple((roll, alpha) for roll in (0.0, 90.0, 180.0, 270.0)
-                                       for alpha in (-2.0, 10.0, 22.0))
+DEFAULT_WIND_OFF_ATTITUDES_DEG = tuple(
+    (roll, alpha) for roll in (0.0, 90.0, 180.0, 270.0) for alpha in (-2.0, 10.0, 22.0)
+)
 
 
-def aero_run_profile(model: ModelDescription, installation: Installation, rate_hz: float, *, q_pa: float,
-                     weight_n: float, cg_m, alphas_deg=tuple(range(-2, 23, 2)), hold_s: float = 0.5,
-                     wind_off_attitudes_deg=DEFAULT_WIND_OFF_ATTITUDES_DEG, wind_off_hold_s: float = 0.3,
-                     aero: AeroModel = AeroModel()) -> AeroRunProfile:
-    """A tunnel run: wind-off holds at (φ, α) pairs (degrees), the wind-on α sweep at q_pa (φ = β = 0),
-    then one wind-off hold at α = 0 (the tunnel shut down). Each hold sampled at rate_hz.
+def aero_run_profile(
+    model: ModelDescription,
+    installation: Installation,
+    rate_hz: float,
+    *,
+    q_pa: float,
+    weight_n: float,
+    cg_m,
+    alphas_deg=tuple(range(-2, 23, 2)),
+    hold_s: float = 0.5,
+    wind_off_attitudes_deg=DEFAULT_WIND_OFF_ATTITUDES_DEG,
+    wind_off_hold_s: float = 0.3,
+    aero: AeroModel = AeroModel(),
+) -> AeroRunProfile:
+    """A tunnel run: wind-off holds at (φ, α) pairs (degrees), the wind-on α sweep at q_pa (φ = β =
+    0), then one wind-off hold at α = 0 (the tunnel shut down). Each hold sampled at rate_hz.
 
     The model's true attitude solves attitude = support + deflection(air + weight loads at that
     attitude) (aero/deflection.py); the air loads are the AeroModel's coefficients at the true α
@@ -137,24 +187,44 @@ def aero_run_profile(model: ModelDescription, installation: Installation, rate_h
     if rate_hz <= 0 or hold_s <= 0 or wind_off_hold_s <= 0:
         raise ValueError('rate_hz, hold_s and wind_off_hold_s must be positive')
     if not q_pa > 0 or not weight_n >= 0:
-        raise ValueError(f'dynamic pressure must be positive and weight not negative (q {q_pa} Pa, W {weight_n} N)')
+        raise ValueError(
+            f'dynamic pressure must be positive and weight not negative (q {q_pa} Pa, W '
+            f'{weight_n} N)'
+        )
     off = np.radians(np.asarray(wind_off_attitudes_deg, float).reshape(-1, 2))
     alphas = np.radians(np.asarray(alphas_deg, float))
-    support_holds = np.vstack([np.column_stack([off[:, 0], off[:, 1], np.zeros(len(off))]),
-                               np.column_stack([np.zeros(len(alphas)), alphas, np.zeros(len(alphas))]),
-                               np.zeros((1, 3))])
+    support_holds = np.vstack(
+        [
+            np.column_stack([off[:, 0], off[:, 1], np.zeros(len(off))]),
+            np.column_stack([np.zeros(len(alphas)), alphas, np.zeros(len(alphas))]),
+            np.zeros((1, 3)),
+        ]
+    )
     q_holds = np.concatenate([np.zeros(len(off)), np.full(len(alphas), float(q_pa)), [0.0]])
-    counts = np.concatenate([np.full(len(off), max(1, round(wind_off_hold_s * rate_hz))),
-                             np.full(len(alphas), max(1, round(hold_s * rate_hz))), [max(1, round(wind_off_hold_s * rate_hz))]])
-    labels = tuple(f'wind off, roll={np.degrees(r):+.0f} deg, alpha={np.degrees(a):+.1f} deg' for r, a in off) \
-        + tuple(f'alpha={np.degrees(a):+.1f} deg' for a in alphas) + ('wind off, alpha=+0.0 deg',)
+    counts = np.concatenate(
+        [
+            np.full(len(off), max(1, round(wind_off_hold_s * rate_hz))),
+            np.full(len(alphas), max(1, round(hold_s * rate_hz))),
+            [max(1, round(wind_off_hold_s * rate_hz))],
+        ]
+    )
+    labels = (
+        tuple(
+            f'wind off, roll={np.degrees(r):+.0f} deg, alpha={np.degrees(a):+.1f} deg'
+            for r, a in off
+        )
+        + tuple(f'alpha={np.degrees(a):+.1f} deg' for a in alphas)
+        + ('wind off, alpha=+0.0 deg',)
+    )
 
     def body_at(attitude):
         body = aero.coefficients(np.degrees(attitude[:, 1]))
         return np.where(q_holds[:, None] > 0, body, 0.0)
 
     def total_at(attitude):
-        return air_loads_from_coefficients(body_at(attitude), q_holds, model) + weight_loads(attitude, weight_n, cg_m)
+        return air_loads_from_coefficients(body_at(attitude), q_holds, model) + weight_loads(
+            attitude, weight_n, cg_m
+        )
 
     attitude = iterate_attitude(support_holds, model.deflection, total_at)
     body = body_at(attitude)
@@ -165,14 +235,25 @@ def aero_run_profile(model: ModelDescription, installation: Installation, rate_h
     wind[q_holds <= 0] = np.nan
     condition = np.repeat(np.arange(len(q_holds)), counts)
     times = (np.arange(len(condition)) + 0.5) / rate_hz
-    return AeroRunProfile(times, condition, labels, support_holds[condition], q_holds[condition], attitude[condition],
-                          body[condition], wind[condition], aero_loads[condition], total[condition],
-                          installation.from_tunnel(total[condition]))
+    return AeroRunProfile(
+        times,
+        condition,
+        labels,
+        support_holds[condition],
+        q_holds[condition],
+        attitude[condition],
+        body[condition],
+        wind[condition],
+        aero_loads[condition],
+        total[condition],
+        installation.from_tunnel(total[condition]),
+    )
 
 
 def csv_profile(path: str | Path, installation: Installation, rate_hz: float) -> WindOnProfile:
     """Loads from a CSV with columns time_s,FX,FY,FZ,MX,MY,MZ (balance axes, N / N·m), linearly
-    interpolated at rate_hz. Repeat a time to make a step. ValueError names file and line."""
+    interpolated at rate_hz. Repeat a time to make a step. ValueError names file and line.
+    """
     path = Path(path)
     try:
         with open(path, newline='') as handle:
@@ -187,24 +268,40 @@ def csv_profile(path: str | Path, installation: Installation, rate_hz: float) ->
         try:
             table[line - 2] = [float(row[c]) for c in columns]
         except (TypeError, ValueError):
-            raise ValueError(f'{path}: line {line}: expected numbers in {",".join(columns)}') from None
+            raise ValueError(
+                f'{path}: line {line}: expected numbers in {",".join(columns)}'
+            ) from None
     if not np.all(np.isfinite(table)) or np.any(np.diff(table[:, 0]) < 0):
         raise ValueError(f'{path}: load profile must be finite with non-decreasing time_s')
     times = np.arange(table[0, 0], table[-1, 0], 1.0 / rate_hz) + 0.5 / rate_hz
     loads = np.column_stack([np.interp(times, table[:, 0], table[:, 1 + k]) for k in range(6)])
     _, condition = np.unique(loads, axis=0, return_inverse=True)
-    return WindOnProfile(times - table[0, 0], condition.ravel(), (), installation.to_tunnel(loads), loads)
+    return WindOnProfile(
+        times - table[0, 0], condition.ravel(), (), installation.to_tunnel(loads), loads
+    )
 
 
-def wind_on_outputs(truth: BalanceModel, loads_balance, *, electrical_zero_mv=0.04, noise_mv=0.0,
-                    seed: int = 0, effects=(), times_s=None, temperature_c=20.0, rated_output_mv=None,
-                    reference_temperature_c: float = 20.0) -> np.ndarray:
+def wind_on_outputs(
+    truth: BalanceModel,
+    loads_balance,
+    *,
+    electrical_zero_mv=0.04,
+    noise_mv=0.0,
+    seed: int = 0,
+    effects=(),
+    times_s=None,
+    temperature_c=20.0,
+    rated_output_mv=None,
+    reference_temperature_c: float = 20.0,
+) -> np.ndarray:
     """Raw bridge outputs (S, 6) mV for loads (S, 6): inverse of the truth without constants
     (§10.1), plus the effects the balance has (simulation/effects.py: temperature at
     `temperature_c`, hysteresis from the load history, ...), the electrical zero and Gaussian noise
-    (σ noise_mv per bridge)."""
+    (σ noise_mv per bridge).
+    """
     from ..simulation.balance_sim import _direction_history
     from ..simulation.effects import SampleContext
+
     loads = np.atleast_2d(np.asarray(loads_balance, dtype=float))
     model = truth.without_constant()
     for effect in effects:
@@ -213,10 +310,15 @@ def wind_on_outputs(truth: BalanceModel, loads_balance, *, electrical_zero_mv=0.
     outputs = outputs_for_loads(model, unique)[inverse.ravel()]
     if effects:
         n = len(loads)
-        ctx = SampleContext(np.arange(n, dtype=float) if times_s is None else np.asarray(times_s, float),
-                            np.broadcast_to(np.asarray(temperature_c, float), (n,)), loads, outputs,
-                            _direction_history(loads), np.ones(6) if rated_output_mv is None else
-                            np.asarray(rated_output_mv, float), reference_temperature_c)
+        ctx = SampleContext(
+            np.arange(n, dtype=float) if times_s is None else np.asarray(times_s, float),
+            np.broadcast_to(np.asarray(temperature_c, float), (n,)),
+            loads,
+            outputs,
+            _direction_history(loads),
+            np.ones(6) if rated_output_mv is None else np.asarray(rated_output_mv, float),
+            reference_temperature_c,
+        )
         for effect in effects:
             outputs = effect.outputs(outputs, ctx)
     rng = np.random.default_rng(seed)

@@ -1,1 +1,3 @@
-"""Calibration data tables of other tools (BALFIT-style CSV, interfaces.md): reader, writer, units."""
+"""Calibration data tables of other tools (BALFIT-style CSV, interfaces.md): reader, writer,
+units.
+"""

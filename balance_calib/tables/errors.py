@@ -1,4 +1,5 @@
 """The one error a table calibration raises: one line naming the file and what is wrong."""
+
 from __future__ import annotations
 
 

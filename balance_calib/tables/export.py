@@ -7,6 +7,7 @@ already in the loads, so its fitted tare is the model's constant, nothing else) 
 of 0 at four roll angles. Fitting that table with the direct method and the tm663-cubic terms gives
 the refit's cubic calibration.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -28,13 +29,26 @@ def corrected_table(config, corrected, name: str = '') -> CalibrationTable:
     n = len(loads)
     units = tuple('N' if c.startswith('F') else 'N-m' for c in config.components)
     return CalibrationTable(
-        name or config.name, 'DATA_FOR_ITERATIVE_REGRESSION_ANALYSIS', config.name,
+        name or config.name,
+        'DATA_FOR_ITERATIVE_REGRESSION_ANALYSIS',
+        config.name,
         'corrected points of a recorded campaign (zero points and calibration-body tare applied)',
-        tuple(config.components), tuple(config.bridge_outputs), units, ('mV',) * len(config.bridge_outputs),
-        np.asarray(config.capacity, float), np.asarray(config.rated_output_mv, float),
-        tuple(f'NZ-{i + 1}' for i in range(4)), ('Z1',) * 4, np.array([0.0, 90.0, 180.0, 270.0]),
-        np.zeros((4, len(config.bridge_outputs))), tuple(f'P-{i + 1:04d}' for i in range(n)),
-        np.ones(n, dtype=int), ('Z1',) * n, loads, outputs)
+        tuple(config.components),
+        tuple(config.bridge_outputs),
+        units,
+        ('mV',) * len(config.bridge_outputs),
+        np.asarray(config.capacity, float),
+        np.asarray(config.rated_output_mv, float),
+        tuple(f'NZ-{i + 1}' for i in range(4)),
+        ('Z1',) * 4,
+        np.array([0.0, 90.0, 180.0, 270.0]),
+        np.zeros((4, len(config.bridge_outputs))),
+        tuple(f'P-{i + 1:04d}' for i in range(n)),
+        np.ones(n, dtype=int),
+        ('Z1',) * n,
+        loads,
+        outputs,
+    )
 
 
 def export_bags_table(bags: Sequence[str | Path], balance: str, out: Path) -> tuple[Path, int]:
@@ -42,8 +56,9 @@ def export_bags_table(bags: Sequence[str | Path], balance: str, out: Path) -> tu
     from ..bags.reader import read_bags
     from ..calibration_file import ConfigError
     from ..config import load_balance_config
-    from ..refit.load_points import LoadPointError, cut_load_points
-    from ..refit.pipeline import RefitError, calibrate_points
+    from ..refit.load_points import cut_load_points, LoadPointError
+    from ..refit.pipeline import calibrate_points, RefitError
+
     try:
         config = load_balance_config(balance)
         bag = read_bags([Path(b) for b in bags], required=('raw', 'applied_load', 'gravity'))
@@ -52,5 +67,7 @@ def export_bags_table(bags: Sequence[str | Path], balance: str, out: Path) -> tu
     except (ConfigError, BagError, LoadPointError, RefitError) as err:
         raise ExportError(str(err)) from None
     table = corrected_table(config, result.reduction.corrected)
-    write_table(out, table, comments=[f'exported by balance-calib from {", ".join(map(str, bags))}'])
+    write_table(
+        out, table, comments=[f'exported by balance-calib from {", ".join(map(str, bags))}']
+    )
     return out, table.points

@@ -1,4 +1,5 @@
 """Residual figures of a table calibration, in the style of TM-663 Figs. 4-9 (% of capacity)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -10,8 +11,10 @@ CLIP_PCT = 0.5
 
 def residual_figure(residuals_pct: np.ndarray, symbols, title: str, path: Path) -> Path:
     import matplotlib
+
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
+
     n = len(symbols)
     rows = (n + 1) // 2
     fig, axes = plt.subplots(rows, 2, figsize=(11, 2.8 * rows), sharex=True, squeeze=False)
@@ -22,7 +25,9 @@ def residual_figure(residuals_pct: np.ndarray, symbols, title: str, path: Path) 
             continue
         values = residuals_pct[:, k]
         sigma = float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
-        ax.plot(labels, np.clip(values, -CLIP_PCT, CLIP_PCT), '.', ms=2, label=f'σ = {sigma:.4f} %')
+        ax.plot(
+            labels, np.clip(values, -CLIP_PCT, CLIP_PCT), '.', ms=2, label=f'σ = {sigma:.4f} %'
+        )
         ax.axhline(0.0, color='k', lw=0.5)
         ax.set_ylabel(f'Δ{symbols[k]} (% cap.)')
         ax.legend(loc='upper right', fontsize=7)

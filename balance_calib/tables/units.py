@@ -10,19 +10,20 @@ not in the table): the fit then works in those output units, and the calibration
 The factors are built from the exact definitions in `balance_calib.units` (1 lb = 0.45359237 kg,
 1 in = 0.0254 m, g_n = 9.80665 m/s²), the one source of them.
 """
+
 from __future__ import annotations
 
 from ..units import METRE_PER_INCH, NEWTON_PER_LBF, STANDARD_GRAVITY_M_S2
 
-NEWTON_PER_OZF = NEWTON_PER_LBF / 16.0                  # avoirdupois ounce-force: 1/16 lbf
-NEWTON_PER_GF = STANDARD_GRAVITY_M_S2 * 1e-3            # gram-force
+NEWTON_PER_OZF = NEWTON_PER_LBF / 16.0  # avoirdupois ounce-force: 1/16 lbf
+NEWTON_PER_GF = STANDARD_GRAVITY_M_S2 * 1e-3  # gram-force
 
 # Output units that are not voltages: the fit keeps them as they are (factor 1).
 NON_VOLTAGE_OUTPUT_UNITS = ('counts', '-')
 
 
 def _entries(kind: str, internal: str, factor: float, *spellings: str) -> dict:
-    return {spelling: (factor, internal, kind) for spelling in spellings}
+    return dict.fromkeys(spellings, (factor, internal, kind))
 
 
 # unit as written (lower case, blanks removed) -> (factor to internal, internal unit, kind)
@@ -36,11 +37,13 @@ _UNITS = {
     **_entries('moment', 'N·m', 1.0, 'n-m', 'nm', 'n·m', 'n*m', 'n.m'),
     **_entries('moment', 'N·m', 1000.0, 'kn-m', 'knm', 'kn·m', 'kn*m', 'kn.m'),
     **_entries('moment', 'N·m', 1e-3, 'n-mm', 'nmm', 'n·mm', 'n*mm', 'n.mm'),
-    **_entries('moment', 'N·m', NEWTON_PER_LBF * METRE_PER_INCH,
-               'in-lbs', 'in-lb', 'in-lbf', 'inch-lbs'),
+    **_entries(
+        'moment', 'N·m', NEWTON_PER_LBF * METRE_PER_INCH, 'in-lbs', 'in-lb', 'in-lbf', 'inch-lbs'
+    ),
     **_entries('moment', 'N·m', NEWTON_PER_LBF * 12 * METRE_PER_INCH, 'ft-lbs', 'ft-lb'),
-    **_entries('moment', 'N·m', NEWTON_PER_OZF * METRE_PER_INCH,
-               'in-ozf', 'in-oz', 'ozf-in', 'oz-in'),
+    **_entries(
+        'moment', 'N·m', NEWTON_PER_OZF * METRE_PER_INCH, 'in-ozf', 'in-oz', 'ozf-in', 'oz-in'
+    ),
     **_entries('moment', 'N·m', STANDARD_GRAVITY_M_S2, 'kgf-m', 'kgf·m', 'kgfm'),
     **_entries('output', 'mV', 1.0, 'mv'),
     **_entries('output', 'mV', 1e-3, 'microv', 'uv', 'µv'),
@@ -59,8 +62,22 @@ _UNITS = {
 
 # How the known units are listed in a message (one spelling each, as tables write them).
 _LISTED = {
-    'load': ('N', 'kN', 'lbs', 'kgf', 'gf', 'g', 'ozf', 'N-m', 'kN-m', 'N-mm', 'in-lbs', 'ft-lbs',
-             'in-ozf', 'kgf-m'),
+    'load': (
+        'N',
+        'kN',
+        'lbs',
+        'kgf',
+        'gf',
+        'g',
+        'ozf',
+        'N-m',
+        'kN-m',
+        'N-mm',
+        'in-lbs',
+        'ft-lbs',
+        'in-ozf',
+        'kgf-m',
+    ),
     'output': ('mV', 'microV', 'V', 'mV/V', 'microV/V', 'V/V', 'counts', '-'),
     'other channel': ('degC', 'degF', 'K', 'none', 's'),
 }

@@ -10,29 +10,30 @@ wrong tare (it absorbed it): reported apart, as `validation_series_tares`.
 Warnings: validation loads beyond the calibrated range (per component and sign, with the factor),
 a sign the calibration never applied, and a coverage of ±1.96 u below 90 %.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, cast
+from typing import cast, Mapping
 
 import numpy as np
 
 from ..fit.iterative import iterative_point_uncertainty
-from ..fit.series_tares import SeriesTareFit, direct_point_uncertainty
+from ..fit.series_tares import direct_point_uncertainty, SeriesTareFit
 from ..model.inverse import InverseDidNotConverge
 from .errors import TableCalibrationError
 
 COVERAGE_WARNING = 0.90
-RANGE_TOLERANCE = 1.01           # validation beyond 1 % over the calibrated maximum: extrapolation
-SIGN_FRACTION = 0.01             # a sign is calibrated when loads reach 1 % of capacity in it
+RANGE_TOLERANCE = 1.01  # validation beyond 1 % over the calibrated maximum: extrapolation
+SIGN_FRACTION = 0.01  # a sign is calibrated when loads reach 1 % of capacity in it
 
 
 @dataclass(frozen=True)
 class FormValidation:
-    residuals: np.ndarray                       # (N_val, n_loads) applied - predicted, SI
-    uncertainty: np.ndarray                     # (N_val, n_loads) k = 1, SI
-    own_tares: Mapping[int, np.ndarray] = field(default_factory=dict)        # SI
-    own_tare_sigma: Mapping[int, np.ndarray] = field(default_factory=dict)   # SI
+    residuals: np.ndarray  # (N_val, n_loads) applied - predicted, SI
+    uncertainty: np.ndarray  # (N_val, n_loads) k = 1, SI
+    own_tares: Mapping[int, np.ndarray] = field(default_factory=dict)  # SI
+    own_tare_sigma: Mapping[int, np.ndarray] = field(default_factory=dict)  # SI
 
     @property
     def coverage(self) -> float:
@@ -40,10 +41,12 @@ class FormValidation:
         return float(np.mean(np.abs(self.residuals) <= 1.96 * self.uncertainty))
 
 
-def validate_form(method: str, fit: SeriesTareFit, validation,
-                  outputs: np.ndarray) -> FormValidation:
+def validate_form(
+    method: str, fit: SeriesTareFit, validation, outputs: np.ndarray
+) -> FormValidation:
     """Predict the validation points with one fitted form: its tares where it has the series, the
-    series' own tares (model fixed) where not."""
+    series' own tares (model fixed) where not.
+    """
     try:
         totals = np.atleast_2d(fit.model.loads(outputs))
     except InverseDidNotConverge as err:
@@ -60,26 +63,29 @@ def validate_form(method: str, fit: SeriesTareFit, validation,
         difference = totals[mask] - applied[mask]
         own[int(s)] = difference.mean(axis=0)
         n = int(mask.sum())
-        own_sigma[int(s)] = (difference.std(axis=0, ddof=1) / np.sqrt(n) if n > 1
-                             else np.full(totals.shape[1], np.nan))
+        own_sigma[int(s)] = (
+            difference.std(axis=0, ddof=1) / np.sqrt(n)
+            if n > 1
+            else np.full(totals.shape[1], np.nan)
+        )
         tares[mask] = own[int(s)]
     residuals = applied - (totals - tares)
     # uncertainty: the calibration's series rows where known; a zero series row (the model alone)
     # plus the own tare's variance where not
     proxy = np.where(known, series, fit.series_labels[0])
-    point_u = (direct_point_uncertainty if method == 'direct' else iterative_point_uncertainty)
+    point_u = direct_point_uncertainty if method == 'direct' else iterative_point_uncertainty
     u = point_u(fit, outputs, proxy)
     if np.any(~known):
         model_only = _model_only_uncertainty(method, fit, outputs[~known])
         tare_var = np.array([own_sigma[int(s)] for s in series[~known]]) ** 2
-        u[~known] = np.sqrt(model_only ** 2 + np.nan_to_num(tare_var))
+        u[~known] = np.sqrt(model_only**2 + np.nan_to_num(tare_var))
     return FormValidation(residuals, u, own, own_sigma)
 
 
 def _model_only_uncertainty(method: str, fit: SeriesTareFit, outputs: np.ndarray) -> np.ndarray:
-    """k = 1 uncertainty of a predicted total load without any series tare (zero series row)."""
+    """K = 1 uncertainty of a predicted total load without any series tare (zero series row)."""
     p = len(fit.model.terms)
-    covariance = cast(np.ndarray, fit.full_covariance_unscaled)[:p, :p]   # a table fit has it
+    covariance = cast(np.ndarray, fit.full_covariance_unscaled)[:p, :p]  # a table fit has it
     if method == 'direct':
         z = fit.model.design(outputs)
         h = np.einsum('ij,jk,ik->i', z, covariance, z)
@@ -90,12 +96,13 @@ def _model_only_uncertainty(method: str, fit: SeriesTareFit, outputs: np.ndarray
     h = np.einsum('ij,jk,ik->i', z, covariance, z)
     inverse = np.linalg.inv(jacobian)
     variance = fit.residual_sigma[None, :] ** 2 * (1.0 + h)[:, None]
-    return np.sqrt(np.einsum('nmk,nk->nm', inverse ** 2, variance))
+    return np.sqrt(np.einsum('nmk,nk->nm', inverse**2, variance))
 
 
 def range_warnings(table, validation) -> list[str]:
     """Per component and sign: validation loads beyond the calibrated ones (factor), or in a sign
-    the calibration never applied."""
+    the calibration never applied.
+    """
     warnings = []
     cal, val = table.applied_loads_si, validation.applied_loads_si
     capacity = table.load_capacity_si
@@ -106,20 +113,26 @@ def range_warnings(table, validation) -> list[str]:
             if val_max <= SIGN_FRACTION * capacity[k]:
                 continue
             if cal_max <= SIGN_FRACTION * capacity[k]:
-                warnings.append(f'validation applies {symbol} {word} (up to '
-                                f'{100 * val_max / capacity[k]:.0f} % of capacity), a sign the '
-                                f'calibration never applied: its σ there is an extrapolation')
+                warnings.append(
+                    f'validation applies {symbol} {word} (up to '
+                    f'{100 * val_max / capacity[k]:.0f} % of capacity), a sign the '
+                    f'calibration never applied: its σ there is an extrapolation'
+                )
             elif val_max > RANGE_TOLERANCE * cal_max:
-                warnings.append(f'validation loads {symbol} {word} to {val_max / cal_max:.2f}x '
-                                f'the calibrated {100 * cal_max / capacity[k]:.0f} % of capacity: '
-                                f'its σ there is an extrapolation')
+                warnings.append(
+                    f'validation loads {symbol} {word} to {val_max / cal_max:.2f}x '
+                    f'the calibrated {100 * cal_max / capacity[k]:.0f} % of capacity: '
+                    f'its σ there is an extrapolation'
+                )
     return warnings
 
 
 def coverage_warning(coverage: float, method: str) -> list[str]:
     if coverage < COVERAGE_WARNING:
-        return [f'only {100 * coverage:.1f} % of the validation loads lie within ±1.96 u of the '
-                f'{method} model (95 % expected, < {100 * COVERAGE_WARNING:.0f} % warned): the '
-                f'stated uncertainty is too small for these points (extrapolation, another setup, '
-                f'or an effect the model lacks)']
+        return [
+            f'only {100 * coverage:.1f} % of the validation loads lie within ±1.96 u of the '
+            f'{method} model (95 % expected, < {100 * COVERAGE_WARNING:.0f} % warned): the '
+            f'stated uncertainty is too small for these points (extrapolation, another setup, '
+            f'or an effect the model lacks)'
+        ]
     return []

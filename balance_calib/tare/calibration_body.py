@@ -7,6 +7,7 @@
   C'1, C'8, ... set to zero.
 - The corrected data of §7.1: applied + tare loads against zero-subtracted + tare outputs.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -31,8 +32,9 @@ def body_loads_from_rotation(linear_model: BalanceModel, output_difference_mv) -
     return 0.5 * linear_part(linear_model) @ np.asarray(output_difference_mv, dtype=float)
 
 
-def tare_loads(body: CalibrationBody, gravity_unit, *, axial_jig: bool = False,
-               axial_jig_sign=1.0) -> np.ndarray:
+def tare_loads(
+    body: CalibrationBody, gravity_unit, *, axial_jig: bool = False, axial_jig_sign=1.0
+) -> np.ndarray:
     """Loads of the body's weight for gravity direction(s) g (unit vector(s), balance axes).
 
     Force W·g at the centre of gravity r: F = W g, M = r x F (Table 9 / 13: for I_g = 2,
@@ -46,7 +48,9 @@ def tare_loads(body: CalibrationBody, gravity_unit, *, axial_jig: bool = False,
     moment = np.cross(np.asarray(body.cg_m, dtype=float), force)
     loads = np.hstack([force, moment])
     if axial_jig:
-        loads[:, 0] += body.axial_jig_weight_n * np.broadcast_to(np.asarray(axial_jig_sign, float), (len(loads),))
+        loads[:, 0] += body.axial_jig_weight_n * np.broadcast_to(
+            np.asarray(axial_jig_sign, float), (len(loads),)
+        )
     return loads[0] if single else loads
 
 
@@ -56,14 +60,16 @@ class BodyEstimate:
 
     weight_n: float
     cg_m: tuple[float, float, float]
-    pairs: int                      # opposite orientation pairs used
-    moment_residual_nm: float       # RMS misfit of M = r x F over the pairs
+    pairs: int  # opposite orientation pairs used
+    moment_residual_nm: float  # RMS misfit of M = r x F over the pairs
 
     def as_body(self, axial_jig_weight_n: float = 0.0) -> CalibrationBody:
         return CalibrationBody(self.weight_n, self.cg_m, axial_jig_weight_n)
 
 
-def estimate_body(linear_model: BalanceModel, gravity_units: Sequence, output_differences_mv: Sequence) -> BodyEstimate:
+def estimate_body(
+    linear_model: BalanceModel, gravity_units: Sequence, output_differences_mv: Sequence
+) -> BodyEstimate:
     """Weight and CG from zero-point output differences at opposite orientations.
 
     Each pair k: ΔV_k = V(g_k) - V(-g_k); ½ C ΔV_k = (W g_k, r x W g_k) (eqs. (29)-(31)). W is the
@@ -72,7 +78,7 @@ def estimate_body(linear_model: BalanceModel, gravity_units: Sequence, output_di
     """
     gravity = np.atleast_2d(np.asarray(gravity_units, dtype=float))
     differences = np.atleast_2d(np.asarray(output_differences_mv, dtype=float))
-    half = differences @ (0.5 * linear_part(linear_model)).T                 # (K, 6)
+    half = differences @ (0.5 * linear_part(linear_model)).T  # (K, 6)
     forces, moments = half[:, :3], half[:, 3:]
     weight = float(np.mean(np.einsum('ij,ij->i', forces, gravity)))
     # r x F = -F x r = -[F]x r  ->  stack the 3x3 skew matrices
@@ -82,16 +88,25 @@ def estimate_body(linear_model: BalanceModel, gravity_units: Sequence, output_di
         rows.append(-np.array([[0, -fz, fy], [fz, 0, -fx], [-fy, fx, 0]]))
     system = np.vstack(rows)
     target = moments.reshape(-1)
-    cg, *_ = np.linalg.lstsq(system, target, rcond=1e-10)   # min-norm: unobservable axes stay 0
+    cg, *_ = np.linalg.lstsq(system, target, rcond=1e-10)  # min-norm: unobservable axes stay 0
     residual = float(np.sqrt(np.mean((system @ cg - target) ** 2))) if target.size else 0.0
     return BodyEstimate(weight, (float(cg[0]), float(cg[1]), float(cg[2])), len(gravity), residual)
 
 
-def fit_inverse_linear(bridge_outputs_mv, loads, components=COMPONENTS, outputs=BRIDGE_OUTPUTS) -> BalanceModel:
+def fit_inverse_linear(
+    bridge_outputs_mv, loads, components=COMPONENTS, outputs=BRIDGE_OUTPUTS
+) -> BalanceModel:
     """The linear model outputs = C'(1, loads), eqs. (32)-(37), fitted by least squares."""
     terms = parse_terms(['1'] + list(components))
-    result = fit_model(terms, loads, bridge_outputs_mv, name="inverse linear (eqs. 32-37)",
-                       components=tuple(outputs), inputs=tuple(components), on_unexcited='drop')
+    result = fit_model(
+        terms,
+        loads,
+        bridge_outputs_mv,
+        name='inverse linear (eqs. 32-37)',
+        components=tuple(outputs),
+        inputs=tuple(components),
+        on_unexcited='drop',
+    )
     return result.model
 
 
@@ -104,14 +119,20 @@ def tare_outputs(inverse_linear: BalanceModel, tare_loads_n) -> np.ndarray:
 class CorrectedData:
     """§7.1 修正データ: the total load on the balance and the outputs that belong to it."""
 
-    loads: np.ndarray            # (N, 6) applied + tare, N and N·m
+    loads: np.ndarray  # (N, 6) applied + tare, N and N·m
     bridge_outputs_mv: np.ndarray  # (N, 6) zero-subtracted + tare outputs, mV
-    tare_loads: np.ndarray       # (N, 6)
+    tare_loads: np.ndarray  # (N, 6)
     tare_outputs_mv: np.ndarray  # (N, 6)
 
 
-def corrected_data(applied_loads, zeroed_outputs_mv, tare_loads_n, tare_outputs_mv) -> CorrectedData:
+def corrected_data(
+    applied_loads, zeroed_outputs_mv, tare_loads_n, tare_outputs_mv
+) -> CorrectedData:
     applied = np.asarray(applied_loads, float)
     zeroed = np.asarray(zeroed_outputs_mv, float)
-    return CorrectedData(applied + tare_loads_n, zeroed + tare_outputs_mv,
-                         np.asarray(tare_loads_n, float), np.asarray(tare_outputs_mv, float))
+    return CorrectedData(
+        applied + tare_loads_n,
+        zeroed + tare_outputs_mv,
+        np.asarray(tare_loads_n, float),
+        np.asarray(tare_outputs_mv, float),
+    )

@@ -1,4 +1,5 @@
-"""One-axis calibration of the thrust stand, lab manual §4.2: weights -> corrected readings -> line.
+"""One-axis calibration of the thrust stand, lab manual §4.2: weights -> corrected readings ->
+line.
 
 Procedure as the manual runs it: with the chamber pressurised to the firing gauge pressure p_G,
 hang the pan with 0, 1, ..., 5 weights (about 85 g each, weighed individually), read the strain
@@ -12,22 +13,23 @@ The fit runs through the package's general term machinery (`fit_model` with term
 so the result is a `BalanceModel` that `balance_calibrator` can load; eq. (27) gives σ_a from
 the readings' and masses' own uncertainties (`line_fit.py`).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..fit.least_squares import FitResult, fit_model
+from ..fit.least_squares import fit_model, FitResult
 from ..model.balance_model import BalanceModel
 from ..model.terms import parse_terms
 from ..units import STANDARD_GRAVITY_M_S2
-from .line_fit import LineFit, fit_line
-from .one_axis import OneAxisExamination, examine_line
+from .line_fit import fit_line, LineFit
+from .one_axis import examine_line, OneAxisExamination
 from .significant import format_value_error
 
-COMPONENT = 'FX'        # the stand measures thrust along its axis only
-BRIDGE_OUTPUT = 'FXV'   # its one strain channel, mV
+COMPONENT = 'FX'  # the stand measures thrust along its axis only
+BRIDGE_OUTPUT = 'FXV'  # its one strain channel, mV
 TERMS = ('1', BRIDGE_OUTPUT)
 
 
@@ -52,8 +54,10 @@ class CalibrationReadings:
             object.__setattr__(self, name, array)
         n = self.weight_masses_kg.size
         if self.loaded_mv.size != n + 1 or self.unloaded_mv.size != n + 1:
-            raise ValueError(f'{n} weights need {n + 1} loaded and {n + 1} unloaded readings (0 ... {n} weights); '
-                             f'got {self.loaded_mv.size} and {self.unloaded_mv.size}')
+            raise ValueError(
+                f'{n} weights need {n + 1} loaded and {n + 1} unloaded readings (0 ... {n} '
+                f'weights); got {self.loaded_mv.size} and {self.unloaded_mv.size}'
+            )
         if n < 1 or np.any(self.weight_masses_kg <= 0):
             raise ValueError('need at least one weight, each of positive mass')
 
@@ -64,7 +68,9 @@ class CalibrationReadings:
 
     @property
     def corrected_mv(self) -> np.ndarray:
-        """(n + 1,) loaded reading minus the residual zero after it (§4.2's hysteresis correction)."""
+        """(n + 1,) loaded reading minus the residual zero after it (§4.2's hysteresis
+        correction).
+        """
         return self.loaded_mv - self.unloaded_mv
 
 
@@ -72,20 +78,20 @@ class CalibrationReadings:
 class ThrustStandCalibration:
     """Result of §4.2: F_t = a · V_F (the intercept b is the pan, not part of the thrust)."""
 
-    slope_n_per_mv: float                  # a, by fit_model (= eq. (25))
-    intercept_n: float                     # b (= eq. (26))
-    sigma_slope_n_per_mv: float            # σ_a, eq. (27), from the given reading and mass σ
+    slope_n_per_mv: float  # a, by fit_model (= eq. (25))
+    intercept_n: float  # b (= eq. (26))
+    sigma_slope_n_per_mv: float  # σ_a, eq. (27), from the given reading and mass σ
     sigma_intercept_n: float
-    standard_error_slope_n_per_mv: float   # σ_a from the scatter of the points about the line
-    readings_mv: np.ndarray                # corrected readings, x_i
-    loads_n: np.ndarray                    # applied weights, y_i
-    line: LineFit                          # the manual's closed forms, eqs. (25)-(27)
-    fit: FitResult                         # the package's QR fit
-    examination: OneAxisExamination | None = None   # the line's residual examined (one_axis.py)
+    standard_error_slope_n_per_mv: float  # σ_a from the scatter of the points about the line
+    readings_mv: np.ndarray  # corrected readings, x_i
+    loads_n: np.ndarray  # applied weights, y_i
+    line: LineFit  # the manual's closed forms, eqs. (25)-(27)
+    fit: FitResult  # the package's QR fit
+    examination: OneAxisExamination | None = None  # the line's residual examined (one_axis.py)
 
     @property
     def model(self) -> BalanceModel:
-        """load FX [N] = b + a · FXV [mV], the `matrices.linear` of config/thrust_stand.yaml."""
+        """Load FX [N] = b + a · FXV [mV], the `matrices.linear` of config/thrust_stand.yaml."""
         return self.fit.model
 
     def thrust_n(self, reading_mv):
@@ -97,11 +103,18 @@ class ThrustStandCalibration:
 
     def config_matrix(self) -> dict:
         """The `matrices: {linear: ...}` entry of a balance config for this stand."""
-        return {'terms': list(TERMS), 'coefficients': {COMPONENT: [self.intercept_n, self.slope_n_per_mv]}}
+        return {
+            'terms': list(TERMS),
+            'coefficients': {COMPONENT: [self.intercept_n, self.slope_n_per_mv]},
+        }
 
 
-def calibrate(readings: CalibrationReadings, reading_sigma_mv: float, mass_sigma_kg: float,
-              hysteresis_correction: bool = True) -> ThrustStandCalibration:
+def calibrate(
+    readings: CalibrationReadings,
+    reading_sigma_mv: float,
+    mass_sigma_kg: float,
+    hysteresis_correction: bool = True,
+) -> ThrustStandCalibration:
     """Fit the calibration line of §4.2.
 
     reading_sigma_mv: σ of one strain reading (a corrected reading is the difference of two, so
@@ -117,14 +130,28 @@ def calibrate(readings: CalibrationReadings, reading_sigma_mv: float, mass_sigma
     sigma_x = np.full(y.size, reading_sigma_mv * (np.sqrt(2.0) if hysteresis_correction else 1.0))
     sigma_y = STANDARD_GRAVITY_M_S2 * np.sqrt(steps) * mass_sigma_kg
     line = fit_line(x, y, sigma_x, sigma_y)
-    fit = fit_model(parse_terms(TERMS), x[:, None], y[:, None], name='thrust_stand',
-                    components=(COMPONENT,), inputs=(BRIDGE_OUTPUT,), on_unexcited='raise')
+    fit = fit_model(
+        parse_terms(TERMS),
+        x[:, None],
+        y[:, None],
+        name='thrust_stand',
+        components=(COMPONENT,),
+        inputs=(BRIDGE_OUTPUT,),
+        on_unexcited='raise',
+    )
     intercept, slope = fit.model.coefficients[0]
     return ThrustStandCalibration(
-        slope_n_per_mv=float(slope), intercept_n=float(intercept),
-        sigma_slope_n_per_mv=line.sigma_slope, sigma_intercept_n=line.sigma_intercept,
+        slope_n_per_mv=float(slope),
+        intercept_n=float(intercept),
+        sigma_slope_n_per_mv=line.sigma_slope,
+        sigma_intercept_n=line.sigma_intercept,
         standard_error_slope_n_per_mv=float(fit.standard_errors[0, 1]),
-        readings_mv=x, loads_n=y, line=line, fit=fit,
+        readings_mv=x,
+        loads_n=y,
+        line=line,
+        fit=fit,
         # loading steps only (each corrected by its own residual zero): the examination can adopt
-        # terms only where the points carry them, and says when the line leaves more than σ_x, σ_y allow
-        examination=examine_line(x, y, np.ones(y.size), sigma_x, sigma_y))
+        # terms only where the points carry them, and says when the line leaves more than σ_x, σ_y
+        # allow
+        examination=examine_line(x, y, np.ones(y.size), sigma_x, sigma_y),
+    )

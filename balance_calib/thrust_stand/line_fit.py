@@ -13,6 +13,7 @@ Eq. (27) as printed, re-derived from eq. (25) with D = n Σx² - (Σx)², N = n 
 which is what the manual prints (∂D/∂x_i = 2 (n x_i - Σx) gives the factor 2); no correction
 was needed. test_thrust_line_fit checks these against finite differences of eq. (25).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -32,34 +33,36 @@ class LineSums:
 
     @property
     def denominator(self) -> float:
-        return self.n * self.sum_xx - self.sum_x ** 2          # D of eqs. (25)-(27)
+        return self.n * self.sum_xx - self.sum_x**2  # D of eqs. (25)-(27)
 
 
 @dataclass(frozen=True)
 class LineFit:
     """y = slope x + intercept, with uncertainties. Units: slope [y]/[x], intercept [y]."""
 
-    slope: float                  # a, eq. (25)
-    intercept: float              # b, eq. (26)
-    sigma_slope: float            # σ_a, eq. (27)
-    sigma_intercept: float        # σ_b, the same propagation applied to b
+    slope: float  # a, eq. (25)
+    intercept: float  # b, eq. (26)
+    sigma_slope: float  # σ_a, eq. (27)
+    sigma_intercept: float  # σ_b, the same propagation applied to b
     n: int
-    residual_std: float           # sqrt(Σ r² / (n - 2)); NaN for n = 2
-    sigma_source: str             # 'eq27' (given σ_x, σ_y) or 'residuals' (σ_y = residual_std, σ_x = 0)
+    residual_std: float  # sqrt(Σ r² / (n - 2)); NaN for n = 2
+    sigma_source: str  # 'eq27' (given σ_x, σ_y) or 'residuals' (σ_y = residual_std, σ_x = 0)
     sums: LineSums
 
 
 def line_sums(x, y) -> LineSums:
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
-    return LineSums(int(x.size), float(x.sum()), float(y.sum()), float((x * y).sum()), float((x * x).sum()))
+    return LineSums(
+        int(x.size), float(x.sum()), float(y.sum()), float((x * y).sum()), float((x * x).sum())
+    )
 
 
 def slope_and_intercept(sums: LineSums) -> tuple[float, float]:
-    """a and b from the worksheet sums, eqs. (25) and (26)."""
+    """A and b from the worksheet sums, eqs. (25) and (26)."""
     d = sums.denominator
-    a = (sums.n * sums.sum_xy - sums.sum_x * sums.sum_y) / d                  # lab manual eq. (25)
-    b = (sums.sum_xx * sums.sum_y - sums.sum_x * sums.sum_xy) / d             # lab manual eq. (26)
+    a = (sums.n * sums.sum_xy - sums.sum_x * sums.sum_y) / d  # lab manual eq. (25)
+    b = (sums.sum_xx * sums.sum_y - sums.sum_x * sums.sum_xy) / d  # lab manual eq. (26)
     return a, b
 
 
@@ -70,8 +73,9 @@ def slope_partials(x, y) -> tuple[np.ndarray, np.ndarray]:
     s = line_sums(x, y)
     d = s.denominator
     numerator = s.n * s.sum_xy - s.sum_x * s.sum_y
-    da_dx = (s.n * y - s.sum_y) / d - 2.0 * (s.n * x - s.sum_x) * numerator / d ** 2   # lab manual eq. (27)
-    da_dy = (s.n * x - s.sum_x) / d                                                    # lab manual eq. (27)
+    # lab manual eq. (27)
+    da_dx = (s.n * y - s.sum_y) / d - 2.0 * (s.n * x - s.sum_x) * numerator / d**2
+    da_dy = (s.n * x - s.sum_x) / d  # lab manual eq. (27)
     return da_dx, da_dy
 
 
@@ -101,25 +105,40 @@ def fit_line(x, y, sigma_x=None, sigma_y=None) -> LineFit:
     intercept = intercept_c + y_mean - slope * x_mean
     residuals = y - (slope * x + intercept)
     dof = x.size - 2
-    residual_std = float(np.sqrt(np.sum(residuals ** 2) / dof)) if dof > 0 else float('nan')
+    residual_std = float(np.sqrt(np.sum(residuals**2) / dof)) if dof > 0 else float('nan')
 
     if sigma_x is None and sigma_y is None:
         if dof <= 0:
-            raise ValueError('with 2 points and no σ_x, σ_y the uncertainty of the slope is undetermined')
+            raise ValueError(
+                'with 2 points and no σ_x, σ_y the uncertainty of the slope is undetermined'
+            )
         sigma_source = 'residuals'
         sx, sy = np.zeros_like(x), np.full_like(y, residual_std)
     else:
         sigma_source = 'eq27'
         sx = np.broadcast_to(np.asarray(0.0 if sigma_x is None else sigma_x, dtype=float), x.shape)
         sy = np.broadcast_to(np.asarray(0.0 if sigma_y is None else sigma_y, dtype=float), y.shape)
-        if np.any(sx < 0) or np.any(sy < 0) or not (np.all(np.isfinite(sx)) and np.all(np.isfinite(sy))):
+        if (
+            np.any(sx < 0)
+            or np.any(sy < 0)
+            or not (np.all(np.isfinite(sx)) and np.all(np.isfinite(sy)))
+        ):
             raise ValueError('σ_x and σ_y must be finite and >= 0')
 
     da_dx, da_dy = slope_partials(xc, yc)
-    sigma_slope = float(np.sqrt(np.sum((da_dx * sx) ** 2) + np.sum((da_dy * sy) ** 2)))   # lab manual eq. (27)
+    # lab manual eq. (27)
+    sigma_slope = float(np.sqrt(np.sum((da_dx * sx) ** 2) + np.sum((da_dy * sy) ** 2)))
     # b = ȳ - a x̄, so ∂b/∂x_i = -a/n - x̄ ∂a/∂x_i and ∂b/∂y_i = 1/n - x̄ ∂a/∂y_i (eq. (20) again)
     db_dx = -slope / x.size - x_mean * da_dx
     db_dy = 1.0 / x.size - x_mean * da_dy
     sigma_intercept = float(np.sqrt(np.sum((db_dx * sx) ** 2) + np.sum((db_dy * sy) ** 2)))
-    return LineFit(float(slope), float(intercept), sigma_slope, sigma_intercept, int(x.size), residual_std,
-                   sigma_source, line_sums(x, y))
+    return LineFit(
+        float(slope),
+        float(intercept),
+        sigma_slope,
+        sigma_intercept,
+        int(x.size),
+        residual_std,
+        sigma_source,
+        line_sums(x, y),
+    )

@@ -12,6 +12,7 @@ Two misprints of the manual are corrected here, not copied:
   (1/g) C* (p_e - p_a)/p_c * A_e/A_t; the printed form puts the pressure and area ratios inside
   the square root and writes p_c - p_e for p_c. We compute I_sp by eqs. (8) and (15), which agree.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -27,7 +28,7 @@ DEFAULT_EXIT_DIAMETER_M = 3.3e-3
 DEFAULT_GAMMA = 1.402
 DEFAULT_GAS_CONSTANT_J_KG_K = 287.1
 DEFAULT_CHAMBER_K = 293.15
-STANDARD_ATMOSPHERE_PA = 101325.0          # manual footnote 9
+STANDARD_ATMOSPHERE_PA = 101325.0  # manual footnote 9
 
 # |p_e - p_a| below this fraction of p_a counts as optimum expansion in `expansion_state`.
 OPTIMUM_EXPANSION_TOLERANCE = 1e-3
@@ -44,7 +45,8 @@ def _check_gamma(gamma: float) -> None:
 
 def critical_pressure_ratio(gamma: float = DEFAULT_GAMMA) -> float:
     """p*/p_c = (2/(γ+1))^(γ/(γ-1)): the throat pressure of a choked nozzle, and the exit
-    pressure ratio where eq. (4)'s supersonic and subsonic branches meet (A_e/A_t = 1)."""
+    pressure ratio where eq. (4)'s supersonic and subsonic branches meet (A_e/A_t = 1).
+    """
     _check_gamma(gamma)
     return (2.0 / (gamma + 1.0)) ** (gamma / (gamma - 1.0))
 
@@ -67,8 +69,9 @@ def area_ratio_from_pressure_ratio(pe_over_pc, gamma: float = DEFAULT_GAMMA):
     return float(result) if result.ndim == 0 else result
 
 
-def pressure_ratio_from_area_ratio(area_ratio: float, gamma: float = DEFAULT_GAMMA,
-                                   branch: str = 'supersonic') -> float:
+def pressure_ratio_from_area_ratio(
+    area_ratio: float, gamma: float = DEFAULT_GAMMA, branch: str = 'supersonic'
+) -> float:
     """p_e/p_c solving lab manual eq. (4) for a given A_e/A_t >= 1.
 
     branch 'supersonic' (default) is the design solution p_e/p_c < p*/p_c; 'subsonic' the
@@ -82,7 +85,9 @@ def pressure_ratio_from_area_ratio(area_ratio: float, gamma: float = DEFAULT_GAM
         raise ValueError(f"branch must be 'supersonic' or 'subsonic', not {branch!r}")
     area_ratio = float(area_ratio)
     if not np.isfinite(area_ratio) or area_ratio < 1.0:
-        raise ValueError(f'area ratio A_e/A_t must be >= 1 (a converging-diverging nozzle), got {area_ratio}')
+        raise ValueError(
+            f'area ratio A_e/A_t must be >= 1 (a converging-diverging nozzle), got {area_ratio}'
+        )
     critical = critical_pressure_ratio(gamma)
     if area_ratio == 1.0:
         return critical
@@ -101,55 +106,89 @@ def pressure_ratio_from_area_ratio(area_ratio: float, gamma: float = DEFAULT_GAM
         # (2/γ)u <= 0, so g(u) <= ln(1 - r^k) - log_target; choose 1 - r^k = 0.1 exp(log_target)
         small = 0.1 * np.exp(log_target)
         u_low, u_high = u_critical, np.log1p(-small) / exponent
-    root = scipy.optimize.brentq(g, u_low, u_high, xtol=1e-15, rtol=4 * np.finfo(float).eps, maxiter=200)
+    root = scipy.optimize.brentq(
+        g, u_low, u_high, xtol=1e-15, rtol=4 * np.finfo(float).eps, maxiter=200
+    )
     return float(np.exp(root))
 
 
-def mass_flow_kg_s(chamber_pa, throat_area_m2, chamber_k=DEFAULT_CHAMBER_K, gamma: float = DEFAULT_GAMMA,
-                   gas_constant_j_kg_k: float = DEFAULT_GAS_CONSTANT_J_KG_K):
+def mass_flow_kg_s(
+    chamber_pa,
+    throat_area_m2,
+    chamber_k=DEFAULT_CHAMBER_K,
+    gamma: float = DEFAULT_GAMMA,
+    gas_constant_j_kg_k: float = DEFAULT_GAS_CONSTANT_J_KG_K,
+):
     """Choked mass flow through the throat, lab manual eq. (2)."""
     _check_gamma(gamma)
-    return (np.asarray(chamber_pa) * throat_area_m2 / np.sqrt(gas_constant_j_kg_k * np.asarray(chamber_k))
-            * np.sqrt(gamma * (2.0 / (gamma + 1.0)) ** ((gamma + 1.0) / (gamma - 1.0))))
+    return (
+        np.asarray(chamber_pa)
+        * throat_area_m2
+        / np.sqrt(gas_constant_j_kg_k * np.asarray(chamber_k))
+        * np.sqrt(gamma * (2.0 / (gamma + 1.0)) ** ((gamma + 1.0) / (gamma - 1.0)))
+    )
 
 
-def exit_velocity_m_s(pe_over_pc, chamber_k=DEFAULT_CHAMBER_K, gamma: float = DEFAULT_GAMMA,
-                      gas_constant_j_kg_k: float = DEFAULT_GAS_CONSTANT_J_KG_K):
+def exit_velocity_m_s(
+    pe_over_pc,
+    chamber_k=DEFAULT_CHAMBER_K,
+    gamma: float = DEFAULT_GAMMA,
+    gas_constant_j_kg_k: float = DEFAULT_GAS_CONSTANT_J_KG_K,
+):
     """Isentropic exit velocity, lab manual eq. (3)."""
     _check_gamma(gamma)
     expansion = -np.expm1((gamma - 1.0) / gamma * np.log(np.asarray(pe_over_pc, dtype=float)))
-    return np.sqrt(2.0 * gamma * gas_constant_j_kg_k * np.asarray(chamber_k) / (gamma - 1.0) * expansion)
+    return np.sqrt(
+        2.0 * gamma * gas_constant_j_kg_k * np.asarray(chamber_k) / (gamma - 1.0) * expansion
+    )
 
 
 def _momentum_thrust_coefficient(pe_over_pc, gamma: float):
     # first term of lab manual eqs. (5) and (12)
     expansion = -np.expm1((gamma - 1.0) / gamma * np.log(np.asarray(pe_over_pc, dtype=float)))
-    return np.sqrt(2.0 * gamma ** 2 / (gamma - 1.0)
-                   * (2.0 / (gamma + 1.0)) ** ((gamma + 1.0) / (gamma - 1.0)) * expansion)
+    return np.sqrt(
+        2.0
+        * gamma**2
+        / (gamma - 1.0)
+        * (2.0 / (gamma + 1.0)) ** ((gamma + 1.0) / (gamma - 1.0))
+        * expansion
+    )
 
 
 def thrust_coefficient(pe_over_pc, pa_over_pc, area_ratio, gamma: float = DEFAULT_GAMMA):
     """Ideal C_F from γ, p_a/p_c and A_e/A_t (with p_e/p_c from eq. (4)), lab manual eq. (12)."""
     _check_gamma(gamma)
-    return (_momentum_thrust_coefficient(pe_over_pc, gamma)
-            + (np.asarray(pe_over_pc) - np.asarray(pa_over_pc)) * np.asarray(area_ratio))
+    return _momentum_thrust_coefficient(pe_over_pc, gamma) + (
+        np.asarray(pe_over_pc) - np.asarray(pa_over_pc)
+    ) * np.asarray(area_ratio)
 
 
-def thrust_n(chamber_pa, ambient_pa, throat_area_m2, exit_area_m2, pe_over_pc, gamma: float = DEFAULT_GAMMA):
+def thrust_n(
+    chamber_pa, ambient_pa, throat_area_m2, exit_area_m2, pe_over_pc, gamma: float = DEFAULT_GAMMA
+):
     """Ideal thrust, lab manual eq. (5): p_c A_t (momentum term) + (p_e - p_a) A_e."""
     _check_gamma(gamma)
     chamber_pa = np.asarray(chamber_pa, dtype=float)
     exit_pa = np.asarray(pe_over_pc) * chamber_pa
-    return (chamber_pa * throat_area_m2 * _momentum_thrust_coefficient(pe_over_pc, gamma)
-            + (exit_pa - np.asarray(ambient_pa)) * exit_area_m2)
+    return (
+        chamber_pa * throat_area_m2 * _momentum_thrust_coefficient(pe_over_pc, gamma)
+        + (exit_pa - np.asarray(ambient_pa)) * exit_area_m2
+    )
 
 
-def characteristic_velocity_m_s(chamber_k=DEFAULT_CHAMBER_K, gamma: float = DEFAULT_GAMMA,
-                                gas_constant_j_kg_k: float = DEFAULT_GAS_CONSTANT_J_KG_K):
+def characteristic_velocity_m_s(
+    chamber_k=DEFAULT_CHAMBER_K,
+    gamma: float = DEFAULT_GAMMA,
+    gas_constant_j_kg_k: float = DEFAULT_GAS_CONSTANT_J_KG_K,
+):
     """C*, lab manual eq. (14) (= p_c A_t / m_dot, eq. (13))."""
     _check_gamma(gamma)
-    return np.sqrt(gas_constant_j_kg_k * np.asarray(chamber_k) / gamma
-                   * ((gamma + 1.0) / 2.0) ** ((gamma + 1.0) / (gamma - 1.0)))
+    return np.sqrt(
+        gas_constant_j_kg_k
+        * np.asarray(chamber_k)
+        / gamma
+        * ((gamma + 1.0) / 2.0) ** ((gamma + 1.0) / (gamma - 1.0))
+    )
 
 
 def specific_impulse_s(cf, c_star_m_s):
@@ -176,10 +215,11 @@ def shock_free_ambient_ratio(area_ratio: float, gamma: float = DEFAULT_GAMMA) ->
     """Largest p_a/p_c for which no normal shock stands inside the diverging section: a normal
     shock exactly at the exit, p_a = p_e (1 + 2γ/(γ+1) (M_e² - 1)) on the supersonic branch.
     Between this and `choking_ambient_ratio` the flow separates or shocks inside the nozzle and
-    the ideal eq. (12) overestimates C_F."""
+    the ideal eq. (12) overestimates C_F.
+    """
     pe_over_pc = pressure_ratio_from_area_ratio(area_ratio, gamma, 'supersonic')
     mach = exit_mach_number(pe_over_pc, gamma)
-    return float(pe_over_pc * (1.0 + 2.0 * gamma / (gamma + 1.0) * (mach ** 2 - 1.0)))
+    return float(pe_over_pc * (1.0 + 2.0 * gamma / (gamma + 1.0) * (mach**2 - 1.0)))
 
 
 def expansion_state(exit_pa: float, ambient_pa: float) -> str:
@@ -193,22 +233,22 @@ def expansion_state(exit_pa: float, ambient_pa: float) -> str:
 class NozzlePerformance:
     """Ideal performance of a nozzle at one chamber and ambient state, SI."""
 
-    chamber_pa: float              # p_c, absolute
-    ambient_pa: float              # p_a
-    chamber_k: float               # T_c
-    branch: str                    # which root of eq. (4)
-    area_ratio: float              # A_e/A_t
-    pe_over_pc: float              # eq. (4)
-    exit_pa: float                 # p_e
+    chamber_pa: float  # p_c, absolute
+    ambient_pa: float  # p_a
+    chamber_k: float  # T_c
+    branch: str  # which root of eq. (4)
+    area_ratio: float  # A_e/A_t
+    pe_over_pc: float  # eq. (4)
+    exit_pa: float  # p_e
     exit_mach: float
-    mass_flow_kg_s: float          # eq. (2)
-    exit_velocity_m_s: float       # eq. (3)
-    thrust_n: float                # eq. (5)
-    cf: float                      # eq. (12)
-    c_star_m_s: float              # eq. (14)
-    isp_s: float                   # eq. (15)
-    expansion: str                 # optimum / under-expanded / over-expanded
-    flow_regime: str               # 'shock-free', 'shock in nozzle', 'subsonic exit' or 'not choked'
+    mass_flow_kg_s: float  # eq. (2)
+    exit_velocity_m_s: float  # eq. (3)
+    thrust_n: float  # eq. (5)
+    cf: float  # eq. (12)
+    c_star_m_s: float  # eq. (14)
+    isp_s: float  # eq. (15)
+    expansion: str  # optimum / under-expanded / over-expanded
+    flow_regime: str  # 'shock-free', 'shock in nozzle', 'subsonic exit' or 'not choked'
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -227,8 +267,10 @@ class Nozzle:
         if not (self.throat_diameter_m > 0 and self.exit_diameter_m > 0):
             raise ValueError('nozzle diameters must be positive')
         if self.exit_diameter_m < self.throat_diameter_m:
-            raise ValueError(f'exit diameter {self.exit_diameter_m} m is smaller than the throat '
-                             f'{self.throat_diameter_m} m: not a converging-diverging nozzle')
+            raise ValueError(
+                f'exit diameter {self.exit_diameter_m} m is smaller than the throat '
+                f'{self.throat_diameter_m} m: not a converging-diverging nozzle'
+            )
         _check_gamma(self.gamma)
         if not self.gas_constant_j_kg_k > 0:
             raise ValueError('gas constant must be positive')
@@ -237,10 +279,12 @@ class Nozzle:
     def from_mapping(cls, data, where: str = 'thrust_stand') -> 'Nozzle':
         """From the `thrust_stand:` section of a balance config (config/thrust_stand.yaml)."""
         try:
-            return cls(float(data.get('throat_diameter_m', DEFAULT_THROAT_DIAMETER_M)),
-                       float(data.get('exit_diameter_m', DEFAULT_EXIT_DIAMETER_M)),
-                       float(data.get('gamma', DEFAULT_GAMMA)),
-                       float(data.get('gas_constant_j_kg_k', DEFAULT_GAS_CONSTANT_J_KG_K)))
+            return cls(
+                float(data.get('throat_diameter_m', DEFAULT_THROAT_DIAMETER_M)),
+                float(data.get('exit_diameter_m', DEFAULT_EXIT_DIAMETER_M)),
+                float(data.get('gamma', DEFAULT_GAMMA)),
+                float(data.get('gas_constant_j_kg_k', DEFAULT_GAS_CONSTANT_J_KG_K)),
+            )
         except (AttributeError, TypeError, ValueError) as error:
             raise ValueError(f'{where}: {error}') from None
 
@@ -259,37 +303,74 @@ class Nozzle:
     def pe_over_pc(self, branch: str = 'supersonic') -> float:
         return pressure_ratio_from_area_ratio(self.area_ratio, self.gamma, branch)
 
-    def performance(self, chamber_pa: float, ambient_pa: float = STANDARD_ATMOSPHERE_PA,
-                    chamber_k: float = DEFAULT_CHAMBER_K, branch: str = 'supersonic') -> NozzlePerformance:
+    def performance(
+        self,
+        chamber_pa: float,
+        ambient_pa: float = STANDARD_ATMOSPHERE_PA,
+        chamber_k: float = DEFAULT_CHAMBER_K,
+        branch: str = 'supersonic',
+    ) -> NozzlePerformance:
         """Ideal performance at absolute chamber pressure p_c and ambient p_a (Pa), T_c (K)."""
         chamber_pa, ambient_pa, chamber_k = float(chamber_pa), float(ambient_pa), float(chamber_k)
         if not (chamber_pa > 0 and ambient_pa >= 0 and chamber_k > 0):
-            raise ValueError(f'need p_c > 0, p_a >= 0, T_c > 0; got p_c = {chamber_pa} Pa, '
-                             f'p_a = {ambient_pa} Pa, T_c = {chamber_k} K')
+            raise ValueError(
+                f'need p_c > 0, p_a >= 0, T_c > 0; got p_c = {chamber_pa} Pa, '
+                f'p_a = {ambient_pa} Pa, T_c = {chamber_k} K'
+            )
         if chamber_pa <= ambient_pa:
-            raise ValueError(f'chamber pressure {chamber_pa:.6g} Pa does not exceed ambient {ambient_pa:.6g} Pa: '
-                             'no flow (is p_c absolute, p_G + p_a?)')
+            raise ValueError(
+                f'chamber pressure {chamber_pa:.6g} Pa does not exceed ambient {ambient_pa:.6g} '
+                'Pa: no flow (is p_c absolute, p_G + p_a?)'
+            )
         ratio = self.pe_over_pc(branch)
         area_ratio = self.area_ratio
         pa_over_pc = ambient_pa / chamber_pa
         cf = float(thrust_coefficient(ratio, pa_over_pc, area_ratio, self.gamma))
-        c_star = float(characteristic_velocity_m_s(chamber_k, self.gamma, self.gas_constant_j_kg_k))
+        c_star = float(
+            characteristic_velocity_m_s(chamber_k, self.gamma, self.gas_constant_j_kg_k)
+        )
         if pa_over_pc > choking_ambient_ratio(area_ratio, self.gamma):
             regime = 'not choked'
         elif branch == 'subsonic':
-            regime = 'subsonic exit'     # physical only where p_a = p_e of this root
+            regime = 'subsonic exit'  # physical only where p_a = p_e of this root
         elif pa_over_pc > shock_free_ambient_ratio(area_ratio, self.gamma):
             regime = 'shock in nozzle'
         else:
             regime = 'shock-free'
         return NozzlePerformance(
-            chamber_pa=chamber_pa, ambient_pa=ambient_pa, chamber_k=chamber_k, branch=branch,
-            area_ratio=area_ratio, pe_over_pc=ratio, exit_pa=ratio * chamber_pa,
+            chamber_pa=chamber_pa,
+            ambient_pa=ambient_pa,
+            chamber_k=chamber_k,
+            branch=branch,
+            area_ratio=area_ratio,
+            pe_over_pc=ratio,
+            exit_pa=ratio * chamber_pa,
             exit_mach=float(exit_mach_number(ratio, self.gamma)),
-            mass_flow_kg_s=float(mass_flow_kg_s(chamber_pa, self.throat_area_m2, chamber_k, self.gamma,
-                                                self.gas_constant_j_kg_k)),
-            exit_velocity_m_s=float(exit_velocity_m_s(ratio, chamber_k, self.gamma, self.gas_constant_j_kg_k)),
-            thrust_n=float(thrust_n(chamber_pa, ambient_pa, self.throat_area_m2, self.exit_area_m2, ratio,
-                                    self.gamma)),
-            cf=cf, c_star_m_s=c_star, isp_s=float(specific_impulse_s(cf, c_star)),
-            expansion=expansion_state(ratio * chamber_pa, ambient_pa), flow_regime=regime)
+            mass_flow_kg_s=float(
+                mass_flow_kg_s(
+                    chamber_pa,
+                    self.throat_area_m2,
+                    chamber_k,
+                    self.gamma,
+                    self.gas_constant_j_kg_k,
+                )
+            ),
+            exit_velocity_m_s=float(
+                exit_velocity_m_s(ratio, chamber_k, self.gamma, self.gas_constant_j_kg_k)
+            ),
+            thrust_n=float(
+                thrust_n(
+                    chamber_pa,
+                    ambient_pa,
+                    self.throat_area_m2,
+                    self.exit_area_m2,
+                    ratio,
+                    self.gamma,
+                )
+            ),
+            cf=cf,
+            c_star_m_s=c_star,
+            isp_s=float(specific_impulse_s(cf, c_star)),
+            expansion=expansion_state(ratio * chamber_pa, ambient_pa),
+            flow_regime=regime,
+        )

@@ -1,11 +1,12 @@
 """The thrust analyzer's comparison report: `<stem>.json` for programs, `<stem>.md` for people."""
+
 from __future__ import annotations
 
 import json
 import math
 import os
-import tempfile
 from pathlib import Path
+import tempfile
 
 from .analysis import ThrustComparison
 from .significant import format_value_error
@@ -33,8 +34,9 @@ def report_markdown(comparison: ThrustComparison) -> str:
     lines = [
         '# Thrust stand: measured and theoretical thrust coefficient',
         '',
-        f'Nozzle D_t = {c.nozzle.throat_diameter_m * 1e3:.4g} mm, D_e = {c.nozzle.exit_diameter_m * 1e3:.4g} mm '
-        f'(A_e/A_t = {c.nozzle.area_ratio:.4f}), γ = {c.nozzle.gamma}, R = {c.nozzle.gas_constant_j_kg_k} J/(kg·K).',
+        f'Nozzle D_t = {c.nozzle.throat_diameter_m * 1e3:.4g} mm, D_e = '
+        f'{c.nozzle.exit_diameter_m * 1e3:.4g} mm (A_e/A_t = {c.nozzle.area_ratio:.4f}), γ = '
+        f'{c.nozzle.gamma}, R = {c.nozzle.gas_constant_j_kg_k} J/(kg·K).',
         '',
         '| quantity | measured | theory (isentropic) |',
         '|---|---|---|',
@@ -89,7 +91,9 @@ def _json_safe(value):
     return value
 
 
-def write_report(report_path: str | Path, comparison: ThrustComparison, extra: dict | None = None) -> tuple[Path, Path]:
+def write_report(
+    report_path: str | Path, comparison: ThrustComparison, extra: dict | None = None
+) -> tuple[Path, Path]:
     """Write both files (each atomically); returns their paths."""
     json_path, markdown_path = report_paths(report_path)
     data = _json_safe({**comparison.as_dict(), **(extra or {})})

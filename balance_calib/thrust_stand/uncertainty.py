@@ -6,6 +6,7 @@ Every measured input x_i with uncertainty Δx_i contributes |∂f/∂x_i| Δx_i 
 - `worst_case`: sum of absolute values, eq. (19), for rounding errors or a safe bound;
 - `dominant`: the largest single contribution, eq. (21), and which input gives it.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -16,7 +17,13 @@ import numpy as np
 from .nozzle import circle_area_m2
 
 # names of the inputs of the measured thrust coefficient, in the order the manual lists them
-CF_INPUTS = ('calibration_slope', 'thrust_reading', 'chamber_gauge_pa', 'ambient_pa', 'throat_diameter_m')
+CF_INPUTS = (
+    'calibration_slope',
+    'thrust_reading',
+    'chamber_gauge_pa',
+    'ambient_pa',
+    'throat_diameter_m',
+)
 
 
 @dataclass(frozen=True)
@@ -24,38 +31,48 @@ class PropagatedUncertainty:
     """A derived value with its propagated uncertainty (same units as the value)."""
 
     value: float
-    sigma: float                          # eq. (20)
-    worst_case: float                     # eq. (19)
-    dominant: float                       # eq. (21)
+    sigma: float  # eq. (20)
+    worst_case: float  # eq. (19)
+    dominant: float  # eq. (21)
     dominant_input: str
-    contributions: Mapping[str, float]    # |∂f/∂x_i| Δx_i per input, the terms of eq. (18)
-    partials: Mapping[str, float]         # ∂f/∂x_i
+    contributions: Mapping[str, float]  # |∂f/∂x_i| Δx_i per input, the terms of eq. (18)
+    partials: Mapping[str, float]  # ∂f/∂x_i
 
     @property
     def relative_sigma(self) -> float:
         return self.sigma / abs(self.value) if self.value else float('inf')
 
 
-def propagate(value: float, partials: Mapping[str, float], sigmas: Mapping[str, float]) -> PropagatedUncertainty:
-    """Combine ∂f/∂x_i and Δx_i by eqs. (19), (20) and (21). Inputs missing from `sigmas` are exact."""
+def propagate(
+    value: float, partials: Mapping[str, float], sigmas: Mapping[str, float]
+) -> PropagatedUncertainty:
+    """Combine ∂f/∂x_i and Δx_i by eqs. (19), (20) and (21). Inputs missing from `sigmas` are
+    exact.
+    """
     unknown = sorted(set(sigmas) - set(partials))
     if unknown:
         raise KeyError(f'uncertainty given for unknown input(s) {", ".join(unknown)}')
-    contributions = {name: abs(float(partials[name]) * float(sigmas.get(name, 0.0))) for name in partials}
+    contributions = {
+        name: abs(float(partials[name]) * float(sigmas.get(name, 0.0))) for name in partials
+    }
     terms = np.array(list(contributions.values()))
-    dominant_input = max(contributions, key=lambda name: contributions[name]) if contributions else ''
+    dominant_input = (
+        max(contributions, key=lambda name: contributions[name]) if contributions else ''
+    )
     return PropagatedUncertainty(
         value=float(value),
-        sigma=float(np.sqrt(np.sum(terms ** 2))),        # lab manual eq. (20)
-        worst_case=float(np.sum(terms)),                 # lab manual eq. (19)
-        dominant=float(terms.max()) if terms.size else 0.0,   # lab manual eq. (21)
+        sigma=float(np.sqrt(np.sum(terms**2))),  # lab manual eq. (20)
+        worst_case=float(np.sum(terms)),  # lab manual eq. (19)
+        dominant=float(terms.max()) if terms.size else 0.0,  # lab manual eq. (21)
         dominant_input=dominant_input,
         contributions=contributions,
-        partials={name: float(d) for name, d in partials.items()})
+        partials={name: float(d) for name, d in partials.items()},
+    )
 
 
-def numerical_partials(function: Callable[..., float], inputs: Mapping[str, float],
-                       relative_step: float = 1e-6) -> dict[str, float]:
+def numerical_partials(
+    function: Callable[..., float], inputs: Mapping[str, float], relative_step: float = 1e-6
+) -> dict[str, float]:
     """∂f/∂x_i by central differences, for functions without hand-written derivatives.
 
     `function` is called with the inputs as keyword arguments.
@@ -70,14 +87,21 @@ def numerical_partials(function: Callable[..., float], inputs: Mapping[str, floa
 
 
 def measured_thrust_coefficient(thrust_n, chamber_gauge_pa, ambient_pa, throat_diameter_m):
-    """C_F = F_t / (p_c A_t) with p_c = p_G + p_a, A_t = π D_t²/4 (manual §4.1; eq. (11) with A_t)."""
+    """C_F = F_t / (p_c A_t) with p_c = p_G + p_a, A_t = π D_t²/4 (manual §4.1; eq. (11) with
+    A_t).
+    """
     chamber_pa = np.asarray(chamber_gauge_pa) + np.asarray(ambient_pa)
     return np.asarray(thrust_n) / (chamber_pa * circle_area_m2(throat_diameter_m))
 
 
-def thrust_coefficient_uncertainty(calibration_slope: float, thrust_reading: float, chamber_gauge_pa: float,
-                                   ambient_pa: float, throat_diameter_m: float,
-                                   sigmas: Mapping[str, float]) -> PropagatedUncertainty:
+def thrust_coefficient_uncertainty(
+    calibration_slope: float,
+    thrust_reading: float,
+    chamber_gauge_pa: float,
+    ambient_pa: float,
+    throat_diameter_m: float,
+    sigmas: Mapping[str, float],
+) -> PropagatedUncertainty:
     """Measured C_F = a V_F / ((p_G + p_a) π D_t²/4) and its uncertainty from those of its inputs.
 
     calibration_slope a and thrust_reading V_F in any units whose product is N (N/mV and mV;
@@ -88,9 +112,12 @@ def thrust_coefficient_uncertainty(calibration_slope: float, thrust_reading: flo
     """
     chamber_pa = chamber_gauge_pa + ambient_pa
     if not (chamber_pa > 0 and throat_diameter_m > 0):
-        raise ValueError(f'need p_c = p_G + p_a > 0 and D_t > 0; got p_c = {chamber_pa} Pa, '
-                         f'D_t = {throat_diameter_m} m')
-    per_newton = 1.0 / (chamber_pa * float(circle_area_m2(throat_diameter_m)))     # C_F per N of thrust
+        raise ValueError(
+            f'need p_c = p_G + p_a > 0 and D_t > 0; got p_c = {chamber_pa} Pa, '
+            f'D_t = {throat_diameter_m} m'
+        )
+    # C_F per N of thrust
+    per_newton = 1.0 / (chamber_pa * float(circle_area_m2(throat_diameter_m)))
     cf = float(calibration_slope * thrust_reading * per_newton)
     # a product/quotient, the manual's eq. (24): ∂C_F/∂x_i = (power of x_i) C_F / x_i
     partials = {
