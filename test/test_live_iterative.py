@@ -252,6 +252,7 @@ def test_table_fitted_iterative_calibration_drives_the_calibrator_over_dds(tmp_p
     from a table by `balance-calib fit --method iterative`: every wrench and its uncertainty are
     the model's.
     """
+    from calibrator_harness import wrench_values
     from geometry_msgs.msg import WrenchStamped
     from ros_harness import new_domain_id, NodeProcess, Probe, RELIABLE, wait_for
 
@@ -358,19 +359,7 @@ def test_table_fitted_iterative_calibration_drives_the_calibrator_over_dds(tmp_p
         wrenches[:], uncertainties[:] = of_the_test(wrenches), of_the_test(uncertainties)
 
         def as_array(messages):
-            return np.array(
-                [
-                    [
-                        m.wrench.force.x,
-                        m.wrench.force.y,
-                        m.wrench.force.z,
-                        m.wrench.torque.x,
-                        m.wrench.torque.y,
-                        m.wrench.torque.z,
-                    ]
-                    for m in sorted(messages, key=lambda m: m.header.stamp.nanosec)
-                ]
-            )
+            return wrench_values(sorted(messages, key=lambda m: m.header.stamp.nanosec))
 
         received = as_array(wrenches)
         np.testing.assert_allclose(received, expected, rtol=1e-9, atol=1e-9 * CAPACITY.max())
