@@ -17,7 +17,7 @@ import time
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, ShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -112,18 +112,39 @@ class Probe:
         # while a coroutine callback (the calibrator's ~/tare, ~/refit) awaits
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self.errors: list[Exception] = []
+        self.cycles = 0
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
         self.received: dict[str, list] = {}
 
     def _spin(self):
-        try:
-            self.executor.spin()
-        except Exception:  # context shut down
-            pass
+        """Spin until the context ends. An error in one callback (or in taking from an entity
+        being destroyed) is recorded in self.errors, not allowed to end the thread silently: a
+        dead spin thread looks like a node that never answers.
+        """
+        while self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except (ExternalShutdownException, ShutdownException):
+                break
+            except Exception as error:  # noqa: BLE001 (kept for the test to see)
+                if not self.context.ok():
+                    break
+                self.errors.append(error)
+            self.cycles += 1
 
     def add_node(self, node: Node):
         self.executor.add_node(node)
+
+    def retire(self, node: Node, timeout_s: float = 5.0):
+        """Remove `node` from the executor and destroy it once the executor has gone round
+        without it (destroying entities the spin thread is waiting on can raise there).
+        """
+        self.executor.remove_node(node)
+        seen = self.cycles
+        wait_for(lambda: self.cycles >= seen + 2, timeout_s, 'the executor to let go of the node')
+        node.destroy_node()
 
     def subscribe(self, msg_type, topic: str, qos=RELIABLE) -> list:
         messages = self.received.setdefault(topic, [])
@@ -147,3 +168,4 @@ class Probe:
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
         self._thread.join(timeout=5.0)
+        assert not self.errors, f'the probe executor raised in a callback: {self.errors!r}'

@@ -96,8 +96,7 @@ def test_tare_refused_on_a_ramp_accepted_when_steady_restored_after_a_restart_an
     accepted = window(probe, node, source, 'tare', wind_off)
     assert accepted.success and 'saved to' in accepted.message
     tare_load = node.session.live.tare.tare_load.copy()
-    probe.executor.remove_node(node)
-    node.destroy_node()
+    probe.retire(node)
 
     restarted = start_calibrator(probe, tmp_path, calibration_file)
     np.testing.assert_array_equal(restarted.session.live.tare.tare_load, tare_load)

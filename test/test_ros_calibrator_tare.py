@@ -59,8 +59,7 @@ def calibration_status(diagnostics, installation):
 
 
 def restart(probe, node, tmp_path, calibration_file, **parameters):
-    probe.executor.remove_node(node)
-    node.destroy_node()
+    probe.retire(node)
     return start_calibrator(probe, tmp_path, calibration_file, model='cubic', **parameters)
 
 
