@@ -419,6 +419,8 @@ class TareResult:
     tare_load: np.ndarray | None = None  # for kind 'tare': balance axes, N / N·m
     # standard uncertainty of that mean (scatter / √n), balance axes
     tare_sigma: np.ndarray | None = None
+    # the window's mean raw outputs (6,) mV, before the zero: what another calibration re-reads
+    tare_outputs_mv: np.ndarray | None = None
 
 
 def evaluate_window(
@@ -506,6 +508,7 @@ def evaluate_window(
         ),
         tare_load=tare_load,
         tare_sigma=np.std(batch.loads_total, axis=0, ddof=1) / np.sqrt(n),
+        tare_outputs_mv=mean_outputs,
     )
 
 

@@ -328,6 +328,22 @@ class CalibratorSession:
             ),
         )
 
+    def _switch(self, active: ActiveCalibration) -> str:
+        """Make `active` the calibration between two samples; the tare load re-read or cleared
+        (LiveCalibrator.set_active) and then persisted for its new owner. '' or what happened to
+        the tare load.
+        """
+        owner = self._owner(active)
+        loads_changed = (
+            not owner.calibration_sha256
+            or owner.calibration_sha256 != self.owner.calibration_sha256
+            or active.model_name != self.live.active.model_name
+        )
+        with self.lock:
+            said = self.live.set_active(active, loads_changed)
+        self.owner = owner
+        return f'{said}; {self._persist_tare()}' if said else ''
+
     def _persist_tare(self) -> str:
         if self.tare_file is None:
             return (
@@ -402,9 +418,9 @@ class CalibratorSession:
             self.log('error', message)
             return False, message, None
         new_active, target, message = outcome
-        with self.lock:
-            self.live.set_active(new_active)
-        self.owner = self._owner(new_active)
+        tare_said = self._switch(new_active)
+        if tare_said:
+            message = f'{message}; {tare_said}'
         self.log('info', message)
         if str(target) == str(job.calibration_file):
             return True, message, None
@@ -451,8 +467,6 @@ class CalibratorSession:
             if 'frame_id' in names:
                 self.encoder = WrenchEncoder(value('frame_id'))
             before = self.live.active
-            if pending is not None:
-                self.live.set_active(pending)
         # rclpy applies a request of several parameters one by one: say it once, when it changed
         if pending is not None and (
             before.model_name,
@@ -465,9 +479,11 @@ class CalibratorSession:
                 f'{pending.installation.name} installation',
             )
         if 'tare_file' in names or 'calibration_file' in names:
-            self.tare_file = self._tare_path(self.live.active)
+            self.tare_file = self._tare_path(pending or self.live.active)
         if pending is not None:  # a zero or tare taken from now on belongs to this one
-            self.owner = self._owner(self.live.active)
+            tare_said = self._switch(pending)
+            if tare_said:
+                self.log('warning' if 'cleared' in tare_said else 'info', tare_said)
         return 'diagnostics_period_s' in names
 
     # --- /diagnostics ---------------------------------------------------------------------------

@@ -21,6 +21,8 @@ from . import lone_sample
 from .calibrator_core import (
     _extra_variables,
     compute_wrench,
+    describe_loads,
+    describe_tare,
     diagnostics,
     evaluate_window,
     InputCounters,
@@ -338,12 +340,69 @@ class LiveCalibrator:
         self._lone_plan, self._lone_plan_for = None, None
 
     # --- configuration --------------------------------------------------------------------------
-    def set_active(self, active: ActiveCalibration) -> None:
-        """A new calibration (refit, parameters), between two samples; zero and tare stay."""
-        self.active = active
+    def set_active(self, active: ActiveCalibration, loads_changed: bool = True) -> str:
+        """A new calibration (refit, parameters), between two samples. The electrical zero stays
+        (output space, nothing on the balance). The tare load is the old calibration's reading of
+        the model's weight in the old installation's balance axes, so it does not simply stay:
+        another installation clears it (the weight loads the balance another way), and another
+        calibration or model (`loads_changed`) re-reads it from the wind-off outputs it was
+        taken at; else the wind-off reading would be f_new(V) - f_old(V_tare), not zero. Returns
+        what happened to the tare load ('' when nothing did).
+        """
+        before, self.active = self.active, active
         self.history = LoadHistory(active.capacity)
         self.overload.capacity = np.asarray(active.capacity, dtype=float)
         self.inputs.balance = active.calibration.balance.lower()
+        tare = self.tare
+        if tare.tare_load is None:
+            return ''
+        if active.installation.spec != before.installation.spec:
+            self.tare = _without_tare_load(tare)
+            self.lowpass.reset()
+            return (
+                f'tare load cleared: taken in the {before.installation.name} installation, now '
+                f'{active.installation.name} (take ~/tare again with the model on)'
+            )
+        if not loads_changed:
+            return ''
+        reread = self._reread_tare(active)
+        self.lowpass.reset()
+        if isinstance(reread, str):
+            self.tare = _without_tare_load(tare)
+            return f'tare load cleared: {reread} (take ~/tare again with the model on)'
+        self.tare = replace(tare, tare_load=reread)
+        return (
+            f'tare load re-read by the new calibration from its wind-off outputs: '
+            f'{describe_tare(reread, active)} (was {describe_loads(tare.tare_load, active)})'
+        )
+
+    def _reread_tare(self, active: ActiveCalibration) -> np.ndarray | str:
+        """The tare load (6,) of `active` at the recorded wind-off outputs, or why there is
+        none.
+        """
+        tare = self.tare
+        if tare.tare_outputs_mv is None:
+            return 'its wind-off outputs are not recorded (restored from an older tare file)'
+        needs = active.requires
+        if 'temperature' in needs and tare.tare_temperature_c is None:
+            return 'the new model has temperature terms and no temperature was read at the tare'
+        batch = compute_wrench(
+            active,
+            tare.tare_outputs_mv[None],
+            zero_mv=tare.zero_mv,
+            temperature_c=tare.tare_temperature_c,
+            load_direction=(
+                None
+                if 'load_history' not in needs or tare.tare_direction is None
+                else tare.tare_direction[None]
+            ),
+            zero_temperature_c=tare.zero_temperature_c,
+            zero_direction=tare.zero_direction,
+        )
+        loads = batch.loads_total[0]
+        if not np.all(np.isfinite(loads)):
+            return f'the new {batch.model_used} model gives no load at its wind-off outputs'
+        return loads
 
     def set_settings(self, settings: LiveSettings) -> None:
         if settings.lowpass_hz != self.settings.lowpass_hz:
@@ -593,6 +652,9 @@ class LiveCalibrator:
                 tare_load=result.tare_load,
                 tare_taken_at=now_iso(),
                 tare_sigma=result.tare_sigma,
+                tare_outputs_mv=result.tare_outputs_mv,
+                tare_temperature_c=window.temperature_c,
+                tare_direction=self.history.direction.copy(),
             )
         self.lowpass.reset()
         return result
@@ -603,7 +665,7 @@ class LiveCalibrator:
 
     def clear_tare(self) -> str:
         had = self.tare.tare_load
-        self.tare = replace(self.tare, tare_load=None, tare_taken_at='', tare_sigma=None)
+        self.tare = _without_tare_load(self.tare)
         self.lowpass.reset()
         if had is None:
             return 'clear_tare: there was no tare load; the electrical zero stays'
@@ -677,3 +739,16 @@ class LiveCalibrator:
         self.counters.start_period()
         self.inputs.start_period()
         return reports
+
+
+def _without_tare_load(tare: TareState) -> TareState:
+    """The state with the electrical zero kept and no tare load."""
+    return replace(
+        tare,
+        tare_load=None,
+        tare_taken_at='',
+        tare_sigma=None,
+        tare_outputs_mv=None,
+        tare_temperature_c=None,
+        tare_direction=None,
+    )

@@ -3,7 +3,9 @@ start-up.
 
 The file (YAML, replaced atomically) holds the electrical zero (mV, with the temperature and load
 direction at that moment, for models with such terms) and the tare load (N, N·m, balance
-calibration axes), with the balance name and when each was taken, and what they were taken for
+calibration axes) with the mean raw outputs, temperature and load direction it was read from (so
+that a new calibration of the same installation re-reads it, `LiveCalibrator.set_active`), with
+the balance name and when each was taken, and what they were taken for
 (`TareOwner`): the calibration (SHA-256 of the calibration file's bytes), the installation, the
 namespace and the node. A tare load in balance axes is not independent of the installation: the
 model's weight loads the balance the other way once it is mounted inverted. The state is restored
@@ -27,8 +29,10 @@ from ..calibration_file import write_text_atomically
 from ..tunnel_axes import Installation
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
 
-FORMAT = 'balance_calib/tare 2'
-OLDER_FORMATS = ('balance_calib/tare 1',)  # read, never restored: they record no owner
+FORMAT = 'balance_calib/tare 3'
+# 'tare 2' is restored (it has an owner) but records no tare outputs: a later calibration clears
+# its tare load instead of re-reading it; 'tare 1' is read, never restored: it records no owner
+OLDER_FORMATS = ('balance_calib/tare 2', 'balance_calib/tare 1')
 MAX_BYTES = 1 << 16
 
 
@@ -105,6 +109,11 @@ class TareState:
     tare_load: np.ndarray | None = None  # (6,) FX..MZ, balance axes, N / N·m
     tare_taken_at: str = ''
     tare_sigma: np.ndarray | None = None  # (6,) standard uncertainty of the tare load, N / N·m
+    # what the tare load was read from: mean raw outputs (6,) mV before the zero, the temperature
+    # and the load direction (6,) +-1 then (None: not recorded, a 'tare 2' file)
+    tare_outputs_mv: np.ndarray | None = None
+    tare_temperature_c: float | None = None
+    tare_direction: np.ndarray | None = None
     owner: TareOwner | None = None  # what they were taken for (None: not recorded)
 
     def to_dict(self) -> dict:
@@ -121,6 +130,9 @@ class TareState:
             'tare_load_balance_axes': plain(self.tare_load, COMPONENTS),
             'tare_taken_at': self.tare_taken_at,
             'tare_sigma_balance_axes': plain(self.tare_sigma, COMPONENTS),
+            'tare_outputs_mv': plain(self.tare_outputs_mv, BRIDGE_OUTPUTS),
+            'tare_temperature_c': self.tare_temperature_c,
+            'tare_direction': plain(self.tare_direction, COMPONENTS),
             'taken_for': None if self.owner is None else self.owner.to_dict(),
         }
 
@@ -191,16 +203,30 @@ def load_tare(path: Path, balance: str) -> TareState | None:
             raise ValueError(f'{path}: {key} holds a NaN or infinite value')
         return result
 
-    temperature = data.get('zero_temperature_c')
+    def number(key):
+        value = data.get(key)
+        if value is None:
+            return None
+        try:
+            result = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f'{path}: {key} needs a number, not {value!r}') from None
+        if not np.isfinite(result):
+            raise ValueError(f'{path}: {key} is a NaN or infinite value')
+        return result
+
     return TareState(
         balance,
         vector('zero_mv', BRIDGE_OUTPUTS),
-        None if temperature is None else float(temperature),
+        number('zero_temperature_c'),
         vector('zero_direction', COMPONENTS),
         str(data.get('zero_taken_at') or ''),
         vector('tare_load_balance_axes', COMPONENTS),
         str(data.get('tare_taken_at') or ''),
         vector('tare_sigma_balance_axes', COMPONENTS),
+        vector('tare_outputs_mv', BRIDGE_OUTPUTS),
+        number('tare_temperature_c'),
+        vector('tare_direction', COMPONENTS),
         _owner(path, data.get('taken_for')),
     )
 
