@@ -1,8 +1,8 @@
 """Hysteresis loops and sign asymmetries written from their physics (test/diagnosis_physics.py,
 not from the families' terms), one noise floor in size (the RMS they add to that component's
 cubic-fit residual = Table 17's cubic σ): the right family named first and alone, nothing
-unexplained, σ after (in-sample and cross-validated) within 15 % / 20 % of the clean campaign of
-the same seed (issue 24). The fast path runs one seed per cell; the slow test the ten seeds of
+unexplained, σ after (in-sample and cross-validated) within 15 % of the clean campaign of the
+same seed (issue 24). The fast path runs one seed per cell; the slow test the ten seeds of
 the issue's ≥ 9/10.
 
 Only the cells that meet the target are here; the measured misses (docs in the final report of
@@ -78,7 +78,7 @@ def _outcome(balance, shape, bridges, seed):
 def test_a_physical_loop_or_sign_asymmetry_is_named_alone_one_seed(balance, shape, bridges):
     right, sigma, crossval, found = _outcome(balance, shape, bridges, SEEDS[0])
     assert right, found
-    assert sigma <= 1.15 and crossval <= 1.2, (sigma, crossval)
+    assert sigma <= 1.15 and crossval <= 1.15, (sigma, crossval)
 
 
 @pytest.mark.slow
@@ -86,4 +86,4 @@ def test_a_physical_loop_or_sign_asymmetry_is_named_alone_one_seed(balance, shap
 def test_a_physical_loop_or_sign_asymmetry_is_named_alone_in_nine_of_ten(balance, shape, bridges):
     outcomes = [_outcome(balance, shape, bridges, seed) for seed in SEEDS]
     assert sum(o[0] for o in outcomes) >= 9, [o[3] for o in outcomes]
-    assert all(o[1] <= 1.15 and o[2] <= 1.2 for o in outcomes), [(o[1], o[2]) for o in outcomes]
+    assert all(o[1] <= 1.15 and o[2] <= 1.15 for o in outcomes), [(o[1], o[2]) for o in outcomes]
