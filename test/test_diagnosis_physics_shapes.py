@@ -1,16 +1,18 @@
 """Hysteresis loops and sign asymmetries written from their physics (test/diagnosis_physics.py,
 not from the families' terms), one noise floor in size (the RMS they add to that component's
 cubic-fit residual = Table 17's cubic σ): the right family named first and alone, nothing
-unexplained, σ after (in-sample and cross-validated) within 15 % / 20 % of the clean campaign of
-the same seed (issue 24). The fast path runs one seed per cell; the slow test the ten seeds of
+unexplained, σ after (in-sample and cross-validated) within 15 % of the clean campaign of the
+same seed (issue 24). The fast path runs one seed per cell; the slow test the ten seeds of
 the issue's ≥ 9/10.
 
-Only the cells that meet the target are here; the measured misses (docs in the final report of
-issue 24): load-path friction 0/10 (unexplained: on this schedule every loaded point is reached
-rising, so it is mostly a sign step plus a sensitivity, which no family holds with the stick
-band), negative curvature on every bridge 4/10 (LMC6522) and 0/10 (B660H) with cross_terms
-beside bidirectional, Preisach on every bridge 8/10 (LMC6522) and 7/10 (B660H), and B660H's loops
-on F_Z at σ ratios 1.18-1.56.
+Only the cells that meet the target are here; the measured misses (issue 24, docs/results.md):
+load-path friction 0/10 (unexplained: on this schedule every loaded point is reached rising, so
+it is mostly a sign step plus a sensitivity, which no family holds with the stick band), negative
+curvature on every bridge 4/10 (LMC6522, σ 1.87x) and 0/10 (B660H, 2.41x), Preisach on every
+bridge 8/10 (LMC6522, 1.43x: M_X's single play term fits 70-72 % of its excess and the leftovers
+drop it) and 7/10 (B660H), Masing and re-seating on every bridge of LMC6522 at 1.17x / 1.18x, and
+B660H's loops on F_Z at σ ratios 1.18-1.56 (one play term fits what the whitened test can see;
+what is left lies along the zero-point blocks, where the whitening gives it little weight).
 """
 
 from functools import lru_cache
@@ -32,6 +34,7 @@ CELLS = [
     ('lmc6522', 'bouc_wen', 'all'),
     ('lmc6522', 'sign_step', 'all'),
     ('b660h', 'sign_step', 'FZ'),
+    ('b660h', 'negative_curvature', 'FZ'),
 ]
 SEEDS = tuple(range(3000, 3010))
 
@@ -78,7 +81,7 @@ def _outcome(balance, shape, bridges, seed):
 def test_a_physical_loop_or_sign_asymmetry_is_named_alone_one_seed(balance, shape, bridges):
     right, sigma, crossval, found = _outcome(balance, shape, bridges, SEEDS[0])
     assert right, found
-    assert sigma <= 1.15 and crossval <= 1.2, (sigma, crossval)
+    assert sigma <= 1.15 and crossval <= 1.15, (sigma, crossval)
 
 
 @pytest.mark.slow
@@ -86,4 +89,4 @@ def test_a_physical_loop_or_sign_asymmetry_is_named_alone_one_seed(balance, shap
 def test_a_physical_loop_or_sign_asymmetry_is_named_alone_in_nine_of_ten(balance, shape, bridges):
     outcomes = [_outcome(balance, shape, bridges, seed) for seed in SEEDS]
     assert sum(o[0] for o in outcomes) >= 9, [o[3] for o in outcomes]
-    assert all(o[1] <= 1.15 and o[2] <= 1.2 for o in outcomes), [(o[1], o[2]) for o in outcomes]
+    assert all(o[1] <= 1.15 and o[2] <= 1.15 for o in outcomes), [(o[1], o[2]) for o in outcomes]
