@@ -24,7 +24,6 @@ from balance_calib.simulation.wind_on import wind_on_outputs
 
 # the memo's TM-663 §10.2.2: mounted inverted, F_X, F_Y, M_Y and M_Z change sign in tunnel axes
 INVERTED_SIGNS = np.array([-1.0, -1.0, 1.0, 1.0, -1.0, -1.0])
-UPRIGHT_SIGNS = np.array([-1.0, 1.0, -1.0, 1.0, 1.0, 1.0])  # '-FX,FY,-FZ,MX,MY,MZ'
 
 
 def outputs(load_balance, n=1, noise=False, seed=0):
