@@ -1,5 +1,7 @@
 """The statistics under the residual diagnosis: PRESS, forward selection, zero-point whitening."""
 
+import importlib
+
 import numpy as np
 
 from balance_calib.diagnosis.candidates import load_directions, refer_to_zero_points
@@ -108,3 +110,76 @@ def test_variables_referred_to_zero_points_vanish_there_and_keep_fast_changes(lm
     one_bracket = ((zero.before < 0) | (zero.after < 0)) & ~points.is_zero_point
     assert np.array_equal(np.abs(referred[:, 0]) > 1e-9, one_bracket)
     assert np.std(referred[~points.is_zero_point, 1]) > 0.3
+
+
+def test_forward_selection_tests_each_group_at_its_own_level(rng):
+    """Weighted Bonferroni (issue 24, small effects): a group passes at its own level; the planted
+    term's p sits between a flat and a weighted level, so only the weighted split takes it, and the
+    stronger term, tested at a level it does not reach, is not taken instead.
+    """
+    n = 200
+    base = np.column_stack([np.ones(n), rng.normal(size=(n, 2))])
+    candidates = rng.normal(size=(n, 10))
+    noise = rng.normal(size=n)
+    target = base @ [1.0, 0.5, -0.3] + 0.25 * candidates[:, 3] + 0.3 * candidates[:, 6] + noise
+    fit = fit_columns(base, target)
+    groups = [(j,) for j in range(10)]
+    p = {
+        j: partial_f(
+            fit.rss, fit_columns(np.column_stack([base, candidates[:, j]]), target).rss, 1, n - 4
+        )[1]
+        for j in (3, 6)
+    }
+    weak, strong = sorted(p, key=p.get, reverse=True)
+    assert p[strong] < p[weak] < 1e-3
+    flat = np.full(10, p[strong] / 10)
+    assert forward_select(fit, candidates, groups, alpha_per_test=flat, max_groups=1).steps == ()
+    levels = np.full(10, p[strong] / 100)
+    levels[weak] = 2 * p[weak]
+    selection = forward_select(fit, candidates, groups, alpha_per_test=levels, max_groups=1)
+    assert selection.groups == (weak,)
+    assert np.isclose(selection.steps[0].p_value, p[weak], rtol=1e-9)
+
+
+def test_temperature_levels_favour_the_own_bridge_and_keep_the_family_level(monkeypatch, b660h):
+    """The temperature family's level over its groups, per component: the shares of
+    DiagnosisSettings.temperature_level_shares (own bridge first order, second order, the other
+    bridges), summing to the flat Bonferroni total; zero drift's levels sum to it too.
+    """
+    diagnose_module = importlib.import_module('balance_calib.diagnosis.diagnose')
+
+    seen = []
+    original = diagnose_module.forward_select
+
+    def spy(fit, candidates, groups, *, alpha_per_test, max_groups, **kw):
+        seen.append((len(groups), np.broadcast_to(alpha_per_test, (len(groups),)).copy()))
+        return original(
+            fit, candidates, groups, alpha_per_test=alpha_per_test, max_groups=max_groups, **kw
+        )
+
+    family_of = []
+    original_examine = diagnose_module._examine_family
+
+    def examine(family, *args, **kw):
+        start = len(seen)
+        out = original_examine(family, *args, **kw)
+        family_of.extend([family.name] * (len(seen) - start))
+        return out
+
+    monkeypatch.setattr(diagnose_module, 'forward_select', spy)
+    monkeypatch.setattr(diagnose_module, '_examine_family', examine)
+    reduction, scatter = simulate_reduction(b660h, seed=7, samples_per_point=8, with_scatter=True)
+    diagnose_module.diagnose(reduction, b660h, **scatter)
+    temperature = [lv for (n, lv), f in zip(seen, family_of) if f == 'temperature']
+    drift = [lv for (n, lv), f in zip(seen, family_of) if f == 'zero_drift']
+    assert len(temperature) == 6 and drift
+    totals = {round(float(np.sum(lv)), 15) for lv in temperature + drift}
+    assert len(totals) == 1  # every component's family level is the same total
+    settings = diagnose_module.DiagnosisSettings()
+    own_first, own_second, others = settings.temperature_level_shares
+    for levels in temperature:
+        total = np.sum(levels)
+        ranked = np.sort(levels)[::-1] / total
+        # dT and dT·V_own share the first-order part, dT² and dT²·V_own the second order
+        assert np.allclose(ranked[:2], own_first / 2) and np.allclose(ranked[2:4], own_second / 2)
+        assert np.allclose(ranked[4:], others / (len(levels) - 4))

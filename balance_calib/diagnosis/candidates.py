@@ -70,6 +70,7 @@ class CandidateFamily:
     groups: tuple[tuple[str, ...], ...]  # canonical term names, in groups added as a whole
     max_groups: int  # forward selection adds at most this many per component
     labels: Mapping[tuple[str, ...], str]  # what a group means, for the evidence line
+    frequencies_hz: tuple[float, ...] = ()  # zero_drift: each group's frequency (Hz)
 
     @property
     def nuisance(self) -> bool:
@@ -213,7 +214,9 @@ def drift_family(frequencies_hz: np.ndarray, max_groups: int = 8) -> CandidateFa
         group = (f'drift_sin_{m}', f'drift_cos_{m}')
         groups.append(group)
         labels[group] = f'{1.0 / f:.0f} s'
-    return CandidateFamily('zero_drift', tuple(groups), max_groups, labels)
+    return CandidateFamily(
+        'zero_drift', tuple(groups), max_groups, labels, tuple(float(f) for f in frequencies_hz)
+    )
 
 
 # --- the variables ----------------------------------------------------------------------------
@@ -287,8 +290,15 @@ def drift_variables(times_s, frequencies_hz, is_zero_point, orientation) -> dict
 def without_base_terms(family: CandidateFamily, base_terms: Sequence[str]) -> CandidateFamily:
     """The family without the groups already in the base model."""
     base = {canonical(t) for t in base_terms}
-    groups = tuple(g for g in family.groups if not set(g) & base)
-    return CandidateFamily(family.name, groups, family.max_groups, family.labels)
+    kept = [i for i, g in enumerate(family.groups) if not set(g) & base]
+    frequencies = tuple(family.frequencies_hz[i] for i in kept) if family.frequencies_hz else ()
+    return CandidateFamily(
+        family.name,
+        tuple(family.groups[i] for i in kept),
+        family.max_groups,
+        family.labels,
+        frequencies,
+    )
 
 
 def turning_distances(loads, times_s, direction, capacity) -> np.ndarray:

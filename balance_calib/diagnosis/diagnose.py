@@ -97,6 +97,17 @@ class DiagnosisSettings:
     # separated" (a warning)
     equal_score: float = 0.8
     drift_oversampling: float = 2.0  # Fourier grid spacing = 1 / (oversampling x campaign span)
+    # Weighted Bonferroni (issue 24, small effects): a family's level α is split over its groups
+    # in proportion to where a physical effect is expected, not flat; the levels still sum to α.
+    # zero_drift: weight of frequency f ∝ f^-exponent (a random-walk zero: power ∝ f⁻²) x the
+    # energy of its sine and cosine left after referring to the zero points and whitening (what
+    # the test sees: the zero points remove the slow part, the red spectrum makes the fast part
+    # small); the level goes to the frequencies just faster than the zero points follow.
+    drift_spectrum_exponent: float = 2.0
+    # temperature: shares of α for a component's own bridge first order (dT, dT·V_own: a zero and
+    # a sensitivity linear in dT), own bridge second order (dT², dT²·V_own), and the other
+    # bridges' dT·V, dT²·V (reaching the component only through the interactions)
+    temperature_level_shares: tuple[float, float, float] = (0.5, 0.3, 0.2)
     tare_parameters: tuple[str, ...] = ('weight_n', 'cg_x_m')
     effects: tuple[str, ...] = EFFECT_NAMES
 
@@ -656,18 +667,22 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
             continue
         names = [t for g in groups for t in g]
         index = {t: i for i, t in enumerate(names)}
-        n_tests = n_searches * len(groups) * n_components  # Bonferroni within this family
+        # Bonferroni within this family, weighted over its groups (shares sum to 1 a component)
+        shares = _level_shares(family, groups, problem, k, settings)
+        levels = settings.alpha * shares / (n_searches * n_components)
         selection = forward_select(
             fit.gls,
             problem.white_columns(names),
             [tuple(index[t] for t in g) for g in groups],
-            alpha_per_test=settings.alpha / n_tests,
+            alpha_per_test=levels,
             max_groups=family.max_groups,
         )
         if not selection.steps:
             continue
         chosen = [groups[i] for i in selection.groups]
         added = [t for g in chosen for t in g]
+        # the adjusted p of the first group taken: p x α / its level
+        n_tests = settings.alpha / levels[selection.groups[0]]
         stats = _component_statistics(
             fit, problem.fit(k, comp_terms[k] + added), capacity[k], n_tests
         )
@@ -682,6 +697,48 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
     if not accepted:
         return None
     return _Candidate(family.name, accepted, sum(s['bic_gain'] for s in accepted.values()))
+
+
+def _level_shares(
+    family: CandidateFamily,
+    groups: Sequence[tuple[str, ...]],
+    problem: _Problem,
+    k: int,
+    settings: DiagnosisSettings,
+) -> np.ndarray:
+    """(groups,) the share of the family's level each group offered to component k is tested at
+    (weighted Bonferroni; they sum to 1). Flat except for zero_drift and temperature, see
+    DiagnosisSettings.drift_spectrum_exponent and temperature_level_shares.
+    """
+    weights = np.ones(len(groups))
+    if family.name == 'zero_drift' and family.frequencies_hz:
+        frequency = dict(zip(family.groups, family.frequencies_hz))
+        f = np.array([frequency[tuple(g)] for g in groups])
+        energy = np.array([np.sum(problem.white_columns(list(g)) ** 2) for g in groups])
+        weights = energy * f**-settings.drift_spectrum_exponent
+    elif family.name == 'temperature':
+        own = problem.outputs_names[k]
+        tiers = np.array([_temperature_tier(g[0], own) for g in groups])
+        shares = np.asarray(settings.temperature_level_shares, dtype=float)
+        present = [t for t in range(len(shares)) if np.any(tiers == t)]
+        total = sum(shares[t] for t in present)
+        weights = np.array([shares[t] / total / np.sum(tiers == t) for t in tiers])
+    total = float(np.sum(weights))
+    if not np.isfinite(total) or total <= 0:
+        return np.full(len(groups), 1.0 / len(groups))
+    return weights / total
+
+
+def _temperature_tier(term: str, own_output: str) -> int:
+    """0: first order in dT on the component's own bridge (or none), 1: second order there,
+    2: another bridge's output.
+    """
+    factors = parse_terms([term])[0].factors
+    outputs = {f.variable for f in factors if f.variable != 'dT'}
+    power = sum(f.power for f in factors if f.variable == 'dT')
+    if outputs - {own_output}:
+        return 2
+    return 0 if power <= 1 else 1
 
 
 def _changes_over_campaign(problem, k, terms, added, fit, alpha, family) -> bool:

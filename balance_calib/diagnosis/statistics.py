@@ -144,14 +144,16 @@ def forward_select(
     candidates: np.ndarray,
     groups,
     *,
-    alpha_per_test: float,
+    alpha_per_test: float | np.ndarray,
     max_groups: int,
     reference_norms: np.ndarray | None = None,
 ) -> Selection:
     """Add candidate groups to `fit` one at a time, best partial F-test first.
 
     candidates (N, m) columns; groups: sequence of 1- or 2-tuples of column indices. A step is
-    taken while the best group's p-value is below alpha_per_test. A column whose part not already
+    taken while some group's p-value is below its level, alpha_per_test (a scalar, or (groups,)
+    levels of a weighted Bonferroni split: the family-wise level is their sum); of the groups that
+    pass, the best fitting (smallest p) is taken. A column whose part not already
     explained by the fit is below 1e-6 of reference_norms (default: its own norm) is unusable
     (e.g. a time wave the zero points already follow).
     """
@@ -169,6 +171,7 @@ def forward_select(
     residual = fit.residuals.copy()
     rss, dof = fit.rss, fit.dof
     available = np.ones(len(groups), dtype=bool)
+    levels = np.broadcast_to(np.asarray(alpha_per_test, dtype=float), (len(groups),))
     steps: list[Step] = []
     for _ in range(max_groups):
         norms = np.linalg.norm(orthogonal, axis=0)
@@ -201,11 +204,12 @@ def forward_select(
         dof_after = dof - size
         f_values = (reduction / size) / np.maximum((rss - reduction) / dof_after, 1e-300)
         p_values = scipy.stats.f.sf(f_values, size, dof_after)
-        p_values = np.where(ok, p_values, np.inf)
-        f_values = np.where(ok, f_values, -np.inf)
-        best = int(np.lexsort((-f_values, p_values))[0])
-        if not p_values[best] <= alpha_per_test:
+        passing = ok & (p_values <= levels)
+        if not passing.any():
             break
+        p_values = np.where(passing, p_values, np.inf)
+        f_values = np.where(passing, f_values, -np.inf)
+        best = int(np.lexsort((-f_values, p_values))[0])
         columns = [first[best]] + ([second[best]] if second[best] >= 0 else [])
         q, r = np.linalg.qr(orthogonal[:, columns])
         keep = np.abs(np.diag(r)) > 1e-12 * max(np.abs(r[0, 0]), 1e-300)

@@ -20,8 +20,9 @@ tables (for the README) and the runtime.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 import sys
 import time
@@ -298,6 +299,9 @@ class Outcome:
     crossval_before: float
     crossval_after: float
     seconds: float
+    # every component's σ before, in-sample and cross-validated (% FS): the clean floors
+    sigma_before_all: Mapping[str, float] = field(default_factory=dict)
+    crossval_before_all: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def right(self) -> bool:
@@ -355,6 +359,8 @@ def run_one(
         result.sigma_pct_fs_crossval['before'][c],
         result.sigma_pct_fs_crossval['after'][c],
         seconds,
+        dict(result.sigma_pct_fs['before']),
+        dict(result.sigma_pct_fs_crossval['before']),
     )
 
 
@@ -473,22 +479,16 @@ def markdown_tables(outcomes: list[Outcome], floors: dict, sizes, balances) -> s
     return '\n'.join(lines)
 
 
-def floors_from_clean(balances, clean_seeds: int, scatter: bool = True) -> dict:
-    """(balance, component, 'sigma'|'crossval') -> median σ over clean campaigns (% FS)."""
+def floors_from_clean(outcomes: Sequence[Outcome]) -> dict:
+    """(balance, component, 'sigma'|'crossval') -> median σ over the clean campaigns (% FS)."""
     floors = {}
-    for b in balances:
-        config = load_balance_config(b)
-        sig, cv = [], []
-        for s in range(clean_seeds):
-            reduction, extra = simulate_reduction(
-                config, seed=1000 + s, samples_per_point=8, with_scatter=True
+    for b in dict.fromkeys(o.balance for o in outcomes if o.shape is None):
+        clean = [o for o in outcomes if o.balance == b and o.shape is None]
+        for c in clean[0].sigma_before_all:
+            floors[(b, c, 'sigma')] = float(np.median([o.sigma_before_all[c] for o in clean]))
+            floors[(b, c, 'crossval')] = float(
+                np.median([o.crossval_before_all[c] for o in clean])
             )
-            result = diagnose(reduction, config, **(extra if scatter else {}))
-            sig.append([result.sigma_pct_fs['before'][c] for c in config.components])
-            cv.append([result.sigma_pct_fs_crossval['before'][c] for c in config.components])
-        for k, c in enumerate(config.components):
-            floors[(b, c, 'sigma')] = float(np.median(np.array(sig)[:, k]))
-            floors[(b, c, 'crossval')] = float(np.median(np.array(cv)[:, k]))
     return floors
 
 
@@ -551,6 +551,10 @@ def main(argv=None) -> int:
         '--jobs', type=int, default=2, metavar='N', help='worker processes (default 2)'
     )
     args = parser.parse_args(argv)
+    if args.jobs < 1 or args.seeds < 0 or args.clean_seeds < 0:
+        parser.error('--jobs must be at least 1, --seeds and --clean-seeds at least 0')
+    if args.clean_seeds < 1 and args.seeds > 0 and (args.families or args.outside):
+        parser.error('--clean-seeds must be at least 1: the σ floors come from clean campaigns')
     start = time.perf_counter()
     scatter = not args.zero_points_only
     jobs = jobs_for(
@@ -570,7 +574,7 @@ def main(argv=None) -> int:
             outcomes = list(pool.map(_run, jobs, chunksize=4))
     else:
         outcomes = [_run(j) for j in jobs]
-    floors = floors_from_clean(args.balances, args.clean_seeds, scatter)
+    floors = floors_from_clean(outcomes)
     elapsed = time.perf_counter() - start
     print(markdown_tables(outcomes, floors, args.sizes, args.balances))
     print(
