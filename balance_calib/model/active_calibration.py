@@ -138,6 +138,44 @@ class ActiveCalibration:
         return six
 
     @cached_property
+    def coefficients_six_t(self) -> np.ndarray:
+        """coefficients_six as the (n_terms, 6) matrix of design @ coefficients (a view)."""
+        return self.coefficients_six.T
+
+    @cached_property
+    def output_limit_mv(self) -> np.ndarray:
+        """(6,) the live calibrator's whole-batch check: |every raw output| <= this means no
+        sample is saturated or non-finite (output_range_mv, the largest float where it is
+        infinite, so that an infinite output fails it); a batch that fails gets per-sample masks.
+        """
+        return np.minimum(self.output_range_mv, np.finfo(float).max)
+
+    @cached_property
+    def envelope_limit(self) -> np.ndarray:
+        """(6,) |every load| <= this: every load finite and inside the envelope (the check of a
+        whole batch, as output_limit_mv).
+        """
+        return np.minimum(self.envelope, np.finfo(float).max)
+
+    def layout(self, model: BalanceModel) -> tuple[np.ndarray, np.ndarray | None]:
+        """The model's input columns of the six raw outputs and its components' slots in FX..MZ
+        (None when it gives all six in order), cached for the active and the base model.
+        """
+        known = self._layouts.get(id(model))
+        if known is not None and known[0] is model:
+            return known[1], known[2]
+        columns = np.array([BRIDGE_OUTPUTS.index(v) for v in model.inputs], dtype=np.intp)
+        positions = [COMPONENTS.index(c) for c in model.components]
+        slots = None if positions == list(range(6)) else np.array(positions, dtype=np.intp)
+        if model is self.model or model is self.base_model:
+            self._layouts[id(model)] = (model, columns, slots)
+        return columns, slots
+
+    @cached_property
+    def _layouts(self) -> dict:
+        return {}
+
+    @cached_property
     def unused_inputs(self) -> np.ndarray | None:
         """Columns of the six raw outputs that the calibration does not read (a 1-, 3- or 5-bridge
         calibration), None when it reads all six: their values, NaN included, change nothing.
