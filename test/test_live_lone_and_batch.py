@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from balance_calib.calibration_file import Calibration
+from balance_calib.live.calibrator_core import compute_wrench
 from balance_calib.live.stream import LiveCalibrator, LiveSettings
 from balance_calib.model.active_calibration import activate
 from balance_calib.model.balance_model import BalanceModel
@@ -131,3 +132,39 @@ def test_lone_samples_batches_of_three_and_a_whole_run_publish_the_same(case):
         np.testing.assert_allclose(
             live.overload.peak_fraction, whole_live.overload.peak_fraction, rtol=1e-12
         )
+
+
+def test_terms_with_absolute_values_and_fourth_powers_are_the_products_written_out():
+    """The live core evaluates a direct model's terms as products of gathered factors (outputs,
+    their absolute values): written out by hand here, term by term, on two bridge columns taken
+    out of order (a 3-component calibration of FX, FZ and MY).
+    """
+    names = ['FXV', 'MYV', 'FZV', 'FXV*|FXV|', '|FZV|', 'MYV^4', 'FXV*FZV*|MYV|^2', '|MYV|^3']
+    rng = np.random.default_rng(3)
+    coefficients = rng.normal(0.0, 100.0, (3, len(names)))
+    model = BalanceModel(
+        'signed', parse_terms(names), coefficients, ('FX', 'FZ', 'MY'), ('FXV', 'FZV', 'MYV')
+    )
+    calibration = Calibration(
+        'three',
+        {'signed': model},
+        'signed',
+        'signed',
+        np.array([100.0, 400.0, 20.0]),
+        np.full(3, 2.0),
+        ('FX', 'FZ', 'MY'),
+        ('FXV', 'FZV', 'MYV'),
+    )
+    active = activate(calibration, 'adopted', 'balance')
+    outputs = rng.uniform(-2.0, 2.0, (7, 6))
+    outputs[3, 1] = np.nan  # FYV: a channel the calibration does not read
+    x, z, m = outputs[:, 0], outputs[:, 2], outputs[:, 4]
+    by_hand = (
+        np.column_stack([x, m, z, x * abs(x), abs(z), m**4, x * z * m**2, abs(m) ** 3])
+        @ coefficients.T
+    )
+    for rows in (slice(None), slice(2, 3), slice(3, 4)):
+        batch = compute_wrench(active, outputs[rows])
+        assert batch.accepted.all()
+        np.testing.assert_allclose(batch.loads_total[:, [0, 2, 4]], by_hand[rows], rtol=1e-13)
+        np.testing.assert_array_equal(batch.loads_total[:, [1, 3, 5]], 0.0)

@@ -41,7 +41,6 @@ from ..calibration_file import ConfigError
 from ..model.active_calibration import ActiveCalibration, six_axis_loads
 from ..model.balance_model import BalanceModel
 from ..model.inverse import InverseDidNotConverge
-from ..model.terms import power_products
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
 
 UNITS = ('N', 'N', 'N', 'N·m', 'N·m', 'N·m')
@@ -175,9 +174,13 @@ def _plain_loads(
         loads = np.zeros((outputs.shape[0], 6))
         loads[:, positions] = active.model.loads_and_status(outputs[:, columns])[0]
         return loads, None
-    # outputs[:, columns], not take(): its memory order is that of the design rows, and so the
-    # matrix product's rounding, the same in every build
-    design = power_products(outputs[:, columns], plain, absolute)
+    # the factors of every term gathered from [outputs, |outputs|, 1] and multiplied
+    factors = np.empty((outputs.shape[0], 13))
+    factors[:, :6] = outputs
+    if absolute is not None:
+        np.abs(outputs, out=factors[:, 6:12])
+    factors[:, 12] = 1.0
+    design = np.multiply.reduce(factors[:, active.design_index], axis=2)
     return design @ active.coefficients_six_t, design  # zero columns: components it lacks
 
 

@@ -96,6 +96,27 @@ class ActiveCalibration:
         )
 
     @cached_property
+    def design_index(self) -> np.ndarray | None:
+        """A direct model's terms as products of gathered columns: (n_terms, width) indices into
+        the six raw outputs, their six absolute values and a 1.0 (columns 0-5, 6-11, 12), each
+        factor x^a |x|^b written a + b times and the rest padded with the 1.0; the design row of
+        a sample is the product along each row (multiplications, where numpy's power calls pow()
+        per element: ~20 ns each, 6 per term). None for an iterative model.
+        """
+        columns, _, plain, absolute, _ = self.plan
+        if plain is None:
+            return None
+        absolute = np.zeros_like(plain) if absolute is None else absolute
+        terms = []
+        for powers, absolute_powers in zip(plain, absolute):  # variables in `columns` order
+            factors: list[int] = []
+            for column, a, b in zip(columns, powers, absolute_powers):
+                factors += [int(column)] * int(a) + [6 + int(column)] * int(b)
+            terms.append(factors)
+        width = max([len(t) for t in terms] + [1])
+        return np.array([t + [12] * (width - len(t)) for t in terms], dtype=np.intp)
+
+    @cached_property
     def one_sample_terms(self) -> tuple[tuple[int, ...], ...] | None:
         """Per term, the raw-output columns to multiply (with repetition): the C kernel's form
         of the model (live/lone_sample.py); None when a term has an absolute value or a power

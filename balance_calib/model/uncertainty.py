@@ -103,7 +103,7 @@ def load_standard_uncertainty(
             loads = loads if everyone else loads[finite]
         loads = np.atleast_2d(chosen.loads(good) if loads is None else loads)
         design, jac = chosen.design_and_output_jacobian(loads)
-        h = np.einsum('ij,jk,ik->i', design, covariance, design)
+        h = _leverage(design, covariance)
         variance_out = sigma[None, :] ** 2 * (1.0 + h)[:, None]
         inverse = np.linalg.inv(jac)
         variance = np.einsum('nmk,nk->nm', inverse**2, variance_out)
@@ -135,8 +135,15 @@ def _direct_variance(design: np.ndarray, covariance: np.ndarray, sigma: np.ndarr
     """(N, n_components) u² = σ² (1 + x (XᵀX)⁻¹ xᵀ) for design rows x (N, n_terms) of a direct
     model.
     """
-    h = np.einsum('ij,jk,ik->i', design, covariance, design)
+    h = _leverage(design, covariance)
     return sigma[None, :] ** 2 * (1.0 + h)[:, None]
+
+
+def _leverage(design: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+    """(N,) x (XᵀX)⁻¹ xᵀ of each design row x (N, n_terms): one matrix product (BLAS), where a
+    three-operand einsum loops over n_terms² products per row in C (~6 µs a row at 83 terms).
+    """
+    return np.add.reduce((design @ covariance) * design, axis=1)
 
 
 def with_fitted_covariance(
