@@ -38,7 +38,7 @@ class Installation:
         """Balance-axis loads (or outputs) (..., 6) -> tunnel axes."""
         values = np.asarray(balance_values, dtype=float)
         permutation, signs = self._arrays
-        return values[..., permutation] * signs
+        return values.take(permutation, axis=-1) * signs
 
     @cached_property
     def _arrays(self) -> tuple[np.ndarray, np.ndarray]:

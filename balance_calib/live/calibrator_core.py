@@ -41,7 +41,6 @@ from ..calibration_file import ConfigError
 from ..model.active_calibration import ActiveCalibration, six_axis_loads
 from ..model.balance_model import BalanceModel
 from ..model.inverse import InverseDidNotConverge
-from ..model.terms import power_products
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
 
 UNITS = ('N', 'N', 'N', 'N·m', 'N·m', 'N·m')
@@ -170,14 +169,26 @@ def _plain_loads(
     R-091), NaN rows where it did not converge. Loads (N, 6) and, for a direct model, its design
     rows (N, n_terms) (None for an iterative one).
     """
-    columns, positions, plain, absolute, coefficients = active.plan
-    loads = np.zeros((outputs.shape[0], 6))
+    columns, positions, plain, absolute, _ = active.plan
     if plain is None:
+        loads = np.zeros((outputs.shape[0], 6))
         loads[:, positions] = active.model.loads_and_status(outputs[:, columns])[0]
         return loads, None
-    design = power_products(outputs[:, columns], plain, absolute)
-    loads[:, positions] = design @ coefficients.T
-    return loads, design
+    # the factors of every term gathered from [outputs, |outputs|, 1] and multiplied
+    factors = np.empty((outputs.shape[0], 13))
+    factors[:, :6] = outputs
+    if absolute is not None:
+        np.abs(outputs, out=factors[:, 6:12])
+    factors[:, 12] = 1.0
+    design = np.multiply.reduce(factors[:, active.design_index], axis=2)
+    return design @ active.coefficients_six_t, design  # zero columns: components it lacks
+
+
+def _rows(outputs_mv) -> np.ndarray:
+    """Samples as a float array (N, 6), without a copy when they are one already."""
+    if type(outputs_mv) is np.ndarray and outputs_mv.ndim == 2 and outputs_mv.dtype == float:
+        return outputs_mv
+    return np.atleast_2d(np.asarray(outputs_mv, dtype=float))
 
 
 def compute_wrench(
@@ -197,7 +208,7 @@ def compute_wrench(
     axes: the tare load, subtracted from the loads. zero_temperature_c / zero_direction: the
     conditions when the zero was taken (for models with temperature or load-direction terms).
     """
-    outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
+    outputs = _rows(outputs_mv)
     with np.errstate(invalid='ignore', over='ignore'):  # beyond float range: flagged below
         return _compute_wrench(
             active,
@@ -221,10 +232,17 @@ def _compute_wrench(
     zero_temperature_c,
     zero_direction,
 ) -> WrenchBatch:
-    finite = active.inputs_finite(outputs)  # channels the calibration does not read aside
-    saturated = finite & (np.abs(outputs) > active.output_range_mv).any(axis=1)
-    accepted = finite & ~saturated
-    everyone = bool(accepted.all())
+    n = len(outputs)
+    # the whole batch checked at once (at 1 kHz a batch is one sample): per-sample masks only
+    # for a batch where some output is not finite or beyond the bridge's range
+    everyone = bool(np.logical_and.reduce(np.abs(outputs) <= active.output_limit_mv, axis=None))
+    if everyone:
+        accepted, saturated = np.ones(n, dtype=bool), np.zeros(n, dtype=bool)
+    else:
+        finite = active.inputs_finite(outputs)  # channels the calibration does not read aside
+        saturated = finite & (np.abs(outputs) > active.output_range_mv).any(axis=1)
+        accepted = finite & ~saturated
+        everyone = bool(accepted.all())
     zeroed = outputs if zero_mv is None else outputs - np.asarray(zero_mv, dtype=float)
     name, reason, design = active.model_name, '', None
     if everyone and not active.model.extra_variables:  # the outputs alone: design rows kept
@@ -247,7 +265,7 @@ def _compute_wrench(
             temps = (
                 None
                 if temperature_c is None
-                else np.broadcast_to(np.asarray(temperature_c, float), (len(outputs),))[accepted]
+                else np.broadcast_to(np.asarray(temperature_c, float), (n,))[accepted]
             )
             direction = (
                 None
@@ -263,18 +281,21 @@ def _compute_wrench(
                 zero_temperature_c,
                 zero_direction,
             )
-    not_converged = np.zeros(len(outputs), dtype=bool)
-    # finite outputs, loads beyond float range
-    overflow = accepted & ~np.isfinite(totals).all(axis=1)
-    if overflow.any():
-        if active.iterative:  # finite outputs without loads: Newton did not converge there
-            not_converged = overflow
-        else:
-            saturated = saturated | overflow
-        accepted = accepted & ~overflow
-        totals[overflow] = np.nan
-        design = None  # its rows no longer match the published samples
-    outside = accepted & np.any(np.abs(totals) > active.envelope, axis=1)
+    not_converged = np.zeros(n, dtype=bool)
+    if everyone and np.logical_and.reduce(np.abs(totals) <= active.envelope_limit, axis=None):
+        outside = np.zeros(n, dtype=bool)  # every load finite and inside the envelope
+    else:
+        # finite outputs, loads beyond float range
+        overflow = accepted & ~np.isfinite(totals).all(axis=1)
+        if overflow.any():
+            if active.iterative:  # finite outputs without loads: Newton did not converge there
+                not_converged = overflow
+            else:
+                saturated = saturated | overflow
+            accepted = accepted & ~overflow
+            totals[overflow] = np.nan
+            design = None  # its rows no longer match the published samples
+        outside = accepted & np.any(np.abs(totals) > active.envelope, axis=1)
     loads = totals if tare_load is None else totals - np.asarray(tare_load, dtype=float)
     wrench = active.installation.to_tunnel(loads)  # TM-663 §10.2
     return WrenchBatch(
@@ -573,15 +594,14 @@ class InputCounters:
 
     def count(self, batch: WrenchBatch) -> None:
         """Count a batch the pure core computed."""
+        n, ok = len(batch.accepted), int(np.count_nonzero(batch.accepted))
+        out = int(np.count_nonzero(batch.out_of_envelope))
+        if ok == n:  # every sample published: none saturated or failed (nor counted here)
+            self.add(n, ok, out=out)
+            return
         saturated = 0 if batch.saturated is None else int(np.count_nonzero(batch.saturated))
         failed = 0 if batch.not_converged is None else int(np.count_nonzero(batch.not_converged))
-        self.add(
-            len(batch.accepted),
-            int(np.count_nonzero(batch.accepted)),
-            saturated,
-            failed,
-            int(np.count_nonzero(batch.out_of_envelope)),
-        )
+        self.add(n, ok, saturated, failed, out)
 
     def add(self, n: int, ok: int, saturated: int = 0, failed: int = 0, out: int = 0) -> None:
         """N samples received, ok of them published, saturated / failed (Newton) not, out of the

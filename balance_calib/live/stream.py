@@ -16,10 +16,12 @@ from typing import Callable
 import numpy as np
 
 from ..model.active_calibration import ActiveCalibration, six_axis_loads
-from ..units import BRIDGE_OUTPUTS, COMPONENTS
+from ..model.uncertainty import covariance_and_sigma, has_uncertainty, load_standard_uncertainty
+from ..units import COMPONENTS
 from . import lone_sample
 from .calibrator_core import (
     _extra_variables,
+    _rows,
     compute_wrench,
     describe_loads,
     describe_tare,
@@ -161,13 +163,14 @@ class OverloadMonitor:
         """Feed a batch (loads of the accepted samples (N, 6), saturated flags); True if the
         state changed.
         """
+        # ufunc reductions: what .max() and .any() run, without their Python wrappers
         if len(loads_total):
-            ratio = np.abs(loads_total).max(axis=0) / self.capacity
+            ratio = np.maximum.reduce(np.abs(loads_total), axis=0) / self.capacity
             np.maximum(self.peak_fraction, ratio, out=self.peak_fraction)
             exceeded = ratio > self.fraction
         else:
             exceeded = np.zeros(6, bool)
-        if exceeded.any() or saturated.any():
+        if np.logical_or.reduce(exceeded) or np.logical_or.reduce(saturated):
             names = tuple(COMPONENTS[k] for k in np.flatnonzero(exceeded)) + (
                 ('saturated bridge',) if np.any(saturated) else ()
             )
@@ -297,23 +300,29 @@ def wrench_uncertainty(
     not given. A component the calibration lacks (a 1-, 3- or 5-component balance) is NaN: its 0 is
     not a measurement.
     """
-    from ..model.uncertainty import has_uncertainty, load_standard_uncertainty
-
     model = active.model if model is None else model
-    positions = [COMPONENTS.index(c) for c in model.components]
-    tare = None if tare_sigma is None else np.asarray(tare_sigma)[positions]
-    iterative = getattr(model, 'form', 'direct') == 'iterative'
-    if (model.extra_variables and extra is None) or not has_uncertainty(model):
+    if (model.extra_variables and extra is None) or covariance_and_sigma(model) is None:
         return None
-    columns = [BRIDGE_OUTPUTS.index(v) for v in model.inputs]
-    loads = (
-        None if loads_balance is None or not iterative else np.asarray(loads_balance)[:, positions]
-    )
+    columns, positions = active.layout(model)  # positions None: all six components, in order
+    tare = None if tare_sigma is None else np.asarray(tare_sigma)
+    tare = tare if tare is None or positions is None else tare[positions]
+    loads = None
+    if loads_balance is not None and getattr(model, 'form', 'direct') == 'iterative':
+        loads = np.asarray(loads_balance)
+        loads = loads if positions is None else loads[:, positions]
     per_component = load_standard_uncertainty(
-        model, zeroed_outputs[:, columns], extra, tare_sigma=tare, loads=loads, design=design
+        model,
+        zeroed_outputs.take(columns, axis=1),
+        extra,
+        tare_sigma=tare,
+        loads=loads,
+        design=design,
     )
-    six = np.full((len(zeroed_outputs), 6), np.nan)  # NaN: a component the calibration lacks
-    six[:, positions] = per_component
+    if positions is None:
+        six = per_component
+    else:
+        six = np.full((len(zeroed_outputs), 6), np.nan)  # NaN: a component the calibration lacks
+        six[:, positions] = per_component
     # a signed permutation: magnitudes carry over
     return np.abs(active.installation.to_tunnel(six))
 
@@ -431,7 +440,7 @@ class LiveCalibrator:
         wrench goes out first.
         """
         self.uncertainty_wanted = uncertainty_wanted
-        outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
+        outputs = _rows(outputs_mv)
         self.inputs.update(stamps_ns, frame_ids)
         active, tare = self.active, self.tare
         direction = None
@@ -453,7 +462,7 @@ class LiveCalibrator:
         self.counters.count(batch)
         self.fallback_reason = batch.fallback_reason
         accepted = batch.accepted
-        all_accepted = bool(accepted.all())
+        all_accepted = bool(np.logical_and.reduce(accepted))
         indices = np.arange(len(outputs)) if all_accepted else np.flatnonzero(accepted)
         loads_total = batch.loads_total if all_accepted else batch.loads_total[indices]
         self.overload_changed = self.overload.update(loads_total, batch.saturated, now_s)
@@ -680,8 +689,6 @@ class LiveCalibrator:
 
     # --- /diagnostics ---------------------------------------------------------------------------
     def _uncertainty_state(self) -> str:
-        from ..model.uncertainty import has_uncertainty
-
         if not self.settings.publish_uncertainty:
             return 'off (publish_uncertainty false)'
         if not has_uncertainty(self.active.model):

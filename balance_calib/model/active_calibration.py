@@ -96,6 +96,27 @@ class ActiveCalibration:
         )
 
     @cached_property
+    def design_index(self) -> np.ndarray | None:
+        """A direct model's terms as products of gathered columns: (n_terms, width) indices into
+        the six raw outputs, their six absolute values and a 1.0 (columns 0-5, 6-11, 12), each
+        factor x^a |x|^b written a + b times and the rest padded with the 1.0; the design row of
+        a sample is the product along each row (multiplications, where numpy's power calls pow()
+        per element: ~20 ns each, 6 per term). None for an iterative model.
+        """
+        columns, _, plain, absolute, _ = self.plan
+        if plain is None:
+            return None
+        absolute = np.zeros_like(plain) if absolute is None else absolute
+        terms = []
+        for powers, absolute_powers in zip(plain, absolute):  # variables in `columns` order
+            factors: list[int] = []
+            for column, a, b in zip(columns, powers, absolute_powers):
+                factors += [int(column)] * int(a) + [6 + int(column)] * int(b)
+            terms.append(factors)
+        width = max([len(t) for t in terms] + [1])
+        return np.array([t + [12] * (width - len(t)) for t in terms], dtype=np.intp)
+
+    @cached_property
     def one_sample_terms(self) -> tuple[tuple[int, ...], ...] | None:
         """Per term, the raw-output columns to multiply (with repetition): the C kernel's form
         of the model (live/lone_sample.py); None when a term has an absolute value or a power
@@ -136,6 +157,44 @@ class ActiveCalibration:
         six = np.zeros((6, coefficients.shape[1]))
         six[positions] = coefficients
         return six
+
+    @cached_property
+    def coefficients_six_t(self) -> np.ndarray:
+        """coefficients_six as the (n_terms, 6) matrix of design @ coefficients (a view)."""
+        return self.coefficients_six.T
+
+    @cached_property
+    def output_limit_mv(self) -> np.ndarray:
+        """(6,) the live calibrator's whole-batch check: |every raw output| <= this means no
+        sample is saturated or non-finite (output_range_mv, the largest float where it is
+        infinite, so that an infinite output fails it); a batch that fails gets per-sample masks.
+        """
+        return np.minimum(self.output_range_mv, np.finfo(float).max)
+
+    @cached_property
+    def envelope_limit(self) -> np.ndarray:
+        """(6,) |every load| <= this: every load finite and inside the envelope (the check of a
+        whole batch, as output_limit_mv).
+        """
+        return np.minimum(self.envelope, np.finfo(float).max)
+
+    def layout(self, model: BalanceModel) -> tuple[np.ndarray, np.ndarray | None]:
+        """The model's input columns of the six raw outputs and its components' slots in FX..MZ
+        (None when it gives all six in order), cached for the active and the base model.
+        """
+        known = self._layouts.get(id(model))
+        if known is not None and known[0] is model:
+            return known[1], known[2]
+        columns = np.array([BRIDGE_OUTPUTS.index(v) for v in model.inputs], dtype=np.intp)
+        positions = [COMPONENTS.index(c) for c in model.components]
+        slots = None if positions == list(range(6)) else np.array(positions, dtype=np.intp)
+        if model is self.model or model is self.base_model:
+            self._layouts[id(model)] = (model, columns, slots)
+        return columns, slots
+
+    @cached_property
+    def _layouts(self) -> dict:
+        return {}
 
     @cached_property
     def unused_inputs(self) -> np.ndarray | None:

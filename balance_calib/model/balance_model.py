@@ -93,10 +93,10 @@ class BalanceModel:
     @cached_property
     def _exponents(self) -> tuple[tuple[str, ...], np.ndarray, np.ndarray, bool]:
         """Variables, and the powers of each (plain, absolute) in each term: (n_terms, n_vars)
-        ints.
+        whole numbers as floats (numpy casts integer exponents to float on every call).
         """
         plain, absolute = term_exponents(self.terms, self.variables)
-        return self.variables, plain, absolute, bool(absolute.any())
+        return self.variables, plain.astype(float), absolute.astype(float), bool(absolute.any())
 
     def design(
         self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None

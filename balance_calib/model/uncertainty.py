@@ -89,36 +89,44 @@ def load_standard_uncertainty(
     outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
     n = outputs.shape[0]
     pieces = covariance_and_sigma(chosen)
-    result = np.full((n, len(chosen.components)), np.nan)
-    finite = np.all(np.isfinite(outputs), axis=1)
-    if pieces is None or not finite.any():
-        return result
+    # the whole batch at once (a live batch is often one sample); rows only if some is not finite
+    finite = np.isfinite(outputs)
+    everyone = bool(finite.all())
+    finite = finite if everyone else finite.all(axis=1)  # (N,) when some row is not
+    if pieces is None or not (everyone or finite.any()):
+        return np.full((n, len(chosen.components)), np.nan)
     covariance, sigma = pieces
-    good = outputs[finite]
+    good = outputs if everyone else outputs[finite]
     if getattr(chosen, 'form', 'direct') == 'iterative':
-        loads = np.atleast_2d(
-            chosen.loads(good) if loads is None else np.asarray(loads, dtype=float)[finite]
-        )
+        if loads is not None:
+            loads = np.asarray(loads, dtype=float)
+            loads = loads if everyone else loads[finite]
+        loads = np.atleast_2d(chosen.loads(good) if loads is None else loads)
         design, jac = chosen.design_and_output_jacobian(loads)
-        h = np.einsum('ij,jk,ik->i', design, covariance, design)
+        h = _leverage(design, covariance)
         variance_out = sigma[None, :] ** 2 * (1.0 + h)[:, None]
         inverse = np.linalg.inv(jac)
         variance = np.einsum('nmk,nk->nm', inverse**2, variance_out)
     else:
         sub_extra = (
-            None
-            if extra is None
+            extra
+            if extra is None or everyone
             else {
                 k: (np.asarray(v)[finite] if np.ndim(v) and np.shape(v)[0] == n else v)
                 for k, v in extra.items()
             }
         )
-        design = (
-            chosen.design(good, sub_extra) if design is None else np.atleast_2d(design)[finite]
-        )
+        if design is None:
+            design = chosen.design(good, sub_extra)
+        else:
+            design = np.atleast_2d(design)
+            design = design if everyone else design[finite]
         variance = _direct_variance(design, covariance, sigma)
     if tare_sigma is not None:
         variance = variance + np.asarray(tare_sigma, dtype=float)[None, :] ** 2
+    if everyone:
+        return np.sqrt(variance)
+    result = np.full((n, len(chosen.components)), np.nan)
     result[finite] = np.sqrt(variance)
     return result
 
@@ -127,8 +135,15 @@ def _direct_variance(design: np.ndarray, covariance: np.ndarray, sigma: np.ndarr
     """(N, n_components) u² = σ² (1 + x (XᵀX)⁻¹ xᵀ) for design rows x (N, n_terms) of a direct
     model.
     """
-    h = np.einsum('ij,jk,ik->i', design, covariance, design)
+    h = _leverage(design, covariance)
     return sigma[None, :] ** 2 * (1.0 + h)[:, None]
+
+
+def _leverage(design: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+    """(N,) x (XᵀX)⁻¹ xᵀ of each design row x (N, n_terms): one matrix product (BLAS), where a
+    three-operand einsum loops over n_terms² products per row in C (~6 µs a row at 83 terms).
+    """
+    return np.add.reduce((design @ covariance) * design, axis=1)
 
 
 def with_fitted_covariance(
