@@ -79,7 +79,11 @@ def structure_basis(
         fitted_loads=fitted_loads,
     )
     columns = list(variables.values())
-    columns += list(absolute_load_variables(fitted_loads, capacity, components).values())
+    columns += [  # |x| only: the basis as it was before x|x|, x²|x| joined the family
+        v
+        for name, v in absolute_load_variables(fitted_loads, capacity, components).items()
+        if name.startswith('absload_')
+    ]
     for width in EXTRA_PLAY_WIDTHS:  # a loop of many hysterons: more widths than the family's
         half = width * np.asarray(rated_outputs_mv, float)
         columns += list(play_lag(outputs_mv, times_s, half).T)
