@@ -6,14 +6,15 @@ same seed (issue 24). The fast path runs one seed per cell; the slow test the te
 the issue's ≥ 9/10.
 
 Only the cells that meet the target are here; the measured misses (issue 24, docs/results.md):
-load-path friction 0/10 (unexplained: on this schedule every loaded point is reached rising, so
-it is mostly a sign step plus a sensitivity, which no family holds with the stick band), negative
-curvature on every bridge 9/10 (LMC6522, σ 1.21x: F_Y needs a third sign term its whitened
-test does not see) and 6/10 (B660H, 1.38x) since the load-keyed x|x|, x²|x| (before 4/10, 0/10), Preisach on every
-bridge 8/10 (LMC6522, 1.43x: M_X's single play term fits 70-72 % of its excess and the leftovers
-drop it) and 7/10 (B660H), Masing and re-seating on every bridge of LMC6522 at 1.17x / 1.18x, and
-B660H's loops on F_Z at σ ratios 1.18-1.56 (one play term fits what the whitened test can see;
-what is left lies along the zero-point blocks, where the whitening gives it little weight).
+load-path friction 0/10 (unexplained: on this schedule every loaded point is reached rising, so it
+is mostly a sign step plus a sensitivity, which no family holds with the stick band), negative
+curvature on every bridge 9/10 (LMC6522, σ 1.21x: F_Y needs a third sign term its whitened test
+does not see) and 6/10 (B660H, 1.38x) since the load-keyed x|x|, x²|x| (before 4/10, 0/10),
+Preisach on every bridge 8/10 (LMC6522, 1.43x: M_X's single play term fits 70-72 % of its excess
+and the leftovers drop it) and 7/10 (B660H), Masing and re-seating on every bridge of LMC6522 at
+1.17x / 1.18x, and B660H's loops on F_Z at σ ratios 1.18-1.56 (one play term fits what the whitened
+test can see; what is left lies along the zero-point blocks, where the whitening gives it little
+weight).
 """
 
 from functools import lru_cache
