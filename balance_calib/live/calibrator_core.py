@@ -237,7 +237,8 @@ def _compute_wrench(
     # for a batch where some output is not finite or beyond the bridge's range
     everyone = bool(np.logical_and.reduce(np.abs(outputs) <= active.output_limit_mv, axis=None))
     if everyone:
-        accepted, saturated = np.ones(n, dtype=bool), np.zeros(n, dtype=bool)
+        saturated = np.zeros(n, dtype=bool)
+        accepted = ~saturated
     else:
         finite = active.inputs_finite(outputs)  # channels the calibration does not read aside
         saturated = finite & (np.abs(outputs) > active.output_range_mv).any(axis=1)

@@ -103,8 +103,7 @@ def load_standard_uncertainty(
             loads = loads if everyone else loads[finite]
         loads = np.atleast_2d(chosen.loads(good) if loads is None else loads)
         design, jac = chosen.design_and_output_jacobian(loads)
-        h = _leverage(design, covariance)
-        variance_out = sigma[None, :] ** 2 * (1.0 + h)[:, None]
+        variance_out = _direct_variance(design, covariance, sigma)  # in output space
         inverse = np.linalg.inv(jac)
         variance = np.einsum('nmk,nk->nm', inverse**2, variance_out)
     else:
@@ -123,7 +122,7 @@ def load_standard_uncertainty(
             design = design if everyone else design[finite]
         variance = _direct_variance(design, covariance, sigma)
     if tare_sigma is not None:
-        variance = variance + np.asarray(tare_sigma, dtype=float)[None, :] ** 2
+        variance = variance + np.square(np.asarray(tare_sigma, dtype=float))
     if everyone:
         return np.sqrt(variance)
     result = np.full((n, len(chosen.components)), np.nan)
@@ -135,13 +134,12 @@ def _direct_variance(design: np.ndarray, covariance: np.ndarray, sigma: np.ndarr
     """(N, n_components) u² = σ² (1 + x (XᵀX)⁻¹ xᵀ) for design rows x (N, n_terms) of a direct
     model.
     """
-    h = _leverage(design, covariance)
-    return sigma[None, :] ** 2 * (1.0 + h)[:, None]
+    return np.multiply.outer(1.0 + _leverage(design, covariance), np.square(sigma))
 
 
 def _leverage(design: np.ndarray, covariance: np.ndarray) -> np.ndarray:
     """(N,) x (XᵀX)⁻¹ xᵀ of each design row x (N, n_terms): one matrix product (BLAS), where a
-    three-operand einsum loops over n_terms² products per row in C (~6 µs a row at 83 terms).
+    three-operand einsum loops over n_terms² products per row in C (3.5 µs a row at 34 terms).
     """
     return np.add.reduce((design @ covariance) * design, axis=1)
 
