@@ -668,12 +668,14 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
         names = [t for g in groups for t in g]
         index = {t: i for i, t in enumerate(names)}
         # Bonferroni within this family, weighted over its groups (shares sum to 1 a component)
-        shares = _level_shares(family, groups, problem, k, settings)
+        candidates = problem.white_columns(names)
+        columns = [tuple(index[t] for t in g) for g in groups]
+        shares = _level_shares(family, groups, candidates, columns, problem, k, settings)
         levels = settings.alpha * shares / (n_searches * n_components)
         selection = forward_select(
             fit.gls,
-            problem.white_columns(names),
-            [tuple(index[t] for t in g) for g in groups],
+            candidates,
+            columns,
             alpha_per_test=levels,
             max_groups=family.max_groups,
         )
@@ -702,19 +704,22 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
 def _level_shares(
     family: CandidateFamily,
     groups: Sequence[tuple[str, ...]],
+    candidates: np.ndarray,
+    columns: Sequence[tuple[int, ...]],
     problem: _Problem,
     k: int,
     settings: DiagnosisSettings,
 ) -> np.ndarray:
     """(groups,) the share of the family's level each group offered to component k is tested at
     (weighted Bonferroni; they sum to 1). Flat except for zero_drift and temperature, see
-    DiagnosisSettings.drift_spectrum_exponent and temperature_level_shares.
+    DiagnosisSettings.drift_spectrum_exponent and temperature_level_shares. candidates: the
+    groups' whitened columns (N, m), columns: each group's indices into them.
     """
     weights = np.ones(len(groups))
     if family.name == 'zero_drift' and family.frequencies_hz:
         frequency = dict(zip(family.groups, family.frequencies_hz))
         f = np.array([frequency[tuple(g)] for g in groups])
-        energy = np.array([np.sum(problem.white_columns(list(g)) ** 2) for g in groups])
+        energy = np.array([np.sum(candidates[:, list(c)] ** 2) for c in columns])
         weights = energy * f**-settings.drift_spectrum_exponent
     elif family.name == 'temperature':
         own = problem.outputs_names[k]

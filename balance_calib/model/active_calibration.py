@@ -22,6 +22,8 @@ from .calibration import Calibration
 MODEL_CHOICES = ('linear', 'quadratic', 'cubic', 'adopted')
 DEFAULT_ENVELOPE_MARGIN = 1.1
 DEFAULT_OUTPUT_RANGE_FACTOR = 2.0
+# design_index: columns 0-5 the raw outputs, 6-11 their absolute values, this one a 1.0
+_ONE_COLUMN = 12
 
 
 def six_axis_loads(model: BalanceModel, outputs_mv, extra=None) -> np.ndarray:
@@ -114,27 +116,20 @@ class ActiveCalibration:
                 factors += [int(column)] * int(a) + [6 + int(column)] * int(b)
             terms.append(factors)
         width = max([len(t) for t in terms] + [1])
-        return np.array([t + [12] * (width - len(t)) for t in terms], dtype=np.intp)
+        return np.array([t + [_ONE_COLUMN] * (width - len(t)) for t in terms], dtype=np.intp)
 
     @cached_property
     def one_sample_terms(self) -> tuple[tuple[int, ...], ...] | None:
         """Per term, the raw-output columns to multiply (with repetition): the C kernel's form
-        of the model (live/lone_sample.py); None when a term has an absolute value or a power
-        beyond 3 (the kernel does not apply then), or for an iterative model.
+        of the model (live/lone_sample.py), design_index without its padding; None when a term
+        has an absolute value or a power beyond 3 (the kernel does not apply then), or for an
+        iterative model.
         """
-        columns, _, plain, absolute, _ = self.plan
-        if (
-            plain is None
-            or absolute is not None
-            or plain.size == 0
-            or plain.max() > 3
-            or plain.min() < 0
-        ):
+        _, _, plain, absolute, _ = self.plan
+        index = self.design_index
+        if index is None or absolute is not None or plain.size == 0 or plain.max() > 3:
             return None
-        return tuple(
-            tuple(int(columns[v]) for v in range(plain.shape[1]) for _ in range(int(plain[t, v])))
-            for t in range(plain.shape[0])
-        )
+        return tuple(tuple(int(i) for i in row if i != _ONE_COLUMN) for row in index)
 
     @cached_property
     def one_sample_index(self) -> np.ndarray | None:
