@@ -43,6 +43,7 @@ import numpy as np
 from ..accuracy.sigma import sigma_pct_fs
 from ..config import BalanceConfig, CalibrationBody
 from ..model.balance_model import BalanceModel
+from ..model.inverse import InverseDidNotConverge, outputs_for_loads
 from ..model.terms import as_variables, design_matrix, parse_terms
 from ..model.tm663 import tm663_terms
 from ..reduction import Reduction
@@ -185,6 +186,9 @@ class Diagnosis:
     repeatability_pct_fs: Mapping[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     leftovers: Leftovers | None = None  # the lack-of-fit numbers behind them
+    # the tare outputs were re-read through the adopted model after the search (_retare): σ after
+    # includes it, the effects' own σ before/after (taken when each was adopted) do not
+    tare_reread: bool = False
 
     @property
     def points(self) -> int:
@@ -560,6 +564,17 @@ def diagnose(
             entry['candidate'].components.pop(k, None)
     effects = [e for e in effects if e['candidate'].components]
     warnings += leftovers.warnings
+    tare_reread = False
+    if effects:
+        fits, tare_reread = _retare(
+            problem,
+            fits,
+            comp_terms,
+            points.gravity,
+            points.is_zero_point,
+            components,
+            outputs_names,
+        )
 
     # --- assemble -----------------------------------------------------------------------------
     all_terms = list(base_terms)
@@ -623,6 +638,7 @@ def diagnose(
         repeatability_pct_fs=leftovers.repeatability_pct_fs,
         warnings=tuple(dict.fromkeys(warnings)),
         leftovers=leftovers,
+        tare_reread=tare_reread,
     )
 
 
@@ -887,6 +903,99 @@ def _inseparable_warning(winner, runner, components) -> str:
     )
 
 
+def _current_model(fits, comp_terms, components, outputs_names, outputs_only=True) -> BalanceModel:
+    """The current fits as one model, constants dropped; outputs_only: only the terms in the
+    bridge outputs alone (the tare refit's inverse, tare_refit.TareOutputChange).
+    """
+    names = set(outputs_names)
+    terms: list[str] = []
+    for component_terms in comp_terms:
+        terms += [
+            t
+            for t in component_terms
+            if t not in terms and (not outputs_only or set(parse_terms([t])[0].variables) <= names)
+        ]
+    coefficients = np.array(
+        [
+            [
+                f.ols.coefficients[comp_terms[k].index(t)] if t in comp_terms[k] else 0.0
+                for t in terms
+            ]
+            for k, f in enumerate(fits)
+        ]
+    )
+    return BalanceModel(
+        'current', parse_terms(terms), coefficients, tuple(components), tuple(outputs_names)
+    ).without_constant()
+
+
+def _retare(problem, fits, comp_terms, gravity, is_zero_point, components, outputs_names):
+    """Tare outputs re-read through the inverse of the adopted model, every component refitted:
+    (fits, True); or (fits as given, False) where the re-read fits predict the loaded points no
+    better (`_loaded_press`), e.g. B660H's F_Z curvature keyed to |load|, whose highest-leverage
+    points it moved away.
+
+    The reduction puts the body's outputs back through the inverse of a first cubic fit
+    (reduction.retare_with_model). An effect that fit lacked (a loop, a sign asymmetry) bent it,
+    so the zero points' tare outputs do not lie on the adopted model and every point of an
+    orientation is off by the same output: on LMC6522 under a Masing loop on every bridge,
+    noise-free, F_Y keeps 0.46 of the floor after its loop terms, 0.28 once the tare is re-read.
+    This is the memo's fit -> inverse -> refit (§7.1) once more, with the adopted model, after
+    the search: the tests and the leftovers judge the reduction's data (re-read in every round
+    it made B660H loops' coefficients differ between the halves of the campaign). The adopted
+    terms in other variables (dT, |load|; a loop or drift term is zero there) are held at their
+    mean over the orientation's zero points, where the body alone loads the balance.
+    """
+    gravity = np.asarray(gravity, dtype=float)
+    _, first, index = np.unique(
+        np.round(gravity, 9), axis=0, return_index=True, return_inverse=True
+    )
+    index = np.ravel(index)
+    zero = np.asarray(is_zero_point, dtype=bool)
+    model = _current_model(fits, comp_terms, components, outputs_names, outputs_only=False)
+    extra = {}
+    for name in model.extra_variables:
+        values = np.asarray(problem.variables[name], dtype=float)
+        extra[name] = np.array(
+            [
+                values[(index == o) & zero].mean() if np.any((index == o) & zero) else 0.0
+                for o in range(len(first))
+            ]
+        )
+    corrected = problem.corrected
+    try:
+        new = outputs_for_loads(model, corrected.tare_loads[first], extra)[index]
+    except (InverseDidNotConverge, np.linalg.LinAlgError):
+        return fits, False  # no inverse at the body's load: the reduction's tare outputs stay
+    delta = new - corrected.tare_outputs_mv
+    problem.set_corrected(
+        CorrectedData(
+            corrected.loads,
+            corrected.bridge_outputs_mv + delta,
+            corrected.tare_loads,
+            corrected.tare_outputs_mv + delta,
+        )
+    )
+    refits = [problem.fit(k, comp_terms[k]) for k in range(len(fits))]
+    if _loaded_press(refits, zero, fits) >= _loaded_press(fits, zero, fits):
+        problem.set_corrected(corrected)
+        return fits, False
+    return refits, True
+
+
+def _loaded_press(fits, zero, scale) -> float:
+    """Σ over components of the loaded points' squared PRESS residuals over the component's
+    variance in `scale` (the fits before re-reading): whether re-reading the tare predicts the
+    loads better, judged away from the zero points (which it puts on the model by construction).
+    """
+    return float(
+        sum(
+            np.sum(f.ols.press_residuals[~zero] ** 2) / max(s.ols.rss / len(zero), 1e-300)
+            for f, s in zip(fits, scale)
+        )
+    )
+
+
 def _examine_tare(
     fits,
     comp_terms,
@@ -900,22 +1009,7 @@ def _examine_tare(
     outputs_names,
 ):
     sigmas = np.sqrt([f.gls.variance for f in fits])
-    output_terms = [
-        t for t in comp_terms[0] if set(parse_terms([t])[0].variables) <= set(outputs_names)
-    ]
-    # the inverse for tare outputs: the current fit's output-only part, constants dropped
-    coefficients = np.array(
-        [
-            [
-                f.ols.coefficients[comp_terms[k].index(t)] if t in comp_terms[k] else 0.0
-                for t in output_terms
-            ]
-            for k, f in enumerate(fits)
-        ]
-    )
-    inverse_model = BalanceModel(
-        'current', parse_terms(output_terms), coefficients, tuple(components), tuple(outputs_names)
-    ).without_constant()
+    inverse_model = _current_model(fits, comp_terms, components, outputs_names)
     corrected = problem.corrected
 
     def refits(data):
