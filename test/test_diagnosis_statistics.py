@@ -3,6 +3,7 @@
 import importlib
 
 import numpy as np
+import pytest
 
 from balance_calib.diagnosis.candidates import load_directions, refer_to_zero_points
 from balance_calib.diagnosis.statistics import (
@@ -183,3 +184,24 @@ def test_temperature_levels_favour_the_own_bridge_and_keep_the_family_level(monk
         # dT and dT·V_own share the first-order part, dT² and dT²·V_own the second order
         assert np.allclose(ranked[:2], own_first / 2) and np.allclose(ranked[2:4], own_second / 2)
         assert np.allclose(ranked[4:], others / (len(levels) - 4))
+
+
+@pytest.mark.parametrize(
+    'field, value',
+    [
+        ('alpha', 0.0),
+        ('alpha_lack_of_fit', 1.5),
+        ('min_explained', -0.1),
+        ('max_rounds', 0),
+        ('drift_oversampling', float('nan')),
+        ('drift_spectrum_exponent', float('inf')),
+        ('temperature_level_shares', (0.5, -0.1, 0.6)),
+        ('temperature_level_shares', (0.0, 0.0, 0.0)),
+        ('effects', ('temperature', 'gremlins')),
+    ],
+)
+def test_settings_out_of_range_are_refused_naming_the_setting(field, value):
+    settings_class = importlib.import_module('balance_calib.diagnosis.diagnose').DiagnosisSettings
+    with pytest.raises(ValueError, match=f'DiagnosisSettings.{field} ='):
+        settings_class(**{field: value})
+    settings_class()  # the defaults are in range

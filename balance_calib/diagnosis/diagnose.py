@@ -112,6 +112,39 @@ class DiagnosisSettings:
     tare_parameters: tuple[str, ...] = ('weight_n', 'cg_x_m')
     effects: tuple[str, ...] = EFFECT_NAMES
 
+    def __post_init__(self):
+        """Refuse settings outside their ranges, naming the setting (ValueError)."""
+
+        def refuse(name, value, what):
+            raise ValueError(f'DiagnosisSettings.{name} = {value!r}: must be {what}')
+
+        for name in ('alpha', 'alpha_lack_of_fit', 'alpha_constancy'):
+            value = getattr(self, name)
+            if not 0.0 < value < 1.0:
+                refuse(name, value, 'a level in (0, 1)')
+        if not 0.0 <= self.alpha_slow_structure < 1.0:
+            refuse('alpha_slow_structure', self.alpha_slow_structure, 'in [0, 1) (0: off)')
+        for name in ('min_explained', 'equal_score'):
+            value = getattr(self, name)
+            if not 0.0 <= value <= 1.0:
+                refuse(name, value, 'a fraction in [0, 1]')
+        if not (np.isfinite(self.min_effect_pct_fs) and self.min_effect_pct_fs >= 0):
+            refuse('min_effect_pct_fs', self.min_effect_pct_fs, 'a finite % FS >= 0')
+        if int(self.max_rounds) != self.max_rounds or self.max_rounds < 1:
+            refuse('max_rounds', self.max_rounds, 'a whole number >= 1')
+        if not (np.isfinite(self.drift_oversampling) and self.drift_oversampling > 0):
+            refuse('drift_oversampling', self.drift_oversampling, 'finite and > 0')
+        if not np.isfinite(self.drift_spectrum_exponent):
+            refuse('drift_spectrum_exponent', self.drift_spectrum_exponent, 'finite')
+        shares = np.asarray(self.temperature_level_shares, dtype=float)
+        if shares.shape != (3,) or not np.all(np.isfinite(shares)) or np.any(shares < 0):
+            refuse('temperature_level_shares', self.temperature_level_shares, '3 shares >= 0')
+        if shares.sum() <= 0:
+            refuse('temperature_level_shares', self.temperature_level_shares, 'not all zero')
+        unknown = set(self.effects) - set(EFFECT_NAMES)
+        if unknown:
+            refuse('effects', self.effects, f'among {EFFECT_NAMES} (unknown: {sorted(unknown)})')
+
 
 @dataclass(frozen=True)
 class EffectFound:

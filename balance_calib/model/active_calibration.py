@@ -18,6 +18,7 @@ from ..tunnel_axes import Installation, parse_installation
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
 from .balance_model import BalanceModel
 from .calibration import Calibration
+from .identity_cache import IdentityCache
 
 MODEL_CHOICES = ('linear', 'quadratic', 'cubic', 'adopted')
 DEFAULT_ENVELOPE_MARGIN = 1.1
@@ -177,19 +178,19 @@ class ActiveCalibration:
         """The model's input columns of the six raw outputs and its components' slots in FX..MZ
         (None when it gives all six in order), cached for the active and the base model.
         """
-        known = self._layouts.get(id(model))
-        if known is not None and known[0] is model:
-            return known[1], known[2]
+        known = self._layouts.get(model)
+        if known is not None:
+            return known
         columns = np.array([BRIDGE_OUTPUTS.index(v) for v in model.inputs], dtype=np.intp)
         positions = [COMPONENTS.index(c) for c in model.components]
         slots = None if positions == list(range(6)) else np.array(positions, dtype=np.intp)
         if model is self.model or model is self.base_model:
-            self._layouts[id(model)] = (model, columns, slots)
+            self._layouts.put(model, (columns, slots))
         return columns, slots
 
     @cached_property
-    def _layouts(self) -> dict:
-        return {}
+    def _layouts(self) -> IdentityCache[tuple[np.ndarray, np.ndarray | None]]:
+        return IdentityCache(limit=2)  # the active and the base model
 
     @cached_property
     def unused_inputs(self) -> np.ndarray | None:

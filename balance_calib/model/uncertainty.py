@@ -18,7 +18,9 @@ from typing import Mapping
 
 import numpy as np
 
-_CACHE: dict[int, tuple[object, np.ndarray, np.ndarray]] = {}
+from .identity_cache import IdentityCache
+
+_CACHE: IdentityCache[tuple[np.ndarray, np.ndarray]] = IdentityCache(limit=64)
 
 
 class UncertaintyUnavailable(ValueError):
@@ -29,9 +31,9 @@ def covariance_and_sigma(model) -> tuple[np.ndarray, np.ndarray] | None:
     """The model's unscaled coefficient covariance and residual σ per component (cached), or None
     when the calibration carries none (the memo's published matrices).
     """
-    cached = _CACHE.get(id(model))
-    if cached is not None and cached[0] is model:
-        return cached[1], cached[2]
+    cached = _CACHE.get(model)
+    if cached is not None:
+        return cached
     metadata = getattr(model, 'metadata', None) or {}
     meta = metadata.get('uncertainty') if isinstance(metadata, Mapping) else None
     if not meta:
@@ -40,10 +42,7 @@ def covariance_and_sigma(model) -> tuple[np.ndarray, np.ndarray] | None:
     sigma = np.asarray(meta['residual_sigma'], dtype=float)
     if covariance.shape != (len(model.terms), len(model.terms)):
         return None
-    if len(_CACHE) > 64:
-        _CACHE.clear()
-    _CACHE[id(model)] = (model, covariance, sigma)
-    return covariance, sigma
+    return _CACHE.put(model, (covariance, sigma))
 
 
 def _resolve(calibration_or_model, model: str):
