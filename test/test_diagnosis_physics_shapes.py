@@ -13,7 +13,10 @@ reached rising, so it is mostly a sign step plus a sensitivity, which no family 
 stick band); Preisach on every bridge of LMC6522 8/10 (M_X's play terms fit 70-72 % of its excess
 and the leftovers drop them; σ 1.43x there) and on B660H's F_Z (σ up to 1.49x, one unexplained);
 Masing and re-seating on B660H's F_Z (cross-validated σ up to 1.19x and 1.16x); negative
-curvature on every bridge 9/10 on LMC6522 (cross-validated σ up to 1.17x) and 6/10 on B660H.
+curvature on every bridge of B660H 8/10 (M_X unexplained once, cross_terms beside it once;
+cross-validated σ up to 1.17x). Negative curvature on every bridge of LMC6522 (9/10 and
+cross-validated σ up to 1.21x before) came in with the one-sided curvature offered as a pair and
+its shape settled (diagnose._settle_sign_shape, test_diagnosis_sign_shape.py).
 """
 
 from functools import lru_cache
@@ -36,6 +39,7 @@ CELLS = [
     ('lmc6522', 'masing', 'all'),
     ('lmc6522', 'reseating', 'all'),
     ('lmc6522', 'sign_step', 'all'),
+    ('lmc6522', 'negative_curvature', 'all'),
     ('b660h', 'bouc_wen', 'FZ'),
     ('b660h', 'sign_step', 'FZ'),
     ('b660h', 'negative_curvature', 'FZ'),
