@@ -13,10 +13,12 @@ reached rising, so it is mostly a sign step plus a sensitivity, which no family 
 stick band); Preisach on every bridge of LMC6522 8/10 (M_X's play terms fit 70-72 % of its excess
 and the leftovers drop them; σ 1.43x there) and on B660H's F_Z (σ up to 1.49x, one unexplained);
 Masing and re-seating on B660H's F_Z (cross-validated σ up to 1.19x and 1.16x); negative
-curvature on every bridge of B660H 8/10 (M_X unexplained once, cross_terms beside it once;
-cross-validated σ up to 1.17x). Negative curvature on every bridge of LMC6522 (9/10 and
-cross-validated σ up to 1.21x before) came in with the one-sided curvature offered as a pair and
-its shape settled (diagnose._settle_sign_shape, test_diagnosis_sign_shape.py).
+curvature on every bridge of B660H 9/10 (M_X unexplained in seed 3003, whose clean campaign
+already has M_X at lack-of-fit p 3e-3) but cross-validated σ 1.165x on F_Z in seed 3004 (two
+points beyond -0.8 capacity carry the negative side). Negative curvature on every bridge of
+LMC6522 (9/10 and cross-validated σ up to 1.21x before) came in with the one-sided curvature
+offered as a pair and its shape settled (diagnose._settle_sign_shape,
+test_diagnosis_sign_shape.py).
 """
 
 from functools import lru_cache

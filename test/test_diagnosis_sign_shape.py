@@ -1,6 +1,7 @@
 """The shape of a sign asymmetry (issue 24): the bidirectional family offers a one-sided curvature
-as a pair (x|x| with x²|x|, V|V| with V²|V|), drops the pair's term the points do not resolve and
-completes a shape whose fit moves with the gravity direction (diagnose._settle_sign_shape).
+as a pair (x|x| with x²|x|, V|V| with V²|V|), drops the pair's term the points do not resolve,
+adds the other loads' curvature that reaches a component through the interactions and completes
+a shape whose fit moves with the gravity direction (diagnose._settle_sign_shape).
 
 The campaigns are the physics generator's (test/diagnosis_physics.py: a curvature |x|^2.5 on
 negative loads, not a term of the family), one noise floor in size, on seeds where each step
@@ -71,4 +72,15 @@ def test_a_pair_term_the_points_do_not_resolve_is_dropped():
     assert result.effect_names == ('bidirectional',) and not result.unexplained
     assert len(result.effects[0].terms_by_component['FZ']) == 1
     sigma, crossval = _ratios('b660h', 'FZ', 3007, 'FZ')
+    assert sigma <= 1.15 and crossval <= 1.15, (sigma, crossval)
+
+
+def test_the_other_loads_curvature_reaching_a_component_is_the_same_effect():
+    # B660H, curvature on every bridge, seed 3004: M_X kept a residual that the generic
+    # cross_terms took (MYV·MZV²) beside its own sign terms; M_Y's curvature pair explains it
+    result = _diagnosed('b660h', 'all', 3004)
+    assert result.effect_names == ('bidirectional',) and not result.unexplained
+    terms = result.effects[0].terms_by_component['MX']
+    assert any(t.startswith('absload') and not t.endswith('_MX') for t in terms), terms
+    sigma, crossval = _ratios('b660h', 'all', 3004, 'MX')
     assert sigma <= 1.15 and crossval <= 1.15, (sigma, crossval)
