@@ -149,9 +149,9 @@ def bidirectional_family(
     linear, quadratic, cubic = ABSOLUTE_LOAD_TERMS
     slope: list[tuple[str, ...]] = [(f'|{v}|',) for v in outputs]
     slope += [(f'{linear}_{c}',) for c in components]
-    curvature: list[tuple[str, ...]] = [(canonical(f'{v}*|{v}|'), canonical(f'{v}^2*|{v}|')) for v in outputs] + [
-        (f'{quadratic}_{c}', f'{cubic}_{c}') for c in components
-    ]
+    curvature: list[tuple[str, ...]] = []
+    curvature += [(canonical(f'{v}*|{v}|'), canonical(f'{v}^2*|{v}|')) for v in outputs]
+    curvature += [(f'{quadratic}_{c}', f'{cubic}_{c}') for c in components]
     return CandidateFamily('bidirectional', tuple(slope + curvature), 3, {})
 
 
