@@ -1114,9 +1114,9 @@ def _retare(problem, fits, comp_terms, gravity, is_zero_point, components, outpu
     (0.23 after three passes). This is the memo's fit -> inverse -> refit (§7.1) again, with the
     adopted model, after the search: the tests and the leftovers judge the reduction's data
     (re-read in every round it made B660H loops' coefficients differ between the halves of the
-    campaign). The adopted
-    terms in other variables (dT, |load|; a loop or drift term is zero there) are held at their
-    mean over the orientation's zero points, where the body alone loads the balance.
+    campaign). The adopted terms in other variables (dT, |load|; a loop or drift term is zero
+    there) are held at their mean over the orientation's zero points, where the body alone loads
+    the balance.
     """
     gravity = np.asarray(gravity, dtype=float)
     _, first, index = np.unique(
@@ -1139,15 +1139,7 @@ def _retare(problem, fits, comp_terms, gravity, is_zero_point, components, outpu
         new = outputs_for_loads(model, corrected.tare_loads[first], extra)[index]
     except (InverseDidNotConverge, np.linalg.LinAlgError):
         return fits, False  # no inverse at the body's load: the reduction's tare outputs stay
-    delta = new - corrected.tare_outputs_mv
-    problem.set_corrected(
-        CorrectedData(
-            corrected.loads,
-            corrected.bridge_outputs_mv + delta,
-            corrected.tare_loads,
-            corrected.tare_outputs_mv + delta,
-        )
-    )
+    problem.set_corrected(corrected.with_tare_changed(0.0, new - corrected.tare_outputs_mv))
     refits = [problem.fit(k, comp_terms[k]) for k in range(len(fits))]
     if _loaded_press(refits, zero, fits) >= _loaded_press(fits, zero, fits):
         problem.set_corrected(corrected)

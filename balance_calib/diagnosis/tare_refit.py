@@ -76,13 +76,7 @@ class TareOutputChange:
         delta = (self._outputs(tare_loads(body, self.unique_gravity)) - self.old_outputs)[
             self.index
         ]
-        c = self.corrected
-        return CorrectedData(
-            c.loads + new_tare - c.tare_loads,
-            c.bridge_outputs_mv + delta,
-            new_tare,
-            c.tare_outputs_mv + delta,
-        )
+        return self.corrected.with_tare_changed(new_tare - self.corrected.tare_loads, delta)
 
 
 @dataclass(frozen=True)

@@ -124,6 +124,17 @@ class CorrectedData:
     tare_loads: np.ndarray  # (N, 6)
     tare_outputs_mv: np.ndarray  # (N, 6)
 
+    def with_tare_changed(self, load_change, output_change_mv) -> 'CorrectedData':
+        """The same points with the tare loads and tare outputs moved by (N, 6) changes: the
+        totals move with them (another body, or its outputs read through another model).
+        """
+        return CorrectedData(
+            self.loads + load_change,
+            self.bridge_outputs_mv + output_change_mv,
+            self.tare_loads + load_change,
+            self.tare_outputs_mv + output_change_mv,
+        )
+
 
 def corrected_data(
     applied_loads, zeroed_outputs_mv, tare_loads_n, tare_outputs_mv
