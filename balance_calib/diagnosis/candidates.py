@@ -13,6 +13,9 @@ ordinary `BalanceModel` whose extra variables carry these names:
                    turn_X, turn_X*|turn_X|          distance travelled since the last turning point
                    play_XV_m                        (V - play_w(V)) / w, a bridge's own output
                                                     through a backlash of width w (a grid)
+                   loop_XV_m                        the widest play less its first-loading
+                                                    curve clip(V / w): a Masing (Iwan) joint's
+                                                    loop, whose first loading is the mean response
     bidirectional  |FXV|, FXV*|FXV|, FXV^2*|FXV|,   sign-dependent terms keyed to the output
                    absload_X, absload2_X,           (AIAA R-091): with the base cubic, a cubic of
                    absload3_X                       its own on each side of zero; and the same
@@ -108,8 +111,9 @@ def hysteresis_family(components: Sequence[str], outputs: Sequence[str]) -> Cand
     turn_X: growing away from the turning point, linearly or by Rayleigh's square) and to each
     bridge's own output history (play_XV_m: the play operator of a Prandtl-Ishlinskii model, width
     PLAY_WIDTHS[m] of rated output; a gauge's loop follows its strain, which on a coupled balance
-    moves with other components' loads too, and a small reversal makes a small loop). diagnose.py
-    offers a component its own load-keyed terms and every bridge's output-keyed ones.
+    moves with other components' loads too, and a small reversal makes a small loop; loop_XV_m:
+    the widest play without its first-loading curve, see play_loop). diagnose.py offers a
+    component its own load-keyed terms and every bridge's output-keyed ones.
     """
     return _single(
         'hysteresis',
@@ -118,7 +122,8 @@ def hysteresis_family(components: Sequence[str], outputs: Sequence[str]) -> Cand
         + [f'dir_{c}*|{v}|' for c, v in zip(components, outputs)]
         + [f'turn_{c}' for c in components]
         + [f'turn_{c}*|turn_{c}|' for c in components]
-        + [f'play_{v}_{m}' for v in outputs for m in range(1, len(PLAY_WIDTHS) + 1)],
+        + [f'play_{v}_{m}' for v in outputs for m in range(1, len(PLAY_WIDTHS) + 1)]
+        + [f'loop_{v}_{len(PLAY_WIDTHS)}' for v in outputs],
         3,
     )
 
@@ -354,6 +359,21 @@ def play_lag(outputs, times_s, half_width) -> np.ndarray:
     return out
 
 
+def play_loop(outputs, times_s, half_width) -> np.ndarray:
+    """(N, n) play_lag less its first-loading curve clip(V / w, -1, 1): zero while the output
+    rises from the zero or falls to it for the first time, ±2 across the backlash after a reversal.
+
+    A play's lag follows clip(V / w) on first loading, a static curve the base cubic does not hold
+    at the widest w (0.3 of rated output). A joint whose first loading lies on the mean response
+    (a Masing or Iwan joint: its backbone is part of the calibration) has a loop without it; with
+    the play alone, the static remainder was left to the sign family's V|V| (B660H, a Masing loop
+    on every bridge: `bidirectional` named beside the loop in 4 campaigns of 10, 1 with this term).
+    """
+    outputs = np.atleast_2d(np.asarray(outputs, dtype=float))
+    half = np.asarray(half_width, float)
+    return play_lag(outputs, times_s, half) - np.clip(outputs / half, -1.0, 1.0)
+
+
 def direction_variables(
     loads,
     times_s,
@@ -378,8 +398,11 @@ def direction_variables(
     names = [f'dir_{c}' for c in components] + [f'turn_{c}' for c in components]
     if outputs is not None:
         for m, width in enumerate(PLAY_WIDTHS, start=1):
-            columns.append(play_lag(outputs, times_s, width * np.asarray(rated_outputs, float)))
+            half = width * np.asarray(rated_outputs, float)
+            columns.append(play_lag(outputs, times_s, half))
             names += [f'play_{v}_{m}' for v in outputs_names]
+        columns.append(play_loop(outputs, times_s, half))  # the widest play's loop alone
+        names += [f'loop_{v}_{len(PLAY_WIDTHS)}' for v in outputs_names]
     referred = refer_to_zero_points(np.hstack(columns), times_s, is_zero_point, orientation)
     return {name: referred[:, i] for i, name in enumerate(names)}, raw
 

@@ -746,6 +746,18 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
                 settings,
                 family.max_groups,
             )
+        elif family.name == 'hysteresis':
+            chosen = _completed_while_moving(
+                problem,
+                k,
+                comp_terms[k],
+                fit,
+                (candidates, columns, groups),
+                chosen,
+                settings,
+                family.max_groups,
+                family.name,
+            )
         added = [t for g in chosen for t in g]
         # the adjusted p of the first group taken: p x α / its level
         n_tests = settings.alpha / levels[selection.groups[0]]
@@ -820,10 +832,40 @@ def _settle_sign_shape(
     coupled = _coupled_curvature(problem, k, terms, chosen, level, max_groups)
     if coupled != chosen and not moves(coupled):
         chosen = coupled
+    extra = len(chosen) - own  # the coupled pairs do not count against max_groups
+    return _completed_while_moving(
+        problem, k, terms, fit, offered, chosen, settings, max_groups + extra, 'bidirectional'
+    )
+
+
+def _completed_while_moving(
+    problem, k, terms, fit, offered, chosen, settings, max_groups: int, family: str
+) -> list[tuple[str, ...]]:
+    """`chosen` (groups of one family on component k) if its coefficients hold over the campaign
+    (_changes_over_campaign); else `chosen` with the family's next best groups added, each step
+    significant at the leftovers' lack-of-fit level, up to max_groups in all, as soon as the
+    coefficients hold; `chosen` unchanged when no such completion exists (the Chow test then
+    rejects it). offered: as for _settle_sign_shape.
+
+    A shape between the family's groups is fitted by one group with coefficients that depend
+    on the part of the campaign the points cover: a one-sided |x|^2.5 (see _settle_sign_shape);
+    a loop on every bridge of a coupled balance, which reaches a component through several
+    bridges whose histories differ between the campaign's halves (B660H F_Y, a Masing or a
+    re-seating loop on every bridge: its own bridge's loop term alone rejected by the Chow test
+    in seeds 3005 and 3007, which a second play completes; 3005 is then named right).
+    """
+    candidates, columns, groups = offered
+    flat = lambda shape: [t for g in shape for t in g]  # noqa: E731
+
+    def moves(shape) -> bool:
+        return _changes_over_campaign(
+            problem, k, terms, flat(shape), fit, settings.alpha_constancy, family
+        )
+
     if not moves(chosen):
-        return chosen
+        return list(chosen)
     current = list(chosen)
-    while len(current) - (len(chosen) - own) < max_groups:
+    while len(current) < max_groups:
         present = set(flat(current))
         rest = [i for i, g in enumerate(groups) if not set(g) & present]
         if not rest:
@@ -832,7 +874,7 @@ def _settle_sign_shape(
             problem.fit(k, list(terms) + flat(current)).gls,
             candidates,
             [columns[i] for i in rest],
-            alpha_per_test=level,
+            alpha_per_test=settings.alpha_lack_of_fit,
             max_groups=1,
         )
         if not step.steps:
@@ -840,7 +882,7 @@ def _settle_sign_shape(
         current.append(tuple(groups[rest[step.groups[0]]]))
         if not moves(current):
             return current
-    return chosen
+    return list(chosen)
 
 
 def _coupled_curvature(problem, k, terms, chosen, level, max_groups: int) -> list:
