@@ -734,13 +734,14 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
         if not selection.steps:
             continue
         chosen = [groups[i] for i in selection.groups]
+        offered = (candidates, columns, groups)
         if family.name == 'bidirectional':
             chosen = _settle_sign_shape(
                 problem,
                 k,
                 comp_terms[k],
                 fit,
-                (candidates, columns, groups),
+                offered,
                 selection.groups,
                 settings,
                 family.max_groups,
@@ -751,7 +752,7 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
                 k,
                 comp_terms[k],
                 fit,
-                (candidates, columns, groups),
+                offered,
                 chosen,
                 settings,
                 family.max_groups,
@@ -803,21 +804,13 @@ def _settle_sign_shape(
     groups' term names); taken: indices into the groups, in the order the selection chose them.
     Returns the groups (a pair possibly reduced to one term); unchanged when no step applies.
     """
-    candidates, columns, groups = offered
+    groups = offered[2]
     level = settings.alpha_lack_of_fit
     chosen = [tuple(groups[i]) for i in taken]
 
-    def flat(shape) -> list[str]:
-        return [t for g in shape for t in g]
-
-    def moves(shape) -> bool:
-        return _changes_over_campaign(
-            problem, k, terms, flat(shape), fit, settings.alpha_constancy, 'bidirectional'
-        )
-
     def p_without(shape, term) -> float:
-        full = problem.fit(k, list(terms) + flat(shape)).gls
-        less = problem.fit(k, list(terms) + [t for t in flat(shape) if t != term]).gls
+        full = problem.fit(k, list(terms) + _flat(shape)).gls
+        less = problem.fit(k, list(terms) + [t for t in _flat(shape) if t != term]).gls
         return partial_f(less.rss, full.rss, 1, full.dof)[1]
 
     simpler = []
@@ -828,7 +821,8 @@ def _settle_sign_shape(
             if p_values[weakest] > level:
                 group = (group[1 - weakest],)
         simpler.append(group)
-    if simpler != chosen and not moves(simpler):
+    moving = _moves(problem, k, terms, simpler, fit, settings, 'bidirectional')
+    if simpler != chosen and not moving:
         chosen = simpler
     return _completed_while_moving(
         problem, k, terms, fit, offered, chosen, settings, max_groups, 'bidirectional'
@@ -852,23 +846,16 @@ def _completed_while_moving(
     in seeds 3005 and 3007, which a second play completes; 3005 is then named right).
     """
     candidates, columns, groups = offered
-    flat = lambda shape: [t for g in shape for t in g]  # noqa: E731
-
-    def moves(shape) -> bool:
-        return _changes_over_campaign(
-            problem, k, terms, flat(shape), fit, settings.alpha_constancy, family
-        )
-
-    if not moves(chosen):
+    if not _moves(problem, k, terms, chosen, fit, settings, family):
         return list(chosen)
     current = list(chosen)
     while len(current) < max_groups:
-        present = set(flat(current))
+        present = set(_flat(current))
         rest = [i for i, g in enumerate(groups) if not set(g) & present]
         if not rest:
             break
         step = forward_select(
-            problem.fit(k, list(terms) + flat(current)).gls,
+            problem.fit(k, list(terms) + _flat(current)).gls,
             candidates,
             [columns[i] for i in rest],
             alpha_per_test=settings.alpha_lack_of_fit,
@@ -877,9 +864,23 @@ def _completed_while_moving(
         if not step.steps:
             break
         current.append(tuple(groups[rest[step.groups[0]]]))
-        if not moves(current):
+        if not _moves(problem, k, terms, current, fit, settings, family):
             return current
     return list(chosen)
+
+
+def _flat(shape) -> list[str]:
+    """The term names of a list of groups, in order."""
+    return [t for g in shape for t in g]
+
+
+def _moves(problem, k, terms, shape, fit, settings, family: str) -> bool:
+    """Do the groups `shape` added to component k's terms fit with coefficients that change over
+    the campaign (_changes_over_campaign at settings.alpha_constancy)?
+    """
+    return _changes_over_campaign(
+        problem, k, terms, _flat(shape), fit, settings.alpha_constancy, family
+    )
 
 
 def _level_shares(
