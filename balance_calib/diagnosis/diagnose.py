@@ -572,7 +572,8 @@ def diagnose(
 
     # --- what is left: lack of fit against the repeatability, unexplained structure ------------
     # judged with the tare re-read through the adopted model (_retare); where the leftovers drop
-    # an effect, the reduction's tare is read again through the model without it
+    # an effect, the reduction's tare is read again through the model without it (the leftovers'
+    # numbers stay those of the first reading)
     reduced = problem.corrected
     fits, tare_reread = _retare_passes(problem, fits, comp_terms, points, effects)
     leftovers = examine_leftovers(
@@ -1131,10 +1132,9 @@ def _retare(problem, fits, comp_terms, gravity, is_zero_point, components, outpu
     the leftovers judge the re-read data (_retare_passes before examine_leftovers), since a tare
     bent by the loop leaves, along each orientation's block of points, structure the directed
     tests read as a load shape changing with time (B660H, Masing on every bridge, seed 3007: F_Y
-    `unexplained`, load F_Y x time p = 0.001 before the re-read, 0.009 after).
-    The adopted terms in other variables (dT, |load|; a loop or drift term is zero
-    there) are held at their mean over the orientation's zero points, where the body alone loads
-    the balance.
+    `unexplained`, load F_Y x time p = 0.001 before the re-read, 0.009 after). The adopted terms
+    in other variables (dT, |load|; a loop or drift term is zero there) are held at their mean
+    over the orientation's zero points, where the body alone loads the balance.
     """
     gravity = np.asarray(gravity, dtype=float)
     _, first, index = np.unique(
