@@ -741,6 +741,9 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
                 family.max_groups,
             )
         elif family.name == 'hysteresis':
+            chosen = _completed_at_lack_of_fit(
+                problem, k, comp_terms[k], offered, chosen, settings, family.max_groups
+            )
             chosen = _completed_while_moving(
                 problem,
                 k,
@@ -861,6 +864,39 @@ def _completed_while_moving(
         if not _moves(problem, k, terms, current, fit, settings, family):
             return current
     return list(chosen)
+
+
+def _completed_at_lack_of_fit(
+    problem, k, terms, offered, chosen, settings, max_groups: int
+) -> list[tuple[str, ...]]:
+    """`chosen` (the loop groups that passed the family's level on component k) with the
+    family's next best groups added while each is significant at the leftovers' lack-of-fit
+    level (settings.alpha_lack_of_fit, Bonferroni over the groups left), up to max_groups: once
+    a loop is established its shape is settled at the level at which the leftovers would call
+    what remains structure, as _settle_sign_shape does for a sign asymmetry. offered: as there.
+
+    A loop the family does not contain is a blend of its plays (an Iwan joint is a sum of plays
+    of every width): B660H, a Bouc-Wen loop on every bridge, seed 3009, M_Z's second play is
+    taken here, cross-validated σ 1.15x -> 1.09x the clean floor.
+    """
+    candidates, columns, groups = offered
+    current = list(chosen)
+    while len(current) < max_groups:
+        present = set(_flat(current))
+        rest = [i for i, g in enumerate(groups) if not set(g) & present]
+        if not rest:
+            break
+        step = forward_select(
+            problem.fit(k, list(terms) + _flat(current)).gls,
+            candidates,
+            [columns[i] for i in rest],
+            alpha_per_test=settings.alpha_lack_of_fit / len(rest),
+            max_groups=1,
+        )
+        if not step.steps:
+            break
+        current.append(tuple(groups[rest[step.groups[0]]]))
+    return current
 
 
 def _flat(shape) -> list[str]:
