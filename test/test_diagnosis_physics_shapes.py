@@ -16,13 +16,15 @@ test_diagnosis_sign_shape.py). Masing on B660H's F_Z (one seed of ten at a cross
 (candidates.play_loop). Masing, Bouc-Wen and re-seating on every bridge of B660H (8, 8 and 7/10
 before) came in once the leftovers judged the tare re-read through the adopted model and a loop's
 shape was settled at the lack-of-fit level (diagnose._retare_passes, _completed_at_lack_of_fit).
-The measured misses: load-path friction 0-4/10 (on this schedule every
+The measured misses: load-path friction 0-5/10 (on this schedule every
 loaded point is reached rising, so it is mostly a sign step plus a sensitivity, which no family
 holds with the stick band); Preisach on every bridge of LMC6522 7/10 (M_X's play terms fit 70-72 %
-of its excess and the leftovers drop them; σ 1.43x there) and on B660H's F_Z 4/10 (σ up to
-1.56x); Preisach on every bridge of B660H 7/10; negative curvature on every bridge of B660H
-8/10 (cross-validated σ up to 1.18x on F_Z: two points beyond -0.8 capacity carry the negative
-side).
+of its excess and the leftovers drop them; σ 1.43x there), on B660H's F_Z 4/10 (σ up to 1.40x)
+and on every bridge of B660H 7/10; negative curvature on every bridge of B660H 8/10 (seed 3003:
+M_X's clean campaign already lacks fit, p 0.003, and with the curvature fitted p 1.3e-4 is
+left, below the leftovers' 1.7e-4, so the family is dropped there; seed 3004: cross_terms on M_X
+and a cross-validated σ of 1.18x on F_Z, where two points beyond -0.8 capacity carry the
+negative side).
 """
 
 from functools import lru_cache
