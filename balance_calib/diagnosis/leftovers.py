@@ -272,6 +272,50 @@ def within_point_variance(linear, point_variance_mv2, point_samples, loaded):
     return np.mean(variance[ok] @ (linear**2).T, axis=0), int(np.sum(samples[ok] - 1))
 
 
+def repeatability_variance(
+    points, linear, pairs, components, point_variance_mv2=None, point_samples=None
+) -> tuple[np.ndarray, np.ndarray, dict[str, str], list[str]]:
+    """(6,) s², the variance of one point's load from its repeatability (module docstring), its
+    degrees of freedom ν and where it came from per component, and warnings: consecutive zero
+    points through the fit's linear part, or the points' own samples where they are at hand and
+    the zero points do not repeat significantly worse. pairs: zero_point_pairs (at least one).
+    """
+    n_components = len(components)
+    noted: list[str] = []
+    delta_loads = pairs @ linear.T
+    s2 = np.mean(delta_loads**2, axis=0) / 2.0
+    nu = np.full(n_components, len(pairs), dtype=float)
+    source = {c: f'{len(pairs)} pairs of consecutive zero points' for c in components}
+    if point_variance_mv2 is not None and point_samples is not None:
+        # the points' own samples: many more degrees of freedom, but blind to noise slower than a
+        # point; kept unless the zero points repeat significantly worse (then they are the
+        # yardstick)
+        s2_within, nu_within = within_point_variance(
+            linear, point_variance_mv2, point_samples, ~np.asarray(points.is_zero_point)
+        )
+        if s2_within is not None:
+            for k, c in enumerate(components):
+                p_worse = scipy.stats.f.sf(s2[k] / s2_within[k], len(pairs), nu_within)
+                if p_worse < 0.001 / n_components:
+                    noted.append(
+                        f"{c}: consecutive zero points repeat worse than the points' own samples "
+                        f'({np.sqrt(s2[k] / s2_within[k]):.1f}x): noise slower than a point, or '
+                        'an effect that shows at zero load too'
+                    )
+                s2[k], nu[k] = s2_within[k], nu_within
+                source[c] = f"the scatter of the points' own samples ({nu_within} dof)"
+    return s2, nu, source, noted
+
+
+def lack_of_fit(gls, s2: float, nu: float) -> tuple[float, float]:
+    """The residual variance of a whitened fit (statistics.ComponentFit) against the repeatability
+    s² with ν degrees of freedom: (ratio, p of the F test).
+    """
+    variance = gls.rss / gls.dof
+    ratio = variance / s2 if s2 > 0 else float('inf')
+    return float(ratio), float(scipy.stats.f.sf(ratio, gls.dof, nu))
+
+
 def _unstable(problem, k, terms, fit, found, late, alpha) -> list[tuple[str, float]]:
     """Families found on component k whose coefficients differ between the first and second half of
     the campaign (a Chow test on their terms x the second-half indicator): a physical effect of
@@ -336,30 +380,10 @@ def examine_leftovers(
             'repeatability is unknown and the residuals were not tested for lack of fit'
         )
         return Leftovers(nan, len(pairs), nan, nan, (), warnings, {}, roll)
-    delta_loads = pairs @ linear.T
-    s2 = np.mean(delta_loads**2, axis=0) / 2.0
-    nu = np.full(n_components, len(pairs), dtype=float)
-    source = {c: f'{len(pairs)} pairs of consecutive zero points' for c in components}
-    if point_variance_mv2 is not None and point_samples is not None:
-        # the points' own samples: many more degrees of freedom, but blind to noise slower than a
-        # point; kept unless the zero points repeat significantly worse (then they are the
-        # yardstick)
-        s2_within, nu_within = within_point_variance(
-            linear, point_variance_mv2, point_samples, ~np.asarray(points.is_zero_point)
-        )
-        if s2_within is not None:
-            for k, c in enumerate(components):
-                p_worse = scipy.stats.f.sf(s2[k] / s2_within[k], len(pairs), nu_within)
-                if p_worse < 0.001 / n_components:
-                    warnings.append(
-                        f"{c}: consecutive zero points repeat worse than the points' own "
-                        "samples "
-                        f'({np.sqrt(s2[k] / s2_within[k]):.1f}x): noise slower than a point, or '
-                        'an '
-                        'effect that shows at zero load too'
-                    )
-                s2[k], nu[k] = s2_within[k], nu_within
-                source[c] = f"the scatter of the points' own samples ({nu_within} dof)"
+    s2, nu, source, noted = repeatability_variance(
+        points, linear, pairs, components, point_variance_mv2, point_samples
+    )
+    warnings += noted
     values = np.sqrt(s2) / capacity * 100.0
     for k, c in enumerate(components):
         others = np.median(np.delete(values, k))
@@ -392,11 +416,10 @@ def examine_leftovers(
         found = per_component[k]
         unstable = _unstable(problem, k, comp_terms[k], fit, found, late, alpha)
         variance = fit.gls.rss / fit.gls.dof
-        ratio = variance / s2[k] if s2[k] > 0 else float('inf')
-        p = float(scipy.stats.f.sf(ratio, fit.gls.dof, nu[k]))
+        ratio, p = lack_of_fit(fit.gls, s2[k], nu[k])
         excess = np.sqrt(max(variance - s2[k], 0.0)) / capacity[k] * 100.0
         ratios[c], p_values[c] = float(ratio), p
-        lack_of_fit = p < alpha and excess >= settings.min_effect_pct_fs
+        lacks_fit = p < alpha and excess >= settings.min_effect_pct_fs
         directed, bases = None, {}
         if alpha_slow > 0:
             bases = slow_structure_bases(times, points.gravity, loads[:, k])
@@ -412,14 +435,14 @@ def examine_leftovers(
                     < settings.min_effect_pct_fs
                 ):
                     directed = None
-        if not (lack_of_fit or unstable or directed):
+        if not (lacks_fit or unstable or directed):
             continue
         partly, explained_note = (), ''
         if found:
             base_excess = max(base_fits[k].gls.rss / base_fits[k].gls.dof - s2[k], 0.0)
             explained = 1.0 - max(variance - s2[k], 0.0) / base_excess if base_excess > 0 else 0.0
             if directed is not None:  # the excess along the directed basis (directed_lack_of_fit)
-                explained = min(explained, directed[2]) if lack_of_fit else directed[2]
+                explained = min(explained, directed[2]) if lacks_fit else directed[2]
             if unstable or explained < settings.min_explained:
                 partly = tuple(e['candidate'].family for e in found)
                 terms = set()
@@ -427,9 +450,7 @@ def examine_leftovers(
                     terms |= set(e['candidate'].components[k]['added'])
                 dropped[k] = terms
                 fit = problem.fit(k, [t for t in comp_terms[k] if t not in terms])
-                variance = fit.gls.rss / fit.gls.dof
-                ratio = variance / s2[k]
-                p = float(scipy.stats.f.sf(ratio, fit.gls.dof, nu[k]))
+                ratio, p = lack_of_fit(fit.gls, s2[k], nu[k])
                 if unstable:
                     explained_note = (
                         '; '
