@@ -16,32 +16,21 @@ import time
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
 
 import diagnosis_physics as physics  # noqa: E402
+from physics_cells import _campaign  # noqa: E402  (the same campaign as the shapes' table)
 from test_diagnosis_two_effects import CASES  # noqa: E402
 
-from balance_calib.config import load_balance_config  # noqa: E402
-from balance_calib.diagnosis import diagnose  # noqa: E402
-from balance_calib.simulation.diagnosis_rates import simulate_reduction  # noqa: E402
-
 TARGET = 1.15
-
-
-def _campaign(balance, effects, seed):
-    config = load_balance_config(balance)
-    reduction, scatter = simulate_reduction(
-        config, effects, seed=seed, samples_per_point=8, with_scatter=True
-    )
-    return diagnose(reduction, config, **scatter)
 
 
 def one_seed(args) -> list[tuple]:
     """Every case's outcome for one balance and seed: (case, right, worst σ ratio, names)."""
     balance, seed = args
-    clean = _campaign(balance, [], seed)
+    _, clean = _campaign(balance, [], seed)
     out = []
     for index, (case_balance, parts) in enumerate(CASES):
         if case_balance != balance:
             continue
-        result = _campaign(balance, [physics.scaled(balance, s, c) for s, c in parts], seed)
+        _, result = _campaign(balance, [physics.scaled(balance, s, c) for s, c in parts], seed)
         families = {physics.FAMILY[s] for s, _ in parts}
         sigma = max(
             result.sigma_pct_fs['after'][c] / clean.sigma_pct_fs['before'][c] for _, c in parts

@@ -74,7 +74,7 @@ from .candidates import (
 )
 from .leftovers import (
     examine_leftovers,
-    lack_of_fit,
+    lacks_fit,
     Leftovers,
     linear_part,
     repeatability_variance,
@@ -1101,13 +1101,9 @@ def _fitted_well(
     s2, nu, _, _ = repeatability_variance(
         points, linear, pairs, components, point_variance_mv2, point_samples
     )
-    alpha = settings.alpha_lack_of_fit / len(components)
 
     def fitted_well(k: int, fit: '_Fit') -> bool:
-        _, p = lack_of_fit(fit.gls, s2[k], nu[k])
-        variance = fit.gls.rss / fit.gls.dof
-        excess = np.sqrt(max(variance - s2[k], 0.0)) / capacity[k] * 100.0
-        return not (p < alpha and excess >= settings.min_effect_pct_fs)
+        return not lacks_fit(fit.gls, s2[k], nu[k], capacity[k], settings, len(components))
 
     return fitted_well
 

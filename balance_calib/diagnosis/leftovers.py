@@ -316,6 +316,15 @@ def lack_of_fit(gls, s2: float, nu: float) -> tuple[float, float]:
     return float(ratio), float(scipy.stats.f.sf(ratio, gls.dof, nu))
 
 
+def lacks_fit(gls, s2: float, nu: float, capacity: float, settings, n_components: int) -> bool:
+    """Structure left over on one component: lack of fit at alpha_lack_of_fit / n_components and
+    an excess over the repeatability of at least min_effect_pct_fs (% FS).
+    """
+    _, p = lack_of_fit(gls, s2, nu)
+    excess = np.sqrt(max(gls.rss / gls.dof - s2, 0.0)) / capacity * 100.0
+    return p < settings.alpha_lack_of_fit / n_components and excess >= settings.min_effect_pct_fs
+
+
 def _unstable(problem, k, terms, fit, found, late, alpha) -> list[tuple[str, float]]:
     """Families found on component k whose coefficients differ between the first and second half of
     the campaign (a Chow test on their terms x the second-half indicator): a physical effect of
@@ -417,9 +426,8 @@ def examine_leftovers(
         unstable = _unstable(problem, k, comp_terms[k], fit, found, late, alpha)
         variance = fit.gls.rss / fit.gls.dof
         ratio, p = lack_of_fit(fit.gls, s2[k], nu[k])
-        excess = np.sqrt(max(variance - s2[k], 0.0)) / capacity[k] * 100.0
         ratios[c], p_values[c] = float(ratio), p
-        lacks_fit = p < alpha and excess >= settings.min_effect_pct_fs
+        structure = lacks_fit(fit.gls, s2[k], nu[k], capacity[k], settings, n_components)
         directed, bases = None, {}
         if alpha_slow > 0:
             bases = slow_structure_bases(times, points.gravity, loads[:, k])
@@ -435,14 +443,14 @@ def examine_leftovers(
                     < settings.min_effect_pct_fs
                 ):
                     directed = None
-        if not (lacks_fit or unstable or directed):
+        if not (structure or unstable or directed):
             continue
         partly, explained_note = (), ''
         if found:
             base_excess = max(base_fits[k].gls.rss / base_fits[k].gls.dof - s2[k], 0.0)
             explained = 1.0 - max(variance - s2[k], 0.0) / base_excess if base_excess > 0 else 0.0
             if directed is not None:  # the excess along the directed basis (directed_lack_of_fit)
-                explained = min(explained, directed[2]) if lacks_fit else directed[2]
+                explained = min(explained, directed[2]) if structure else directed[2]
             if unstable or explained < settings.min_explained:
                 partly = tuple(e['candidate'].family for e in found)
                 terms = set()
