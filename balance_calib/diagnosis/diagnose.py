@@ -1227,7 +1227,8 @@ def _pairs_restored(
     predicts the points better left out one at a time (a lower PRESS σ): the term was dropped for
     the leverage of a few far points, which PRESS weighs, on data whose tare still held part of
     the effect (B660H F_Z, curvature on negative loads of every bridge, seed 3004: FZV²|FZV|
-    alone PRESS 1.18x the clean campaign's after the re-read, with FZV|FZV| 1.10x).
+    alone PRESS 1.18x the clean campaign's after the re-read, with FZV|FZV| 1.10x, and 1.04x
+    once the tare is read again through the completed pair).
     Updates fits, comp_terms and the effects' terms in place; True if any pair was completed.
     """
     pairs = [g for g in bidirectional_family(outputs_names, components).groups if len(g) == 2]
@@ -1239,8 +1240,8 @@ def _pairs_restored(
         for k, stats in candidate.components.items():
             groups = list(stats['groups'])
             for i, group in enumerate(groups):
-                pair = next((p for p in pairs if len(group) == 1 and group[0] in p), None)
-                if pair is None:
+                pair = next((p for p in pairs if group[0] in p), None)
+                if len(group) != 1 or pair is None:
                     continue
                 missing = [t for t in pair if t not in comp_terms[k]]
                 if len(missing) != 1:
