@@ -39,7 +39,6 @@ import rclpy
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from rclpy.time import Time
 from sensor_msgs.msg import FluidPressure
@@ -55,8 +54,9 @@ from balance_calib.config import ConfigError
 from balance_calib.tunnel_axes import parse_installation
 
 from ._parameters import declare_table
+from ._qos import STREAM_QOS
 
-QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+QOS = STREAM_QOS
 
 
 class StartupError(ValueError):

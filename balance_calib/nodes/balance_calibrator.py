@@ -50,9 +50,10 @@ from balance_calib.live.raw_codec import wrench_arrays
 from balance_calib.live.session import CalibratorSession
 
 from ._parameters import declare_table, value_getter
+from ._qos import STREAM_QOS
 from ._raw_input import RawInput
 
-WRENCH_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+WRENCH_QOS = STREAM_QOS
 OVERLOAD_QOS = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )

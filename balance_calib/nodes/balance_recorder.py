@@ -5,17 +5,23 @@ bags/recorder_parameters.py.
 
 Each topic's type and its publishers' QoS come from the graph; topics without publishers yet are
 looked up again every half second. Messages are recorded as serialized bytes (raw subscriptions)
-through the pure BagWriter. SIGINT and SIGTERM both end the recording cleanly: the bag's MCAP
-summary and metadata.yaml are complete afterwards. While it records, what it received is put into
-the file every FLUSH_PERIOD_S (one chunk each), so a refit of the bag still being recorded reads it
-up to a second ago.
+through the pure BagWriter. A bag with a hole says so: samples DDS reports lost to a subscription
+(a stall longer than the writers' history, nodes/_qos.py), and on a topic with one writer the gaps
+in its publication sequence numbers (bags/sequence_gaps.py: what a full queue overwrote too,
+confirmed at each look at the graph), are warned about as they happen (once a second a topic at
+most) and counted in the closing line. SIGINT and SIGTERM both end the recording cleanly: the bag's
+MCAP summary and metadata.yaml are complete afterwards. While it records, what it received is put
+into the file every FLUSH_PERIOD_S (one chunk each), so a refit of the bag still being recorded
+reads it up to a second ago.
 """
 
 import importlib
 import signal
 import sys
+import time
 
 import rclpy
+from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -23,14 +29,17 @@ from rclpy.signals import SignalHandlerOptions
 
 from balance_calib.bags.errors import BagError
 from balance_calib.bags.recorder_parameters import DEFAULT_TOPICS, PARAMETERS
+from balance_calib.bags.sequence_gaps import SequenceGaps
 from balance_calib.bags.writer import BagWriter, qos_profiles_yaml
 from balance_calib.parameter_table import ParameterError
 
 from ._parameters import declare_table
+from ._qos import STREAM_DEPTH
 
 DISCOVERY_PERIOD_S = 0.5
 FLUSH_PERIOD_S = 1.0  # the file holds what was received up to this long ago
-QUEUE_DEPTH = 1000  # a recorder would rather buffer than drop
+QUEUE_DEPTH = STREAM_DEPTH  # a recorder would rather buffer than drop
+HOLE_WARNING_PERIOD_S = 1.0  # a topic losing samples is warned about at most this often
 
 
 def offered_qos_as_dict(qos: QoSProfile) -> dict:
@@ -87,6 +96,10 @@ class BalanceRecorder(Node):
         self._writer.open()
         self._pending = [self.resolve_topic_name(topic) for topic in topics]
         self._recording = {}
+        self._lost: dict[str, int] = {}  # as DDS reported them
+        self._gaps = SequenceGaps()  # as the writers' numbering shows them
+        self._warned_at: dict[str, float] = {}
+        self._closing = False  # a shut-down context: holes go into the closing line only
         self.get_logger().info(f'recording {", ".join(self._pending)} into {output}')
         # The timer runs for the whole recording, even with every topic found: rclpy (Jazzy) wakes
         # spin() for a signal *before* it shuts the context down, so without a periodic wakeup
@@ -103,6 +116,9 @@ class BalanceRecorder(Node):
             self._flushed = written
 
     def _discover(self):
+        for topic in self._recording:
+            if self._gaps.single_writer(topic, self.count_publishers(topic) == 1):
+                self._warn_of_hole(topic)
         if not self._pending:
             return
         types = dict(self.get_topic_names_and_types())
@@ -129,12 +145,45 @@ class BalanceRecorder(Node):
                 self.get_logger().error(f'cannot record {topic}: {error}')
                 continue
             self._recording[topic] = self.create_subscription(
-                msg_class, topic, self._writer_for(topic), subscription_qos(offered), raw=True
+                msg_class,
+                topic,
+                self._writer_for(topic),
+                subscription_qos(offered),
+                raw=True,
+                event_callbacks=SubscriptionEventCallbacks(message_lost=self._loss_on(topic)),
             )
+            self._gaps.single_writer(topic, len(publishers) == 1)
             self.get_logger().info(f'recording {topic} ({msgtype})')
+
+    def _loss_on(self, topic):
+        def lost(info: QoSMessageLostInfo):
+            self._lost[topic] = info.total_count
+            self._warn_of_hole(topic)
+
+        return lost
+
+    def _holes(self) -> dict[str, int]:
+        """Samples missing per topic: the larger of DDS's count and the numbering's."""
+        topics = set(self._lost) | set(self._gaps.missing)
+        holes = {t: max(self._lost.get(t, 0), self._gaps.missing.get(t, 0)) for t in topics}
+        return {topic: count for topic, count in sorted(holes.items()) if count}
+
+    def _warn_of_hole(self, topic: str) -> None:
+        now = time.monotonic()
+        if (
+            self._closing
+            or now - self._warned_at.get(topic, -HOLE_WARNING_PERIOD_S) < HOLE_WARNING_PERIOD_S
+        ):
+            return
+        self._warned_at[topic] = now
+        self.get_logger().warn(
+            f'{topic}: {self._holes().get(topic, 0)} message(s) so far lost before they reached '
+            'the recorder; the bag has a hole'
+        )
 
     def _writer_for(self, topic):
         def write(serialized: bytes, message_info: dict):
+            self._gaps.seen(topic, message_info.get('publication_sequence_number'))
             self._writer.write(
                 topic,
                 self.get_clock().now().nanoseconds,
@@ -147,6 +196,7 @@ class BalanceRecorder(Node):
     def destroy_node(self):
         """Write what DDS has already delivered, finish the bag, then leave the graph."""
         counts = {}
+        self._closing = True
         if self._writer.is_open:
             for topic, subscription in self._recording.items():
                 # After a signal the context is shut down and no executor can run; messages
@@ -156,6 +206,7 @@ class BalanceRecorder(Node):
                     taken := subscription.handle.take_message(subscription.msg_type, True)
                 ) is not None:
                     write(*taken)
+            self._gaps.close()
             counts = self._writer.close()
         super().destroy_node()
         # Logged once the node is gone, as the shut-down context can no longer reach /rosout.
@@ -163,6 +214,9 @@ class BalanceRecorder(Node):
         self.get_logger().info(
             f'bag {self._writer.path} closed; messages written: {summary or "none"}'
         )
+        if holes := self._holes():
+            said = ', '.join(f'{topic}: {count}' for topic, count in holes.items())
+            self.get_logger().warn(f'messages lost before they reached the recorder: {said}')
         if self._pending:
             # the defaults cover every interface topic and a run publishes only some of them: a
             # silent default topic is not news, a silent topic the user added is

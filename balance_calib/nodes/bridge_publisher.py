@@ -69,14 +69,16 @@ from balance_calib.simulation.wind_on import (
 from balance_calib.tunnel_axes import parse_installation
 
 from ._parameters import declare_table
+from ._qos import STREAM_QOS
 
 # name -> default, as tests and tools read them; the table (type, range, description) is the
 # pure simulation/publisher_parameters.py's
 PARAMETERS = defaults(TABLE)
-RAW_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+RAW_QOS = STREAM_QOS
 # timeline kinds of the physical wind-on run, after simulation/timeline.py's
 ATTITUDE, DYNAMIC_PRESSURE, AERO_TRUTH, AERO_TRUTH_WIND = 7, 8, 9, 10
 EVENT_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+TAIL_ACK_TIMEOUT_S = 10.0  # exit_when_done: how long the subscribers may take to acknowledge
 
 
 class StartupError(ValueError):
@@ -490,13 +492,23 @@ class BridgePublisher(Node):
         self._timer.cancel()
         if self._settings['exit_when_done']:
             # let reliable subscribers acknowledge the tail before the process goes away (acks come
-            # with the writer's next heartbeat, so this can take a couple of seconds)
-            deadline = time.monotonic() + 3.0
-            for publisher in self._outputs.values():
-                if publisher.get_subscription_count() > 0:
-                    publisher.wait_for_all_acked(
-                        Duration(seconds=max(deadline - time.monotonic(), 0.0))
-                    )
+            # with the writer's next heartbeat, so this can take a couple of seconds; a
+            # subscriber that stalled needs its repairs first): what a writer takes with it is
+            # lost to its late readers, so a tail left unacknowledged is said
+            deadline = time.monotonic() + TAIL_ACK_TIMEOUT_S
+            unacked = [
+                publisher.topic_name
+                for publisher in self._outputs.values()
+                if publisher.get_subscription_count() > 0
+                and not publisher.wait_for_all_acked(
+                    Duration(seconds=max(deadline - time.monotonic(), 0.0))
+                )
+            ]
+            if unacked:
+                self.get_logger().warn(
+                    f'leaving with samples not acknowledged after {TAIL_ACK_TIMEOUT_S:g} s on '
+                    f'{", ".join(unacked)}: a subscriber that stalled may lack the end of the run'
+                )
             self.done.set_result(True)
 
 
