@@ -56,8 +56,6 @@ from balance_calib.tunnel_axes import parse_installation
 from ._parameters import declare_table
 from ._qos import STREAM_QOS
 
-QOS = STREAM_QOS
-
 
 class StartupError(ValueError):
     pass
@@ -114,7 +112,7 @@ class AeroCoefficients(Node):
         )
         self._request = None  # (core request, Future, deadline)
         out = {
-            name: self.create_publisher(WrenchStamped, f'aero/{name}', QOS)
+            name: self.create_publisher(WrenchStamped, f'aero/{name}', STREAM_QOS)
             for name in (
                 'coefficients',
                 'wind_coefficients',
@@ -125,11 +123,13 @@ class AeroCoefficients(Node):
             )
         }
         self._out = out
-        self._point_attitude = self.create_publisher(Vector3Stamped, 'aero/point_attitude', QOS)
+        self._point_attitude = self.create_publisher(
+            Vector3Stamped, 'aero/point_attitude', STREAM_QOS
+        )
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(WrenchStamped, 'balance/wrench', self._on_wrench, QOS)
-        self.create_subscription(Vector3Stamped, 'model/attitude', self._on_attitude, QOS)
-        self.create_subscription(FluidPressure, 'tunnel/dynamic_pressure', self._on_q, QOS)
+        self.create_subscription(WrenchStamped, 'balance/wrench', self._on_wrench, STREAM_QOS)
+        self.create_subscription(Vector3Stamped, 'model/attitude', self._on_attitude, STREAM_QOS)
+        self.create_subscription(FluidPressure, 'tunnel/dynamic_pressure', self._on_q, STREAM_QOS)
         self.create_timer(0.1, self._on_flush)
         self.create_timer(float(p['diagnostics_period_s']), self._on_diagnostics)
         # a coroutine in its own group, so the sample callbacks keep running while it awaits its

@@ -53,7 +53,6 @@ from ._parameters import declare_table, value_getter
 from ._qos import STREAM_QOS
 from ._raw_input import RawInput
 
-WRENCH_QOS = STREAM_QOS
 OVERLOAD_QOS = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
 )
@@ -83,7 +82,7 @@ class BalanceCalibrator(Node):
         value = self.session.value
         overrides = QoSOverridingOptions.with_default_policies()
         self._wrench_pub = self.create_publisher(
-            WrenchStamped, 'balance/wrench', WRENCH_QOS, qos_overriding_options=overrides
+            WrenchStamped, 'balance/wrench', STREAM_QOS, qos_overriding_options=overrides
         )
         # who reads the uncertainty, kept by the publisher's matched event: asking rmw at every
         # batch cost 5-15 µs a sample at 1 kHz (cold caches); asked still while the count is 0 (and
@@ -93,7 +92,7 @@ class BalanceCalibrator(Node):
         self._uncertainty_pub = self.create_publisher(
             WrenchStamped,
             'balance/wrench_uncertainty',
-            WRENCH_QOS,
+            STREAM_QOS,
             qos_overriding_options=overrides,
             event_callbacks=PublisherEventCallbacks(matched=self._on_uncertainty_matched),
         )

@@ -74,7 +74,6 @@ from ._qos import STREAM_QOS
 # name -> default, as tests and tools read them; the table (type, range, description) is the
 # pure simulation/publisher_parameters.py's
 PARAMETERS = defaults(TABLE)
-RAW_QOS = STREAM_QOS
 # timeline kinds of the physical wind-on run, after simulation/timeline.py's
 ATTITUDE, DYNAMIC_PRESSURE, AERO_TRUTH, AERO_TRUTH_WIND = 7, 8, 9, 10
 EVENT_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
@@ -138,8 +137,8 @@ class BridgePublisher(Node):
         noise = self._settings['noise_sigma_pct_fs']
         noise = table17_noise(config) if noise < 0 else np.full(6, float(noise))
         self._frame_id = config.name
-        self._publisher(tl.RAW, WrenchStamped, '/balance/raw', RAW_QOS)
-        self._publisher(tl.TEMPERATURE, Temperature, '/balance/temperature', RAW_QOS)
+        self._publisher(tl.RAW, WrenchStamped, '/balance/raw', STREAM_QOS)
+        self._publisher(tl.TEMPERATURE, Temperature, '/balance/temperature', STREAM_QOS)
         return config, config.matrices[truth_name], noise
 
     def _temperature_every(self) -> int:
@@ -212,7 +211,7 @@ class BridgePublisher(Node):
         zero_mv = float(self._settings['electrical_zero_mv'])
         # the balance's own effects, wind-on too
         effects = parse_effects(self._settings['effects'])
-        self._publisher(tl.TRUTH, WrenchStamped, '/balance/truth', RAW_QOS)
+        self._publisher(tl.TRUTH, WrenchStamped, '/balance/truth', STREAM_QOS)
 
         def build(cycle):
             raw = wind_on_outputs(
@@ -278,11 +277,11 @@ class BridgePublisher(Node):
             truth.without_constant(), config.capacity, noise
         ) * np.sqrt(samples_per_hold)
         effects = parse_effects(self._settings['effects'])
-        self._publisher(tl.TRUTH, WrenchStamped, '/balance/truth', RAW_QOS)
-        self._publisher(ATTITUDE, Vector3Stamped, '/model/attitude', RAW_QOS)
-        self._publisher(DYNAMIC_PRESSURE, FluidPressure, '/tunnel/dynamic_pressure', RAW_QOS)
-        self._publisher(AERO_TRUTH, WrenchStamped, '/aero/truth', RAW_QOS)
-        self._publisher(AERO_TRUTH_WIND, WrenchStamped, '/aero/truth_wind', RAW_QOS)
+        self._publisher(tl.TRUTH, WrenchStamped, '/balance/truth', STREAM_QOS)
+        self._publisher(ATTITUDE, Vector3Stamped, '/model/attitude', STREAM_QOS)
+        self._publisher(DYNAMIC_PRESSURE, FluidPressure, '/tunnel/dynamic_pressure', STREAM_QOS)
+        self._publisher(AERO_TRUTH, WrenchStamped, '/aero/truth', STREAM_QOS)
+        self._publisher(AERO_TRUTH_WIND, WrenchStamped, '/aero/truth_wind', STREAM_QOS)
         wind_on = profile.q_pa > 0
 
         def build(cycle):
@@ -331,7 +330,7 @@ class BridgePublisher(Node):
                     f'is not available here'
                 )
                 continue
-            self._outputs[topic] = self.create_publisher(msg_type, topic, RAW_QOS)
+            self._outputs[topic] = self.create_publisher(msg_type, topic, STREAM_QOS)
         self._recorded = recorded
         replay_timeline = tl.Timeline(
             recorded.times_s, np.full(len(recorded), -1), np.zeros((len(recorded), 6))
@@ -348,12 +347,12 @@ class BridgePublisher(Node):
                 f'ThrustStandSimulator cannot be loaded ({err})'
             ) from None
         self._frame_id = 'thrust_stand'
-        self._publisher(tl.RAW, WrenchStamped, '/balance/raw', RAW_QOS)
+        self._publisher(tl.RAW, WrenchStamped, '/balance/raw', STREAM_QOS)
         self._publisher(
-            tl.CHAMBER_PRESSURE, FluidPressure, '/thrust_stand/chamber_pressure', RAW_QOS
+            tl.CHAMBER_PRESSURE, FluidPressure, '/thrust_stand/chamber_pressure', STREAM_QOS
         )
         self._publisher(
-            tl.AMBIENT_PRESSURE, FluidPressure, '/thrust_stand/ambient_pressure', RAW_QOS
+            tl.AMBIENT_PRESSURE, FluidPressure, '/thrust_stand/ambient_pressure', STREAM_QOS
         )
         self._publisher(tl.APPLIED_LOAD, WrenchStamped, '/calibration/applied_load')
         rate, duration = float(self._settings['rate_hz']), float(simulator.duration_s)
