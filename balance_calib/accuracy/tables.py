@@ -111,7 +111,9 @@ def format_coefficient_tables(model: BalanceModel, standard_errors=None) -> str:
     """The whole matrix in the memo's layout (linear as Table 10, others as Tables 11-12); with
     standard_errors (n_components, n_terms) the weak coefficients marked WEAK_MARK.
     """
-    weak = None if standard_errors is None else weak_coefficients(model.coefficients, standard_errors)
+    weak = (
+        None if standard_errors is None else weak_coefficients(model.coefficients, standard_errors)
+    )
     if all(
         t.degree <= 1
         and not any(f.absolute for f in t.factors)

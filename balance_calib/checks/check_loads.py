@@ -250,10 +250,16 @@ def calibration_body(calibration: Calibration, source: str):
 
 
 def bag_readings(
-    calibration: Calibration, points, cut, source: str, model: str = 'adopted'
+    calibration: Calibration,
+    points,
+    point_variance_mv2,
+    source: str,
+    model: str = 'adopted',
 ) -> CheckReadings:
     """Check points of a campaign bag cut into load points (refit/load_points.cut_load_points):
     zero points subtracted, the calibration's body as tare; zero points are not check points.
+    point_variance_mv2 (P, n_bridges): variance of each point's mean output, mV² (the cut's
+    CutSummary.point_variance_mv2), None or NaN where unknown.
     """
     from ..coverage.run import run_coverage
     from ..model.inverse import outputs_for_loads
@@ -278,7 +284,7 @@ def bag_readings(
     body_outputs = outputs_for_loads(wind_on, body_loads)
     outputs = zero.zeroed_outputs_mv + body_outputs
     coverage = run_coverage(calibration, outputs_mv=outputs[loaded], model=name)
-    variance_mv2, note = _point_variance(points, zero, cut)
+    variance_mv2, note = _point_variance(points, zero, point_variance_mv2)
     warnings += note
     jacobian = wind_on.jacobian(outputs[loaded])
     own = np.einsum('pki,pi->pk', jacobian**2, variance_mv2[loaded])
@@ -300,14 +306,14 @@ def bag_readings(
     )
 
 
-def _point_variance(points, zero, cut) -> tuple[np.ndarray, list[str]]:
+def _point_variance(points, zero, point_variance_mv2) -> tuple[np.ndarray, list[str]]:
     """(P, n) variance (mV²) of each point's zeroed mean output: its own mean's and, interpolated
     in time, its bracketing zero points' (the tare's share); unknown (fewer than two samples)
     counts as 0 and is said.
     """
     variance = (
-        np.asarray(cut.point_variance_mv2, dtype=float)
-        if cut is not None and cut.point_variance_mv2 is not None
+        np.asarray(point_variance_mv2, dtype=float)
+        if point_variance_mv2 is not None
         else np.full(np.shape(points.outputs_mv), np.nan)
     )
     unknown = int(np.count_nonzero(~np.isfinite(variance).all(axis=1)))
@@ -372,4 +378,4 @@ def read_check_inputs(
     source = ', '.join(str(p) for p in paths)
     bag = read_bags([Path(p) for p in paths], required=('raw', 'applied_load', 'gravity'))
     points, cut = cut_load_points(bag, None, source=source)
-    return bag_readings(calibration, points, cut, source, model)
+    return bag_readings(calibration, points, cut.point_variance_mv2, source, model)

@@ -203,9 +203,11 @@ def compare_calibrations(
     s_a = primary_sensitivities(a.model(name_a))
     s_b = primary_sensitivities(b.model(name_b))
     if s_a is None or s_b is None:
-        sensitivity = {v: None for v in a.bridge_outputs}
+        sensitivity = dict.fromkeys(a.bridge_outputs)
     else:
-        sensitivity = {v: _number((sb / sa - 1.0) * 100.0, 4) for v, sa, sb in zip(a.bridge_outputs, s_a, s_b)}
+        sensitivity = {
+            v: _number((sb / sa - 1.0) * 100.0, 4) for v, sa, sb in zip(a.bridge_outputs, s_a, s_b)
+        }
     return Comparison(
         tuple(a.components),
         capacity,

@@ -36,7 +36,12 @@ def check_figure(result, path: str | Path) -> Path:
     figure, axes_list = _panels(len(readings.components))
     for j, (axes, component) in enumerate(zip(axes_list, readings.components)):
         axes.fill_between(
-            x, -limit[:, j], limit[:, j], step='mid', color='C0', alpha=0.2,
+            x,
+            -limit[:, j],
+            limit[:, j],
+            step='mid',
+            color='C0',
+            alpha=0.2,
             label=f'±{result.k:g}·u',
         )
         inside = ~readings.outside[:, j]
@@ -47,8 +52,13 @@ def check_figure(result, path: str | Path) -> Path:
         ):
             if mask.any():
                 axes.plot(
-                    x[mask], error[mask, j], linestyle='none', marker='o', markersize=3,
-                    markerfacecolor=face, markeredgecolor='C3' if face == 'C3' else 'C0',
+                    x[mask],
+                    error[mask, j],
+                    linestyle='none',
+                    marker='o',
+                    markersize=3,
+                    markerfacecolor=face,
+                    markeredgecolor='C3' if face == 'C3' else 'C0',
                     label=label,
                 )
         axes.axhline(0.0, color='0.3', linewidth=0.6)
@@ -71,11 +81,20 @@ def compare_figure(comparison, path: str | Path) -> Path:
     changed = comparison.changed
     for j, (axes, component) in enumerate(zip(axes_list, comparison.components)):
         axes.fill_between(
-            x, -band[:, j], band[:, j], step='mid', color='0.6', alpha=0.3,
+            x,
+            -band[:, j],
+            band[:, j],
+            step='mid',
+            color='0.6',
+            alpha=0.3,
             label='±2·√(u_A² + u_B²)',
         )
         axes.plot(
-            x, difference[:, j], linestyle='none', marker='.', markersize=3,
+            x,
+            difference[:, j],
+            linestyle='none',
+            marker='.',
+            markersize=3,
             color='C3' if component in changed else 'C0',
             label='B − A' + (' (changed)' if component in changed else ''),
         )

@@ -10,14 +10,20 @@ from ..record import identification_markdown, signature_markdown
 
 
 def _f(value, digits: int = 4) -> str:
+    """A signed number (an error, a difference), n/a for null."""
     return 'n/a' if value is None else f'{value:+.{digits}f}'
+
+
+def _u(value, digits: int = 4) -> str:
+    """An unsigned number (an RMS, an uncertainty), n/a for null."""
+    return 'n/a' if value is None else f'{value:.{digits}f}'
 
 
 def failed_lines(summary: Mapping) -> list[str]:
     """One line per failed point-component, then the verdict (what `check` prints)."""
     lines = [
         f'FAILED {f["point"]} {f["component"]}: error {_f(f["error_pct_fs"])} % FS, limit '
-        f'{"n/a" if f["limit_pct_fs"] is None else format(f["limit_pct_fs"], ".4f")} % FS'
+        f'{_u(f["limit_pct_fs"])} % FS'
         f'{" (outside the calibrated range)" if f.get("outside_support") else ""}'
         for f in summary['failed']
     ]
@@ -50,7 +56,7 @@ def check_markdown(summary: Mapping, record: Mapping) -> str:
     for c in components:
         entry = summary['components'][c]
         lines.append(
-            f'| {c} | {_f(entry["rms_error_pct_fs"])} | {_f(entry["worst_error_pct_fs"])} | '
+            f'| {c} | {_u(entry["rms_error_pct_fs"])} | {_f(entry["worst_error_pct_fs"])} | '
             f'{entry["failed"]} |'
         )
     lines += ['']
@@ -63,7 +69,7 @@ def check_markdown(summary: Mapping, record: Mapping) -> str:
         ]
         lines += [
             f'| {f["point"]} | {f["component"]} | {_f(f["error_pct_fs"])} | '
-            f'{"n/a" if f["limit_pct_fs"] is None else format(f["limit_pct_fs"], ".4f")} | '
+            f'{_u(f["limit_pct_fs"])} | '
             f'{"yes" if f.get("outside_support") else "no"} |'
             for f in summary['failed']
         ]
@@ -109,14 +115,14 @@ def compare_lines(summary: Mapping) -> list[str]:
             'primary sensitivities moved: '
             + ', '.join(f'{v} {s:+.3f} %' for v, s in moved.items())
         )
-    lines.append(
-        f'verdict: {"changed: " + ", ".join(summary["changed"]) if summary["changed"] else "unchanged"}'
-        f' ({summary["points"]} points: {summary["points_from"]})'
-    )
+    verdict = 'changed: ' + ', '.join(summary['changed']) if summary['changed'] else 'unchanged'
+    lines.append(f'verdict: {verdict} ({summary["points"]} points: {summary["points_from"]})')
     return lines
 
 
 def compare_markdown(summary: Mapping, name_a: str, name_b: str) -> str:
+    changed = summary['changed']
+    headline = 'Changed: ' + ', '.join(changed) if changed else 'Nothing changed.'
     lines = [
         '# Did the balance change? Two calibrations compared',
         '',
@@ -126,7 +132,7 @@ def compare_markdown(summary: Mapping, name_a: str, name_b: str) -> str:
         'uncertainty √(u_A² + u_B²); a component has changed when its RMS difference exceeds '
         'twice the RMS combined uncertainty.',
         '',
-        f'**{"Changed: " + ", ".join(summary["changed"]) if summary["changed"] else "Nothing changed."}**',
+        f'**{headline}**',
         '',
         '| component | RMS difference, % FS | worst difference, % FS | combined u (RMS), % FS '
         '| changed |',
@@ -134,8 +140,8 @@ def compare_markdown(summary: Mapping, name_a: str, name_b: str) -> str:
     ]
     for c, entry in summary['components'].items():
         lines.append(
-            f'| {c} | {_f(entry["rms_difference_pct_fs"])} | '
-            f'{_f(entry["worst_difference_pct_fs"])} | {_f(entry["combined_u_pct_fs"])} | '
+            f'| {c} | {_u(entry["rms_difference_pct_fs"])} | '
+            f'{_f(entry["worst_difference_pct_fs"])} | {_u(entry["combined_u_pct_fs"])} | '
             f'{"**yes**" if entry["changed"] else "no"} |'
         )
     lines += [
@@ -145,9 +151,7 @@ def compare_markdown(summary: Mapping, name_a: str, name_b: str) -> str:
         '| bridge | change, % |',
         '|---|---|',
     ]
-    lines += [
-        f'| {v} | {_f(s, 3)} |' for v, s in summary['sensitivity_change_pct'].items()
-    ]
+    lines += [f'| {v} | {_f(s, 3)} |' for v, s in summary['sensitivity_change_pct'].items()]
     lines += ['']
     if summary.get('warnings'):
         lines += ['## Warnings', ''] + [f'- {w}' for w in summary['warnings']] + ['']

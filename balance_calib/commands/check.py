@@ -30,7 +30,8 @@ def register(subparsers) -> None:
     parser.add_argument(
         'inputs',
         nargs='+',
-        help='one check table (.csv, BALFIT-style) or campaign bags (rosbag2 directories or .mcap)',
+        help='one check table (.csv, BALFIT-style) or campaign bags (rosbag2 directories or '
+        '.mcap files)',
     )
     parser.add_argument('--out', help='directory for check.json, check.md and check.png')
     parser.add_argument(

@@ -273,7 +273,7 @@ def _gates_and_selection(report) -> list[str]:
 
 def _signing(report) -> list[str]:
     """report.md: identification, largest residuals, effects offered, the adopted coefficients."""
-    from ..accuracy.tables import WEAK_MARK, WEAK_NOTE, weak_coefficients
+    from ..accuracy.tables import weak_coefficients, WEAK_MARK, WEAK_NOTE
 
     ident = report.get('identification', {})
     lines = [

@@ -12,6 +12,5 @@ def add_record_arguments(parser, serial_default: str = "the balance config's `se
     parser.add_argument(
         '--operator',
         default=None,
-        help='who performed it, for the signed record (report.json record.operator; '
-        'default null)',
+        help='who performed it, for the signed record (report.json record.operator; default null)',
     )
