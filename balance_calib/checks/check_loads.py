@@ -12,7 +12,8 @@ reduction.retare_with_model). Zero points are not check points.
 Uncertainty of a reading, k = 1: the one /balance/wrench_uncertainty publishes (model/
 uncertainty.py: σ_k √(1 + leverage)), the tare's share (a table series' tare standard error; a
 bag's interpolated zero, from its zero points' own scatter) and the standard error of the check
-point's own mean (a bag: its samples' scatter, refit/load_points.py), in quadrature.
+point's own mean (a bag: its samples' scatter, refit/load_points.py; a point of one sample: the
+run's repeatability from consecutive zero points), in quadrature.
 
 Support: where the point lies outside the calibration's recorded support (coverage/support.py,
 total loads), or without one beyond the rated load, the reading is an extrapolation: said per
@@ -308,16 +309,34 @@ def bag_readings(
 
 def _point_variance(points, zero, point_variance_mv2) -> tuple[np.ndarray, list[str]]:
     """(P, n) variance (mV²) of each point's zeroed mean output: its own mean's and, interpolated
-    in time, its bracketing zero points' (the tare's share); unknown (fewer than two samples)
-    counts as 0 and is said.
+    in time, its bracketing zero points' (the tare's share). A point whose own scatter is unknown
+    (fewer than two samples) takes the run's repeatability instead, from consecutive zero points
+    in one orientation (half the mean square of their differences: diagnosis/leftovers.py); with
+    no such pair it counts as 0. Either is said.
     """
+    from ..diagnosis.leftovers import zero_point_pairs
+
     variance = (
-        np.asarray(point_variance_mv2, dtype=float)
+        np.array(point_variance_mv2, dtype=float)
         if point_variance_mv2 is not None
         else np.full(np.shape(points.outputs_mv), np.nan)
     )
-    unknown = int(np.count_nonzero(~np.isfinite(variance).all(axis=1)))
-    variance = np.nan_to_num(variance, nan=0.0)
+    unknown = ~np.isfinite(variance).all(axis=1)
+    note = []
+    if unknown.any():
+        pairs = zero_point_pairs(points)
+        if len(pairs):
+            variance[unknown] = np.mean(np.square(pairs), axis=0) / 2.0
+            note.append(
+                f'{int(unknown.sum())} points have fewer than two samples: their own scatter is '
+                f'taken from {len(pairs)} pairs of consecutive zero points'
+            )
+        else:
+            variance[unknown] = 0.0
+            note.append(
+                f'{int(unknown.sum())} points have fewer than two samples and no zero point '
+                'repeats: their own scatter is unknown and left out of u'
+            )
     times = np.asarray(points.times_s, dtype=float)
     before = np.where(zero.before >= 0, zero.before, zero.after)
     after = np.where(zero.after >= 0, zero.after, zero.before)
@@ -329,14 +348,6 @@ def _point_variance(points, zero, point_variance_mv2) -> tuple[np.ndarray, list[
         ((1 - weight) ** 2)[:, None] * variance[before] + (weight**2)[:, None] * variance[after],
     )
     total = variance + np.where(np.asarray(points.is_zero_point)[:, None], 0.0, share)
-    note = (
-        [
-            f'{unknown} points have fewer than two samples: their own scatter is unknown and '
-            'left out of u'
-        ]
-        if unknown
-        else []
-    )
     return total, note
 
 

@@ -20,20 +20,29 @@ def _u(value, digits: int = 4) -> str:
 
 
 def failed_lines(summary: Mapping) -> list[str]:
-    """One line per failed point-component, then the verdict (what `check` prints)."""
-    lines = [
-        f'FAILED {f["point"]} {f["component"]}: error {_f(f["error_pct_fs"])} % FS, limit '
-        f'{_u(f["limit_pct_fs"])} % FS'
-        f'{" (outside the calibrated range)" if f.get("outside_support") else ""}'
-        for f in summary['failed']
-    ]
+    """One line per failed component (its failed points and the worst of them), the warnings,
+    then the verdict: what `check` prints. Every failed point is in check.json and check.md.
+    """
+    lines = []
+    for component, entry in summary['components'].items():
+        failed = [f for f in summary['failed'] if f['component'] == component]
+        if not failed:
+            continue
+        worst = max(failed, key=lambda f: -1.0 if f['ratio'] is None else f['ratio'])
+        outside = sum(bool(f.get('outside_support')) for f in failed)
+        lines.append(
+            f'FAILED {component}: {len(failed)} of {summary["points"]} check points beyond '
+            f'k·u; worst {worst["point"]}: error {_f(worst["error_pct_fs"])} % FS, limit '
+            f'{_u(worst["limit_pct_fs"])} % FS'
+            + (f' ({outside} outside the calibrated range)' if outside else '')
+        )
     lines += [f'warning: {w}' for w in summary.get('warnings', [])]
     failed = len(summary['failed'])
-    worst = summary['worst_ratio']
+    worst_ratio = summary['worst_ratio']
     lines.append(
         f'verdict: {summary["verdict"]} ({summary["points"]} check points, {failed} of '
         f'{summary["point_components"]} point-components beyond k·u, k = {summary["k"]}; worst '
-        f'|error|/(k·u) {"n/a" if worst is None else format(worst, ".2f")})'
+        f'|error|/(k·u) {"n/a" if worst_ratio is None else format(worst_ratio, ".2f")})'
     )
     return lines
 
