@@ -99,6 +99,28 @@ def test_compare_finds_the_changed_bridge_by_the_amount_derived_by_hand(calibrat
     assert all(abs(change[v]) < 0.3 for v in ('FYV', 'FZV', 'MXV', 'MYV', 'MZV'))
 
 
+def test_compare_finds_an_added_interaction_by_the_amount_derived_by_hand(
+    calibrations, campaigns, lmc6522
+):
+    # F_Y gains 13 N per mV of the F_X bridge: B - A = 13 N/mV x V_FX at A's outputs
+    interaction = 13.0
+    b = _calibration(
+        lmc6522, campaigns.campaign(seed=3, effects=f'cross_terms:FY.FXV={interaction}')
+    )
+    truth = lmc6522.matrices['cubic'].without_constant()
+    outputs = outputs_for_loads(truth, _schedule_total_loads(lmc6522))
+    expected = interaction * outputs[:, 0] / lmc6522.capacity[1] * 100.0
+    summary = compare_calibrations(calibrations['a'], b).summary()
+    assert summary['changed'] == ['FY']
+    fy = summary['components']['FY']
+    assert fy['rms_difference_pct_fs'] == pytest.approx(np.sqrt(np.mean(expected**2)), rel=0.06)
+    assert fy['worst_difference_pct_fs'] == pytest.approx(
+        expected[np.argmax(np.abs(expected))], abs=0.03
+    )
+    # an interaction is no change of a bridge's own sensitivity
+    assert all(abs(v) < 0.3 for v in summary['sensitivity_change_pct'].values())
+
+
 def test_compare_of_a_clean_recalibration_finds_nothing_changed(calibrations):
     summary = compare_calibrations(calibrations['a'], calibrations['clean']).summary()
     assert summary['changed'] == []
