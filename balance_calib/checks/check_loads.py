@@ -262,8 +262,7 @@ def bag_readings(
     point_variance_mv2 (P, n_bridges): variance of each point's mean output, mV² (the cut's
     CutSummary.point_variance_mv2), None or NaN where unknown.
     """
-    from ..coverage.run import run_coverage
-    from ..model.inverse import outputs_for_loads
+    from ..coverage.run import outputs_for_run_loads, run_coverage
     from ..tare.calibration_body import tare_loads
     from ..units import COMPONENTS
     from ..zero_points import subtract_zero_points
@@ -282,7 +281,7 @@ def bag_readings(
     name, warnings = usable_model(calibration, model)
     body_loads = tare_loads(calibration_body(calibration, source), points.gravity)
     wind_on = calibration.model(name).without_constant()
-    body_outputs = outputs_for_loads(wind_on, body_loads)
+    body_outputs = outputs_for_run_loads(calibration.model(name), body_loads)  # either form
     outputs = zero.zeroed_outputs_mv + body_outputs
     coverage = run_coverage(calibration, outputs_mv=outputs[loaded], model=name)
     variance_mv2, note = _point_variance(points, zero, point_variance_mv2)
