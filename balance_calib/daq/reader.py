@@ -160,10 +160,11 @@ class DeviceReader:
             self._tell(records)
 
     def _records(self, link, data: bytes) -> Records:
+        datagrams = [data] + link.waiting() if link.datagrams else [data]
         if isinstance(self._parser, RecordParser):
-            return self._parser.parse([data])
-        if link.datagrams and not data.endswith(b'\n'):  # a datagram of text ends its line
-            data += b'\n'
+            return self._parser.parse(datagrams)
+        if link.datagrams:  # a datagram of text ends its line
+            data = b''.join(d if d.endswith(b'\n') else d + b'\n' for d in datagrams)
         lines, overlong = self._framer.feed(data)
         records = self._parser.parse(lines)
         records.malformed += overlong
