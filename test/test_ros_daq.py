@@ -380,5 +380,6 @@ def test_bad_parameters_are_refused_at_start_up_in_one_line():
         out, err = run.communicate(timeout=60)
         assert run.returncode != 0, (args, out, err)
         lines = err.strip().splitlines()
-        assert len(lines) == 1 and named in lines[0], (args, err)
+        assert len(lines) == 1 and lines[0].startswith('[ERROR]'), (args, err)
+        assert f'[balance_daq]: {named}' in lines[0], (args, err)
         assert '[INFO]' not in out + err  # refused before anything came up

@@ -114,9 +114,9 @@ def main(args=None):
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except ParameterError as err:
-        print(f'balance_daq: {err}', file=sys.stderr)
-        status = 2
+    except ParameterError as err:  # one line naming the parameter, as every node says it
+        rclpy.logging.get_logger('balance_daq').error(str(err))
+        status = 1
     finally:
         if node is not None:
             node.destroy_node()
