@@ -141,6 +141,7 @@ def test_a_tcp_line_device_survives_every_bad_input_and_a_refusing_peer_is_retri
             b'\xff\xfe\xfd 1 2 3 4 5 6 7 8 9 10\n',  # not UTF-8: malformed
             f'{s + 2},1,2\n'.encode(),  # short: malformed
             b','.join([b'1'] * 12) + b'\n',  # long: malformed
+            b'9' * 5000 + b'\n',  # longer than any line may be: malformed
             line(s + 2, (s + 2) * US, fx='nan'),  # malformed
             line(s + 2, (s + 2) * US, fx='-inf'),  # malformed
             line(s + 2, (s + 2) * US, status=3),  # invalid (status flag)
@@ -190,7 +191,7 @@ def test_a_tcp_line_device_survives_every_bad_input_and_a_refusing_peer_is_retri
         name = f'balance_daq: {device.address}'
         want = {
             'samples_published': str(warm + 7),
-            'records_malformed': '7',
+            'records_malformed': '8',
             'samples_invalid': '1',
             'samples_saturated': '1',
             'samples_missing': '2',
