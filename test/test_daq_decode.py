@@ -135,6 +135,12 @@ def test_a_serial_ports_first_line_is_dropped_uncounted_a_tcp_streams_is_kept():
 def test_a_line_longer_than_the_limit_is_one_malformed_record_and_its_tail_is_dropped():
     lines, overlong, _ = lines_of(b'1,2\n' + b'9' * 3000, b'9' * 3000, b'9,9\n3,4\n')
     assert lines == [b'1,2', b'3,4'] and overlong == 1
+    # however many chunks it spans, and whether or not it ends before the device goes away
+    endless = [b'9' * 3000] * 7
+    lines, overlong, framer = lines_of(*endless, b'9\n5,6\n')
+    assert lines == [b'5,6'] and overlong == 1
+    lines, overlong, framer = lines_of(*endless)
+    assert lines == [] and overlong == 1 and framer.lost_partial() is False
 
 
 @pytest.mark.parametrize(

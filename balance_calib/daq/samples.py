@@ -97,12 +97,12 @@ class SampleStream:
         self._saturation = np.array(settings.saturation)
         self._saturable = bool(np.isfinite(self._saturation).any())
         self._ratiometric = settings.units in RATIOMETRIC
-        if settings.units == 'counts':
-            self._mv_per_unit = np.array(settings.counts_to_mv)
-        elif self._ratiometric:  # mV per (unit x volt of excitation)
-            self._mv_per_unit = np.full(6, MV_PER_UNIT[settings.units])
-        else:
-            self._mv_per_unit = np.full(6, MV_PER_UNIT[settings.units])
+        # mV per unit of each bridge field (mV/V and uV/V: per volt of excitation too)
+        self._mv_per_unit = (
+            np.array(settings.counts_to_mv)
+            if settings.units == 'counts'
+            else np.full(6, MV_PER_UNIT[settings.units])
+        )
         self._excitation_v = settings.excitation_v
         self._last_stamp_ns = -1
         self.restart()
