@@ -181,6 +181,7 @@ def report_markdown(reduction: Reduction, figures: list[str]) -> str:
                 f'({", ".join(f"{1000 * c:.2f} ± {s:.2f}" for c, s in zip(tare.cg_m, cg_sigma))}) '
                 f'mm, offsets {np.array2string(tare.offsets, precision=3)} N, N·m'
             )
+    lines += ['', '## Zero drift during the run', ''] + zero_drift_section(reduction)
     warnings = [w for run in reduction.runs for w in run.result.warnings]
     lines += ['', '## Warnings', ''] + ([f'- {w}' for w in warnings] or ['- none']) + ['']
     main = values[reduction.main.name]
@@ -268,6 +269,54 @@ def report_markdown(reduction: Reduction, figures: list[str]) -> str:
         '',
     ]
     return '\n'.join(lines)
+
+
+def zero_drift_lines(run, components) -> list[str]:
+    """How one model's run handled the zero's drift, and the shift when it was measured."""
+    from .zero_drift import WARN_BEYOND_SIGMA
+
+    drift = run.zero_drift
+    if drift.shift is None:
+        return [f'- {run.name}: the drift of the zero was not corrected: {drift.reason}.']
+    how = (
+        'the wind-off offsets interpolated linearly in time between them'
+        if drift.corrected
+        else 'not corrected (--zero-drift none): the pre-run offsets throughout'
+    )
+    lines = [
+        f'- {run.name}: pre-run sweep at t = {drift.pre_s:.2f} s, post-run sweep at t = '
+        f'{drift.post_s:.2f} s; {how}.'
+    ]
+    if run.zero_shift_pct_fs is not None:
+        lines.append(
+            '  shift (post − pre), % FS: '
+            + ', '.join(f'{c} {v:+.4f}' for c, v in zip(components, run.zero_shift_pct_fs))
+            + f' (warned beyond {WARN_BEYOND_SIGMA:g}σ)'
+        )
+    return lines
+
+
+def zero_drift_section(reduction: Reduction) -> list[str]:
+    """The shift of the zero between the bracketing wind-off sweeps (interfaces.md, `reduce`'s
+    zero drift), per calibration component in % FS beside the calibration's σ.
+    """
+    from .pipeline import calibration_sigma_pct_fs
+
+    components = reduction.calibration.components
+    lines = [
+        'The wind-off offsets (the zero, load space) of the sweeps before and after the wind-on '
+        'part, at the same attitudes; the post-run offsets fitted with the pre-run weight and CG.',
+        '',
+    ]
+    for run in reduction.runs:
+        lines += zero_drift_lines(run, components)
+    if any(run.zero_shift_pct_fs is not None for run in reduction.runs):
+        sigma = calibration_sigma_pct_fs(reduction.calibration)
+        lines.append(
+            "- the calibration's σ, % FS: "
+            + ', '.join(f'{c} {v:.4f}' for c, v in zip(components, sigma))
+        )
+    return lines
 
 
 def coverage_section(reduction: Reduction) -> list[str]:
