@@ -53,6 +53,9 @@ class Reduction:
     # predicted u of the main model at every sample; None: the calibration carries no coefficient
     # covariance
     coverage: RunCoverage | None = None
+    # the electrical zero subtracted in output space and where it came from ('' = none)
+    electrical_zero_mv: np.ndarray | None = None
+    electrical_zero_source: str = ''
 
     @property
     def runs(self) -> tuple[ModelRun, ...]:
@@ -130,6 +133,30 @@ def _without_implausible_outputs(samples: RunSamples, calibration: Calibration):
     ), [warning]
 
 
+def zero_from_the_bag(samples: RunSamples, calibration: Calibration):
+    """The electrical zero a live balance_calibrator of this balance stated in the bag's
+    /diagnostics (its ~/zero), where it came from, and warnings; (None, '', []) when none did.
+    """
+    mine = [
+        (node, zero)
+        for node, balance, zero in samples.stated_zeros
+        if balance.lower() == calibration.balance.lower()
+    ]
+    if not mine:
+        return None, '', []
+    node, zero = mine[0]
+    source = f"{node}'s ~/zero, stated in the bag's /diagnostics"
+    others = [z for _, z in mine if np.max(np.abs(z - zero)) > 0]
+    warnings = []
+    if others:
+        warnings.append(
+            f'the electrical zero stated in /diagnostics changed during the run (by up to '
+            f'{np.max(np.abs(np.array(others) - zero)):.5f} mV); the first one is used: '
+            'give --electrical-zero-mv to choose'
+        )
+    return zero, source, warnings
+
+
 def reduce_bags(
     bags: Sequence[str | Path],
     calibration_path: str,
@@ -151,7 +178,9 @@ def reduce_bags(
 
     electrical_zero_mv (6,): the bridge outputs with nothing on the balance (the calibrator's
     ~/zero), subtracted from the raw outputs before the calibration (output space, exact for any
-    model); what remains constant is taken by the wind-off sweep's offsets in load space.
+    model); what remains constant is taken by the wind-off sweep's offsets in load space. None:
+    the zero a live balance_calibrator of this balance stated in the bags' /diagnostics (the
+    ~/zero it had taken while the run was recorded), if one did.
     zero_drift 'linear' | 'none': the offsets interpolated in time between the pre-run and
     post-run wind-off sweeps, or the pre-run ones throughout (zero_drift.py).
     """
@@ -185,6 +214,10 @@ def reduce_bags(
     samples, implausible = _without_implausible_outputs(samples, calibration)
     if len(samples.q_pa) == 0:
         raise ReduceError(f'{", ".join(map(str, bags))}: {implausible[0]}; no sample left')
+    zero_source = '--electrical-zero-mv' if electrical_zero_mv is not None else ''
+    if electrical_zero_mv is None:
+        electrical_zero_mv, zero_source, zero_warnings = zero_from_the_bag(samples, calibration)
+        implausible = implausible + zero_warnings
     sigma, sigma_source = calibration_sigma(calibration, parsed)
     runs: list[ModelRun] = []
     raw = (
@@ -251,4 +284,6 @@ def reduce_bags(
         runs[0],
         tuple(runs[1:]),
         coverage,
+        None if electrical_zero_mv is None else np.asarray(electrical_zero_mv, float),
+        zero_source,
     )

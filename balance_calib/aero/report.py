@@ -131,6 +131,17 @@ def _fmt(value: float, digits: int = 5) -> str:
     return 'NaN' if not np.isfinite(value) else f'{value:.{digits}f}'
 
 
+def electrical_zero_text(reduction: Reduction) -> str:
+    """The zero subtracted in output space and where it came from, or 'none'."""
+    from ..units import BRIDGE_OUTPUTS
+
+    zero = reduction.electrical_zero_mv
+    if zero is None:
+        return "none (no --electrical-zero-mv, no calibrator's ~/zero in the bags)"
+    values = ', '.join(f'{b} {v:+.5f}' for b, v in zip(BRIDGE_OUTPUTS, zero))
+    return f'{values} mV ({reduction.electrical_zero_source})'
+
+
 def report_markdown(reduction: Reduction, figures: list[str]) -> str:
     model, cal, samples = reduction.model, reduction.calibration, reduction.samples
     points, values, uncertainty = table(reduction)
@@ -163,6 +174,8 @@ def report_markdown(reduction: Reduction, figures: list[str]) -> str:
         f'{reduction.installation.spec})',
         f'- load σ of a point used for the tare weights and the uncertainty: '
         f'{np.array2string(reduction.sigma_loads, precision=3)} N, N·m ({reduction.sigma_source})',
+        '- electrical zero subtracted from the bridge outputs (output space): '
+        + electrical_zero_text(reduction),
         f'- bags: {", ".join(str(s) for s in samples.sources)}',
         f'- samples: {len(samples.q_pa)} matched, {samples.stale} left out (attitude or q∞ '
         'missing or older than allowed)',

@@ -81,7 +81,8 @@ def register(subparsers) -> None:
         '--electrical-zero-mv',
         default='',
         help="six bridge outputs with nothing on the balance (the calibrator's ~/zero), mV, "
-        'comma-separated: subtracted in output space before the calibration',
+        'comma-separated: subtracted in output space before the calibration (default: the '
+        "zero a live balance_calibrator stated in the bags' /diagnostics, if any)",
     )
     parser.add_argument(
         '--zero-drift',
@@ -161,6 +162,10 @@ def run(args) -> int:
         f'{reduction.model.name} on {reduction.calibration.balance}: {len(points)} held wind-on '
         f'attitudes reduced through {", ".join(r.name for r in reduction.runs)}'
     )
+    if reduction.electrical_zero_source and reduction.electrical_zero_mv is not None:
+        from ..aero.report import electrical_zero_text
+
+        print(f'electrical zero: {electrical_zero_text(reduction)}')
     main = reduction.main
     drift = main.zero_drift
     if drift.shift is None:
