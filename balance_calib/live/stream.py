@@ -36,7 +36,7 @@ from .calibrator_core import (
     WrenchBatch,
 )
 from .raw_codec import WrenchEncoder
-from .support_share import SupportSampler
+from .support_share import SupportSampler, SupportShare
 from .tare_store import now_iso, TareState
 
 
@@ -715,7 +715,11 @@ class LiveCalibrator:
         tare_source: str,
         node_name: str,
         tare_refused: str = '',
+        support: SupportShare | None = None,
     ) -> list[StatusReport]:
+        """support: the period's share outside the support, judged by the caller out of its lock
+        (SupportSampler.take); None: judged here.
+        """
         interval = self.inputs.interval_ns
         state = LiveState(
             period_s=period_s,
@@ -744,9 +748,8 @@ class LiveCalibrator:
             overload=self.overload.components if self.overload.active else None,
             overload_values=self.overload.values(),
             lowpass_hz=self.settings.lowpass_hz,
-            support=self.support.judge(
-                self.active, self.tare.zero_mv, self.counters.period_received
-            ),
+            support=support
+            or self.support.judge(self.active, self.tare.zero_mv, self.counters.period_received),
         )
         reports = diagnostics(self.active, state, node_name)
         self.counters.start_period()
