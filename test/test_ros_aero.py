@@ -139,6 +139,9 @@ def test_live_and_offline_reduction_agree_and_match_the_truth(tmp_path, installa
                 '--estimate-weight',
                 '--installation',
                 installation,
+                # the live node cannot know the post-run sweep: the pre-run zero throughout
+                '--zero-drift',
+                'none',
                 '--out',
                 str(out),
             ]

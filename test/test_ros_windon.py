@@ -61,6 +61,7 @@ def test_windon_records_a_bag_that_reduce_turns_into_the_true_coefficients(tmp_p
         text=True,
         timeout=120,
         env=dict(os.environ, ROS_DOMAIN_ID=str(new_domain_id())),
+        cwd=tmp_path,
     )
     assert done.returncode == 0, done.stdout + done.stderr
     assert time.monotonic() - started < 60
@@ -70,11 +71,11 @@ def test_windon_records_a_bag_that_reduce_turns_into_the_true_coefficients(tmp_p
     command = done.stdout.strip().splitlines()[-1].split('reduce it with: ')[1].split()
     assert command[:3] == ['balance-calib', 'reduce', str(bag)]
     assert (bag / 'metadata.yaml').exists()
-    # 200 Hz: 12 wind-off attitudes + the final one of 0.1 s, 5 wind-on holds of 0.3 s
+    # 200 Hz: 12 wind-off attitudes of 0.1 s before and after 5 wind-on holds of 0.3 s
     data = read_bags(
         [bag], extra_topics=['/model/attitude', '/tunnel/dynamic_pressure', '/aero/truth']
     )
-    assert len(data.raw) == 13 * 20 + 5 * 60
+    assert len(data.raw) == 24 * 20 + 5 * 60
     assert (
         len(data.extra['/model/attitude'])
         == len(data.extra['/tunnel/dynamic_pressure'])
@@ -84,6 +85,16 @@ def test_windon_records_a_bag_that_reduce_turns_into_the_true_coefficients(tmp_p
     reduced = subprocess.run(command, capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert reduced.returncode == 0, reduced.stderr
     assert reduced.stderr == ''
+    # the calibrator's ~/zero, taken before the run and stated in the bag's /diagnostics, is
+    # subtracted in output space: no offset warning; the sweeps bracket the drift: none here
+    assert 'warning' not in reduced.stdout, reduced.stdout
+    zero_line = next(line for line in reduced.stdout.splitlines() if 'electrical zero' in line)
+    zero = [float(v.split()[1]) for v in zero_line.split(': ', 1)[1].split(' mV')[0].split(', ')]
+    # bridge_publisher's electrical_zero_mv (0.04 mV), to the noise of 100 samples
+    assert np.allclose(zero, 0.04, atol=2e-3), zero_line
+    assert "balance_calibrator's ~/zero" in zero_line
+    assert 'zero drift (cubic): shift post − pre % FS' in reduced.stdout
+    assert list(tmp_path.glob('*.tare.yaml')) == []  # the zero left nothing in the directory
     with open(
         Path(command[command.index('--out') + 1]) / 'coefficients.csv', newline=''
     ) as handle:

@@ -21,12 +21,14 @@ import numpy as np
 from ..bags.errors import BagError
 from ..bags.reader import read_bags, TopicNames
 from ..bags.writer import BagWriter, qos_profiles_yaml
+from ..units import BRIDGE_OUTPUTS
 
 RAW_TOPIC = '/balance/raw'
 ATTITUDE_TOPIC = '/model/attitude'
 DYNAMIC_PRESSURE_TOPIC = '/tunnel/dynamic_pressure'
 TRUTH_TOPIC = '/aero/truth'  # simulation only: true body coefficients
 TRUTH_WIND_TOPIC = '/aero/truth_wind'  # simulation only: true wind-axis coefficients
+DIAGNOSTICS_TOPIC = '/diagnostics'  # a live balance_calibrator's, stating its ~/zero
 DEFAULT_MAX_INPUT_AGE_S = 0.5
 
 
@@ -45,6 +47,40 @@ class RunSamples:
     frame_id: str
     truth_body: np.ndarray | None = None  # (S, 6) if the bag has /aero/truth at the same stamps
     truth_wind: np.ndarray | None = None
+    # the electrical zeros a live balance_calibrator stated in the bag's /diagnostics (key
+    # zero_mv of its calibration status), in time order: (node, balance, zero (6,) mV)
+    stated_zeros: tuple[tuple[str, str, np.ndarray], ...] = ()
+
+
+def parse_zero_mv(text: str) -> np.ndarray | None:
+    """balance_calibrator's /diagnostics `zero_mv` ('FXV=+0.04000, FYV=…', calibrator_core) ->
+    (6,) mV, bridges it does not name 0; None for 'none' or what does not parse.
+    """
+    zero = np.zeros(6)
+    try:
+        for item in text.split(','):
+            name, _, value = item.strip().partition('=')
+            zero[BRIDGE_OUTPUTS.index(name)] = float(value)
+    except ValueError:  # 'none', an unknown bridge name, not a number
+        return None
+    return zero if np.all(np.isfinite(zero)) else None
+
+
+def stated_zeros(messages) -> tuple[tuple[str, str, np.ndarray], ...]:
+    """(node, balance, zero) of every calibration status of DiagnosticArray messages that states
+    an electrical zero.
+    """
+    found = []
+    for array in messages:
+        for status in array.status:
+            node, _, part = status.name.rpartition(': ')
+            if part != 'calibration':
+                continue
+            values = {kv.key: kv.value for kv in status.values}
+            zero = parse_zero_mv(values.get('zero_mv', 'none'))
+            if zero is not None:
+                found.append((node, status.hardware_id, zero))
+    return tuple(found)
 
 
 def match_latest(stamps_ns, input_stamps_ns, input_values, max_age_s: float):
@@ -118,7 +154,9 @@ def read_run(
     """
     paths = [Path(p) for p in paths]
     # /model/attitude has the calibration gravity's message type: read it through that array path
-    extra = [dynamic_pressure_topic] + ([TRUTH_TOPIC, TRUTH_WIND_TOPIC] if truth else [])
+    extra = [dynamic_pressure_topic, DIAGNOSTICS_TOPIC] + (
+        [TRUTH_TOPIC, TRUTH_WIND_TOPIC] if truth else []
+    )
     data = read_bags(
         paths,
         topics=TopicNames(
@@ -164,6 +202,8 @@ def read_run(
             else:
                 truth_wind = matched
     frame = str(raw.frame_ids[order][0]) if len(raw) else ''
+    diagnostics = data.extra.get(DIAGNOSTICS_TOPIC)
+    zeros = stated_zeros(diagnostics.messages) if diagnostics is not None else ()
     return RunSamples(
         stamps[ok],
         raw.values[order][ok],
@@ -174,6 +214,7 @@ def read_run(
         frame,
         truth_body,
         truth_wind,
+        zeros,
     )
 
 

@@ -21,7 +21,8 @@ from ..tunnel_axes import Installation, parse_installation
 from .bag_io import DEFAULT_MAX_INPUT_AGE_S, read_run, RunSamples
 from .held_points import HoldSettings
 from .model_file import load_model, ModelDescription
-from .run import FALLBACK_SIGMA_PCT_FS, offset_warnings, reduce_run, RunResult, sigma_loads_tunnel
+from .run import FALLBACK_SIGMA_PCT_FS, offset_warnings, RunResult, sigma_loads_tunnel
+from .zero_drift import drift_pct_fs, drift_warnings, reduce_run_with_drift, ZeroDrift
 
 
 class ReduceError(ValueError):
@@ -32,6 +33,9 @@ class ReduceError(ValueError):
 class ModelRun:
     name: str  # calibration model: 'cubic', 'linear', ...
     result: RunResult
+    zero_drift: ZeroDrift = ZeroDrift('none', reason='not measured')
+    # the shift in % FS of the calibration's components (balance axes); None without a shift
+    zero_shift_pct_fs: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -49,6 +53,9 @@ class Reduction:
     # predicted u of the main model at every sample; None: the calibration carries no coefficient
     # covariance
     coverage: RunCoverage | None = None
+    # the electrical zero subtracted in output space and where it came from ('' = none)
+    electrical_zero_mv: np.ndarray | None = None
+    electrical_zero_source: str = ''
 
     @property
     def runs(self) -> tuple[ModelRun, ...]:
@@ -66,6 +73,12 @@ def calibration_sigma(
     return sigma_loads_tunnel(
         [FALLBACK_SIGMA_PCT_FS] * 6, calibration.capacity, installation
     ), f'none stated by the calibration: {FALLBACK_SIGMA_PCT_FS} % FS assumed'
+
+
+def calibration_sigma_pct_fs(calibration: Calibration) -> np.ndarray:
+    """(6,) the calibration's σ per component, % FS (FALLBACK_SIGMA_PCT_FS where none stated)."""
+    stated = [calibration.sigma_pct_fs.get(c) for c in calibration.components]
+    return np.array([s if s is not None and s > 0 else FALLBACK_SIGMA_PCT_FS for s in stated])
 
 
 def readings_for(
@@ -120,6 +133,30 @@ def _without_implausible_outputs(samples: RunSamples, calibration: Calibration):
     ), [warning]
 
 
+def zero_from_the_bag(samples: RunSamples, calibration: Calibration):
+    """The electrical zero a live balance_calibrator of this balance stated in the bag's
+    /diagnostics (its ~/zero), where it came from, and warnings; (None, '', []) when none did.
+    """
+    mine = [
+        (node, zero)
+        for node, balance, zero in samples.stated_zeros
+        if balance.lower() == calibration.balance.lower()
+    ]
+    if not mine:
+        return None, '', []
+    node, zero = mine[0]
+    source = f"{node}'s ~/zero, stated in the bag's /diagnostics"
+    others = [z for _, z in mine if np.max(np.abs(z - zero)) > 0]
+    warnings = []
+    if others:
+        warnings.append(
+            f'the electrical zero stated in /diagnostics changed during the run (by up to '
+            f'{np.max(np.abs(np.array(others) - zero)):.5f} mV); the first one is used: '
+            'give --electrical-zero-mv to choose'
+        )
+    return zero, source, warnings
+
+
 def reduce_bags(
     bags: Sequence[str | Path],
     calibration_path: str,
@@ -135,12 +172,17 @@ def reduce_bags(
     attitude_topic: str = '/model/attitude',
     dynamic_pressure_topic: str = '/tunnel/dynamic_pressure',
     electrical_zero_mv=None,
+    zero_drift: str = 'linear',
 ) -> Reduction:
     """Everything `reduce` computes. Raises ReduceError (or ConfigError/BagError) naming the input.
 
     electrical_zero_mv (6,): the bridge outputs with nothing on the balance (the calibrator's
     ~/zero), subtracted from the raw outputs before the calibration (output space, exact for any
-    model); what remains constant is taken by the wind-off sweep's offsets in load space.
+    model); what remains constant is taken by the wind-off sweep's offsets in load space. None:
+    the zero a live balance_calibrator of this balance stated in the bags' /diagnostics (the
+    ~/zero it had taken while the run was recorded), if one did.
+    zero_drift 'linear' | 'none': the offsets interpolated in time between the pre-run and
+    post-run wind-off sweeps, or the pre-run ones throughout (zero_drift.py).
     """
     try:
         calibration = load_calibration(calibration_path)
@@ -172,6 +214,10 @@ def reduce_bags(
     samples, implausible = _without_implausible_outputs(samples, calibration)
     if len(samples.q_pa) == 0:
         raise ReduceError(f'{", ".join(map(str, bags))}: {implausible[0]}; no sample left')
+    zero_source = '--electrical-zero-mv' if electrical_zero_mv is not None else ''
+    if electrical_zero_mv is None:
+        electrical_zero_mv, zero_source, zero_warnings = zero_from_the_bag(samples, calibration)
+        implausible = implausible + zero_warnings
     sigma, sigma_source = calibration_sigma(calibration, parsed)
     runs: list[ModelRun] = []
     raw = (
@@ -184,15 +230,43 @@ def reduce_bags(
         if has_uncertainty(calibration, main_name)
         else None
     )
+    times_s = (samples.stamps_ns - samples.stamps_ns[0]) / 1e9
     for name in names:
         readings = readings_for(calibration, name, parsed, raw)
-        result = reduce_run(
-            readings, samples.support_attitude, samples.q_pa, model, settings, sigma
-        )
+        try:
+            result, drift = reduce_run_with_drift(
+                readings,
+                samples.support_attitude,
+                samples.q_pa,
+                times_s,
+                model,
+                settings,
+                sigma,
+                zero_drift,
+            )
+        except ValueError as err:  # the mode
+            raise ReduceError(str(err)) from None
         capacity = parsed.to_tunnel(np.asarray(calibration.capacity, float))
         extra = offset_warnings(result.tares, capacity, name, electrical_zero_mv is not None)
+        shift_pct = None
+        if drift.shift is not None and len(calibration.components) == 6:
+            shift_pct = drift_pct_fs(drift.shift, calibration.capacity, parsed)
+            extra += drift_warnings(
+                drift,
+                calibration.components,
+                shift_pct,
+                calibration_sigma_pct_fs(calibration),
+                name,
+            )
         extra = (implausible if not runs else []) + extra
-        runs.append(ModelRun(name, replace(result, warnings=result.warnings + tuple(extra))))
+        runs.append(
+            ModelRun(
+                name,
+                replace(result, warnings=result.warnings + tuple(extra)),
+                drift,
+                shift_pct,
+            )
+        )
     if not runs[0].result.wind_on:
         raise ReduceError(
             f'{", ".join(map(str, bags))}: no held wind-on attitude found '
@@ -210,4 +284,6 @@ def reduce_bags(
         runs[0],
         tuple(runs[1:]),
         coverage,
+        None if electrical_zero_mv is None else np.asarray(electrical_zero_mv, float),
+        zero_source,
     )

@@ -131,6 +131,17 @@ def _fmt(value: float, digits: int = 5) -> str:
     return 'NaN' if not np.isfinite(value) else f'{value:.{digits}f}'
 
 
+def electrical_zero_text(reduction: Reduction) -> str:
+    """The zero subtracted in output space and where it came from, or 'none'."""
+    from ..units import BRIDGE_OUTPUTS
+
+    zero = reduction.electrical_zero_mv
+    if zero is None:
+        return "none (no --electrical-zero-mv, no calibrator's ~/zero in the bags)"
+    values = ', '.join(f'{b} {v:+.5f}' for b, v in zip(BRIDGE_OUTPUTS, zero))
+    return f'{values} mV ({reduction.electrical_zero_source})'
+
+
 def report_markdown(reduction: Reduction, figures: list[str]) -> str:
     model, cal, samples = reduction.model, reduction.calibration, reduction.samples
     points, values, uncertainty = table(reduction)
@@ -163,6 +174,8 @@ def report_markdown(reduction: Reduction, figures: list[str]) -> str:
         f'{reduction.installation.spec})',
         f'- load σ of a point used for the tare weights and the uncertainty: '
         f'{np.array2string(reduction.sigma_loads, precision=3)} N, N·m ({reduction.sigma_source})',
+        '- electrical zero subtracted from the bridge outputs (output space): '
+        + electrical_zero_text(reduction),
         f'- bags: {", ".join(str(s) for s in samples.sources)}',
         f'- samples: {len(samples.q_pa)} matched, {samples.stale} left out (attitude or q∞ '
         'missing or older than allowed)',
@@ -181,6 +194,7 @@ def report_markdown(reduction: Reduction, figures: list[str]) -> str:
                 f'({", ".join(f"{1000 * c:.2f} ± {s:.2f}" for c, s in zip(tare.cg_m, cg_sigma))}) '
                 f'mm, offsets {np.array2string(tare.offsets, precision=3)} N, N·m'
             )
+    lines += ['', '## Zero drift during the run', ''] + zero_drift_section(reduction)
     warnings = [w for run in reduction.runs for w in run.result.warnings]
     lines += ['', '## Warnings', ''] + ([f'- {w}' for w in warnings] or ['- none']) + ['']
     main = values[reduction.main.name]
@@ -268,6 +282,54 @@ def report_markdown(reduction: Reduction, figures: list[str]) -> str:
         '',
     ]
     return '\n'.join(lines)
+
+
+def zero_drift_lines(run, components) -> list[str]:
+    """How one model's run handled the zero's drift, and the shift when it was measured."""
+    from .zero_drift import WARN_BEYOND_SIGMA
+
+    drift = run.zero_drift
+    if drift.shift is None:
+        return [f'- {run.name}: the drift of the zero was not corrected: {drift.reason}.']
+    how = (
+        'the wind-off offsets interpolated linearly in time between them'
+        if drift.corrected
+        else 'not corrected (--zero-drift none): the pre-run offsets throughout'
+    )
+    lines = [
+        f'- {run.name}: pre-run sweep at t = {drift.pre_s:.2f} s, post-run sweep at t = '
+        f'{drift.post_s:.2f} s; {how}.'
+    ]
+    if run.zero_shift_pct_fs is not None:
+        lines.append(
+            '  shift (post − pre), % FS: '
+            + ', '.join(f'{c} {v:+.4f}' for c, v in zip(components, run.zero_shift_pct_fs))
+            + f' (warned beyond {WARN_BEYOND_SIGMA:g}σ)'
+        )
+    return lines
+
+
+def zero_drift_section(reduction: Reduction) -> list[str]:
+    """The shift of the zero between the bracketing wind-off sweeps (interfaces.md, `reduce`'s
+    zero drift), per calibration component in % FS beside the calibration's σ.
+    """
+    from .pipeline import calibration_sigma_pct_fs
+
+    components = reduction.calibration.components
+    lines = [
+        'The wind-off offsets (the zero, load space) of the sweeps before and after the wind-on '
+        'part, at the same attitudes; the post-run offsets fitted with the pre-run weight and CG.',
+        '',
+    ]
+    for run in reduction.runs:
+        lines += zero_drift_lines(run, components)
+    if any(run.zero_shift_pct_fs is not None for run in reduction.runs):
+        sigma = calibration_sigma_pct_fs(reduction.calibration)
+        lines.append(
+            "- the calibration's σ, % FS: "
+            + ', '.join(f'{c} {v:.4f}' for c, v in zip(components, sigma))
+        )
+    return lines
 
 
 def coverage_section(reduction: Reduction) -> list[str]:

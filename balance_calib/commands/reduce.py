@@ -81,7 +81,15 @@ def register(subparsers) -> None:
         '--electrical-zero-mv',
         default='',
         help="six bridge outputs with nothing on the balance (the calibrator's ~/zero), mV, "
-        'comma-separated: subtracted in output space before the calibration',
+        'comma-separated: subtracted in output space before the calibration (default: the '
+        "zero a live balance_calibrator stated in the bags' /diagnostics, if any)",
+    )
+    parser.add_argument(
+        '--zero-drift',
+        choices=('linear', 'none'),
+        default='linear',
+        help='linear (default): the wind-off offsets interpolated in time between the pre-run '
+        'and post-run wind-off sweeps (same attitudes); none: the pre-run offsets throughout',
     )
     parser.add_argument(
         '--raw-topic',
@@ -144,6 +152,7 @@ def run(args) -> int:
             attitude_topic=args.attitude_topic,
             dynamic_pressure_topic=args.dynamic_pressure_topic,
             electrical_zero_mv=zero,
+            zero_drift=args.zero_drift,
         )
     except (ReduceError, BagError, ConfigError, ValueError) as err:
         raise CommandError(str(err)) from None
@@ -153,6 +162,21 @@ def run(args) -> int:
         f'{reduction.model.name} on {reduction.calibration.balance}: {len(points)} held wind-on '
         f'attitudes reduced through {", ".join(r.name for r in reduction.runs)}'
     )
+    if reduction.electrical_zero_source and reduction.electrical_zero_mv is not None:
+        from ..aero.report import electrical_zero_text
+
+        print(f'electrical zero: {electrical_zero_text(reduction)}')
+    main = reduction.main
+    drift = main.zero_drift
+    if drift.shift is None:
+        print(f'zero drift: not corrected: {drift.reason}')
+    elif main.zero_shift_pct_fs is not None:
+        shift = ', '.join(
+            f'{c} {v:+.4f}'
+            for c, v in zip(reduction.calibration.components, main.zero_shift_pct_fs)
+        )
+        how = 'interpolated linearly in time' if drift.corrected else 'not corrected (none)'
+        print(f'zero drift ({main.name}): shift post − pre % FS {shift}; {how}')
     for warning in (w for r in reduction.runs for w in r.result.warnings):
         print(f'warning: {warning}')
     print(f'coefficients: {written[0]}')

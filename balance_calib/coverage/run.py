@@ -123,6 +123,28 @@ def _outside(
     return outside_support(support, loads, load_leverage)
 
 
+def outside_support_of_outputs(
+    calibration: Calibration,
+    outputs_mv,
+    *,
+    model: str = 'adopted',
+    support: ScheduleSupport | None = None,
+) -> np.ndarray | None:
+    """(S, n) True where the load `model` reads from bridge outputs (S, n_inputs), mV, zero
+    subtracted, is outside the schedule's support for that component: what run_coverage judges,
+    without the uncertainty (the live calibrator's /diagnostics). None: no support to judge by.
+    """
+    support = support if support is not None else recorded_support(calibration)
+    if support is None:
+        return None
+    chosen = calibration.model(model)
+    outputs_mv = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
+    loads = chosen.without_constant().loads(
+        outputs_mv, _extra_at_reference(chosen, len(outputs_mv))
+    )
+    return _outside(calibration, support, loads, outputs_mv)
+
+
 def run_coverage(
     calibration: Calibration,
     loads=None,

@@ -4,14 +4,19 @@
                                   [--installation upright] [--alpha-deg=-2,22,2] [--hold-s 0.5]
                                   [--wind-off-hold-s 0.3] ...
 
-balance_recorder (its default topics: every topic of docs/interfaces.md, plus the simulation's
-/aero/truth and /aero/truth_wind) and bridge_publisher in wind-on mode with a model
-(config/models: the physical run of TM-663 §10.3, a wind-off α/φ sweep, the α sweep at q∞, wind-off
-again, with /model/attitude and /tunnel/dynamic_pressure beside /balance/raw) run as two processes
-on this shell's ROS domain. The publisher starts when the recorder has subscribed and gives up
-after --subscriber-timeout-s; when the run is over the recorder is stopped, the bag OUT is closed
-(metadata.yaml written) and the `balance-calib reduce` command line for it is printed. A failed run
-removes the bag it created. Ctrl-C stops both nodes; the bag then holds the run so far.
+First the balance's electrical zero, as a laboratory takes it before mounting the model:
+balance_calibrator runs beside a bridge_publisher of the empty balance and its ~/zero averages the
+outputs (TM-663 §5(4): the zero belongs in output space). Then balance_recorder (its default
+topics: every topic of docs/interfaces.md, plus the simulation's /aero/truth and /aero/truth_wind)
+and bridge_publisher in wind-on mode with a model (config/models: the physical run of TM-663
+§10.3, a wind-off α/φ sweep, the α sweep at q∞, the same wind-off sweep after it, with
+/model/attitude and /tunnel/dynamic_pressure beside /balance/raw) run on this shell's ROS domain,
+the calibrator still running: its /diagnostics in the bag state the zero, which `reduce` subtracts,
+and the sweeps before and after the run bracket the drift of the zero. The publisher starts when
+the recorder has subscribed and gives up after --subscriber-timeout-s; when the run is over the
+recorder is stopped, the bag OUT is closed (metadata.yaml written) and the `balance-calib reduce`
+command line for it is printed. A failed run removes the bag it created. Ctrl-C stops the nodes;
+the bag then holds the run so far.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from typing import Callable, Sequence
 
@@ -40,6 +46,9 @@ DEFAULT_MODEL = 'euler_replica_lmc6522'
 TRUTH_TOPICS = (TRUTH_TOPIC, TRUTH_WIND_TOPIC)  # simulation only, what `reduce` compares with
 REDUCE_TOPICS = (RAW_TOPIC, ATTITUDE_TOPIC, DYNAMIC_PRESSURE_TOPIC)  # what `reduce` reads
 STOP_TIMEOUT_S = 10.0
+ZERO_SERVICE = '/balance_calibrator/zero'
+EMPTY_BALANCE_S = 5.0  # the empty balance's profile, looped until ~/zero has its samples
+ZERO_SAMPLES = 100  # averaged by ~/zero
 
 
 class WindOnError(RuntimeError):
@@ -98,6 +107,104 @@ def publisher_parameters(
     }
 
 
+def calibrator_parameters(
+    *, balance: str, installation: str, timeout_s: float, tare_file: Path
+) -> dict:
+    """balance_calibrator's: the balance's shipped calibration, ~/zero over ZERO_SAMPLES, its
+    zero kept in a scratch tare_file (not beside the user's files, not restored by the next run).
+    """
+    return {
+        'calibration_file': balance,
+        'installation': installation,
+        'tare_samples': ZERO_SAMPLES,
+        'tare_timeout_s': timeout_s,
+        'tare_file': str(tare_file),
+    }
+
+
+def empty_balance_parameters(
+    *,
+    balance: str,
+    profile_csv: Path,
+    rate_hz: float,
+    seed: int,
+    noise_sigma_pct_fs: float,
+    subscriber_timeout_s: float,
+) -> dict:
+    """bridge_publisher's for the empty balance (zero loads, the electrical zero and noise)."""
+    return {
+        'mode': 'wind_on',
+        'balance': balance,
+        'profile_csv': str(profile_csv),
+        'loop': True,
+        'rate_hz': rate_hz,
+        'seed': seed,
+        'noise_sigma_pct_fs': noise_sigma_pct_fs,
+        'wait_for_subscribers': 1,
+        'wait_for_subscribers_timeout_s': subscriber_timeout_s,
+    }
+
+
+def write_empty_balance_csv(directory: Path) -> Path:
+    """A load profile (simulation/wind_on.py csv_profile) of EMPTY_BALANCE_S s at zero load."""
+    path = Path(directory) / 'empty_balance.csv'
+    path.write_text(
+        'time_s,FX,FY,FZ,MX,MY,MZ\n0,0,0,0,0,0,0\n' + f'{EMPTY_BALANCE_S:g},0,0,0,0,0,0\n'
+    )
+    return path
+
+
+def take_electrical_zero(
+    env: dict, timeout_s: float, calibrator: subprocess.Popen, stop: Callable[[], bool]
+) -> str:
+    """Call balance_calibrator's ~/zero on env's ROS domain; its reply. WindOnError when the
+    calibrator exits, does not answer within timeout_s or refuses the window.
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+    from std_srvs.srv import Trigger
+
+    context = Context()
+    rclpy.init(
+        context=context,
+        domain_id=int(env.get('ROS_DOMAIN_ID') or 0),
+        signal_handler_options=SignalHandlerOptions.NO,  # Ctrl-C stays ours
+    )
+    node = rclpy.create_node('windon_zero', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    deadline = time.monotonic() + timeout_s
+
+    def spin_until(done: Callable[[], bool], what: str) -> None:
+        while not done():
+            if calibrator.poll() is not None:
+                raise WindOnError(
+                    f'balance_calibrator exited with status {calibrator.returncode} before '
+                    f'{what} (see its lines above)'
+                )
+            if stop():
+                raise KeyboardInterrupt('interrupted while taking the electrical zero')
+            if time.monotonic() > deadline:
+                raise WindOnError(f'no {what} within {timeout_s:g} s')
+            executor.spin_once(timeout_sec=0.1)
+
+    try:
+        client = node.create_client(Trigger, ZERO_SERVICE)
+        spin_until(client.service_is_ready, f'{ZERO_SERVICE} service')
+        future = client.call_async(Trigger.Request())
+        spin_until(future.done, f'reply from {ZERO_SERVICE}')
+        reply = future.result()
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    if reply is None or not reply.success:
+        raise WindOnError(f'{ZERO_SERVICE}: {"no reply" if reply is None else reply.message}')
+    return reply.message
+
+
 def reduce_command(bag: Path, *, model: str, balance: str, installation: str) -> list[str]:
     """The `balance-calib reduce` command line for the bag (the balance's shipped matrices)."""
     return [
@@ -153,6 +260,15 @@ def record_wind_on_run(
     if out.exists():
         raise FileExistsError(f'{out} exists already; choose a new bag directory')
     recorder_args = ros_args({'output': str(out), 'topics': recorder_topics()})
+    scratch = Path(tempfile.mkdtemp(prefix='windon-'))
+    calibrator_args = ros_args(
+        calibrator_parameters(
+            balance=balance,
+            installation=installation,
+            timeout_s=subscriber_timeout_s,
+            tare_file=scratch / 'zero.tare.yaml',
+        )
+    )
     publisher_args = ros_args(
         publisher_parameters(
             model=model,
@@ -179,6 +295,26 @@ def record_wind_on_run(
     previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         # own sessions: a terminal's Ctrl-C reaches the nodes only through us, in order
+        calibrator = processes['balance_calibrator'] = subprocess.Popen(
+            ['balance_calibrator', *calibrator_args], env=env, start_new_session=True
+        )
+        empty_args = ros_args(
+            empty_balance_parameters(
+                balance=balance,
+                profile_csv=write_empty_balance_csv(scratch),
+                rate_hz=rate_hz,
+                seed=seed,
+                noise_sigma_pct_fs=noise_sigma_pct_fs,
+                subscriber_timeout_s=subscriber_timeout_s,
+            )
+        )
+        processes['empty balance'] = subprocess.Popen(
+            ['bridge_publisher', *empty_args], env=env, start_new_session=True
+        )
+        say(f'windon: the {balance} empty: its electrical zero with {ZERO_SERVICE}')
+        reply = take_electrical_zero(env, subscriber_timeout_s, calibrator, lambda: interrupted)
+        _stop(processes.pop('empty balance'))
+        say(f'windon: {reply}')
         processes['balance_recorder'] = subprocess.Popen(
             ['balance_recorder', *recorder_args], env=env, start_new_session=True
         )
@@ -205,6 +341,7 @@ def record_wind_on_run(
         if interrupted:
             _stop(publisher)
             status = _stop(recorder)
+            _stop(calibrator)
             raise KeyboardInterrupt(
                 f'interrupted; the bag {out} holds the run so far'
                 + ('' if status == 0 else f' (recorder status {status})')
@@ -225,6 +362,7 @@ def record_wind_on_run(
     finally:
         for process in processes.values():
             _stop(process)
+        shutil.rmtree(scratch, ignore_errors=True)
         for signum, handler in previous.items():
             signal.signal(signum, handler)
     counts = recorded_counts(out)

@@ -42,6 +42,7 @@ from ..model.active_calibration import ActiveCalibration, six_axis_loads
 from ..model.balance_model import BalanceModel
 from ..model.inverse import InverseDidNotConverge
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
+from .support_share import SupportShare
 
 UNITS = ('N', 'N', 'N', 'N·m', 'N·m', 'N·m')
 
@@ -660,6 +661,21 @@ class LiveState:
     overload: tuple[str, ...] | None = None  # components over the limit now (None = no overload)
     overload_values: tuple[tuple[str, str], ...] = ()
     lowpass_hz: float = 0.0
+    support: SupportShare | None = None  # the period's samples against the schedule's support
+
+
+def support_values(support: SupportShare | None) -> tuple[tuple[str, str], ...]:
+    """/diagnostics keys of the share outside the calibration's support (live/support_share.py):
+    outside_support_share (a number, or 'n/a: why'), the samples it judged and the components.
+    """
+    if support is None or support.share is None:
+        why = 'not judged' if support is None else support.reason
+        return (('outside_support_share', f'n/a: {why}'),)
+    return (
+        ('outside_support_share', f'{support.share:.4f}'),
+        ('outside_support_checked', f'{support.outside} of {support.checked} samples'),
+        ('outside_support_components', ', '.join(support.components) or 'none'),
+    )
 
 
 def count_key(what: str) -> str:
@@ -769,7 +785,9 @@ def diagnostics(
             )
         else:
             inputs.append((needed, 'fresh' if state.last_sample_age_s is not None else 'missing'))
-    cal_level = WARN if state.fallback_reason or state.tare_refused else OK
+    support = state.support
+    outside_support = support is not None and bool(support.share)
+    cal_level = WARN if state.fallback_reason or state.tare_refused or outside_support else OK
     absent = active.absent_components
     message = (
         f'{active.model_name} model, {active.installation.name} installation'
@@ -785,6 +803,12 @@ def diagnostics(
             else ''
         )
     )
+    if outside_support:
+        assert support is not None and support.share is not None
+        message += (
+            f"; {100 * support.share:.1f} % of the last period's samples outside the "
+            f"calibration's support ({', '.join(support.components)}): extrapolated"
+        )
     if state.tare_refused:
         message += (
             f'; zero and tare NOT restored ({state.tare_refused}): take ~/zero and ~/tare again'
@@ -823,6 +847,7 @@ def diagnostics(
         ('tare_not_restored', state.tare_refused or 'none'),
         ('lowpass_hz', f'{state.lowpass_hz:g}' if state.lowpass_hz else 'off'),
         ('refit_running', str(state.refit_running)),
+        *support_values(support),
     )
     reports.append(
         StatusReport(cal_level, f'{node_name}: calibration', message, hardware, cal_values)

@@ -488,6 +488,12 @@ class CalibratorSession:
 
     # --- /diagnostics ---------------------------------------------------------------------------
     def report(self):
+        with self.lock:  # the share outside the support is judged out of the samples' way
+            live = self.live
+            judge = live.support.take(
+                live.active, live.tare.zero_mv, live.counters.period_received
+            )
+        support = judge()
         now_s = time.monotonic()
         with self.lock:
             reports = self.live.report(
@@ -502,6 +508,7 @@ class CalibratorSession:
                 tare_source='not persisted' if self.tare_file is None else str(self.tare_file),
                 tare_refused=self.tare_refused,
                 node_name=self.node_name.lstrip('/'),
+                support=support,
             )
         self.period_start_s = now_s
         return reports

@@ -36,6 +36,7 @@ from .calibrator_core import (
     WrenchBatch,
 )
 from .raw_codec import WrenchEncoder
+from .support_share import SupportSampler, SupportShare
 from .tare_store import now_iso, TareState
 
 
@@ -347,6 +348,7 @@ class LiveCalibrator:
         self.overload_changed = False
         self.uncertainty_wanted = True
         self._lone_plan, self._lone_plan_for = None, None
+        self.support = SupportSampler()  # the share outside the calibration's support
 
     # --- configuration --------------------------------------------------------------------------
     def set_active(self, active: ActiveCalibration, loads_changed: bool = True) -> str:
@@ -529,6 +531,7 @@ class LiveCalibrator:
         decode(messages) -> (stamps_ns (N,), outputs (N, 6) in the input's unit, frame ids);
         input_scale: to mV.
         """
+        self.support.keep(messages, decode, input_scale)
         wrench, ready = self._through_kernel(
             messages, now_s, input_scale, encoder.middle, uncertainty_wanted
         )
@@ -712,7 +715,11 @@ class LiveCalibrator:
         tare_source: str,
         node_name: str,
         tare_refused: str = '',
+        support: SupportShare | None = None,
     ) -> list[StatusReport]:
+        """support: the period's share outside the support, judged by the caller out of its lock
+        (SupportSampler.take); None: judged here.
+        """
         interval = self.inputs.interval_ns
         state = LiveState(
             period_s=period_s,
@@ -741,6 +748,8 @@ class LiveCalibrator:
             overload=self.overload.components if self.overload.active else None,
             overload_values=self.overload.values(),
             lowpass_hz=self.settings.lowpass_hz,
+            support=support
+            or self.support.judge(self.active, self.tare.zero_mv, self.counters.period_received),
         )
         reports = diagnostics(self.active, state, node_name)
         self.counters.start_period()

@@ -16,8 +16,8 @@ wind-on alike, which the calibrator's tare removes; its change with α is delibe
 `aero_run_profile` is the physical run of TM-663 §10.3 for the data reduction (aero/): a model
 file's reference lengths and moment reference centre, a dynamic pressure, the model's weight acting
 at its centre of gravity at each attitude, and the sting's deflection under the total load, so the
-balance feels what a real one does; a wind-off α/φ sweep first, the wind-on α sweep, wind-off
-again.
+balance feels what a real one does; a wind-off α/φ sweep first, the wind-on α sweep, the same
+wind-off sweep again.
 """
 
 from __future__ import annotations
@@ -178,7 +178,9 @@ def aero_run_profile(
     aero: AeroModel = AeroModel(),
 ) -> AeroRunProfile:
     """A tunnel run: wind-off holds at (φ, α) pairs (degrees), the wind-on α sweep at q_pa (φ = β =
-    0), then one wind-off hold at α = 0 (the tunnel shut down). Each hold sampled at rate_hz.
+    0), then the same wind-off holds again (the tunnel shut down): the pre-run and post-run zeros
+    that bracket the run, between which `reduce` interpolates a drifting zero. Each hold sampled at
+    rate_hz.
 
     The model's true attitude solves attitude = support + deflection(air + weight loads at that
     attitude) (aero/deflection.py); the air loads are the AeroModel's coefficients at the true α
@@ -197,24 +199,23 @@ def aero_run_profile(
         [
             np.column_stack([off[:, 0], off[:, 1], np.zeros(len(off))]),
             np.column_stack([np.zeros(len(alphas)), alphas, np.zeros(len(alphas))]),
-            np.zeros((1, 3)),
+            np.column_stack([off[:, 0], off[:, 1], np.zeros(len(off))]),
         ]
     )
-    q_holds = np.concatenate([np.zeros(len(off)), np.full(len(alphas), float(q_pa)), [0.0]])
+    q_holds = np.concatenate(
+        [np.zeros(len(off)), np.full(len(alphas), float(q_pa)), np.zeros(len(off))]
+    )
+    wind_off_samples = np.full(len(off), max(1, round(wind_off_hold_s * rate_hz)))
     counts = np.concatenate(
-        [
-            np.full(len(off), max(1, round(wind_off_hold_s * rate_hz))),
-            np.full(len(alphas), max(1, round(hold_s * rate_hz))),
-            [max(1, round(wind_off_hold_s * rate_hz))],
-        ]
+        [wind_off_samples, np.full(len(alphas), max(1, round(hold_s * rate_hz))), wind_off_samples]
+    )
+    wind_off_labels = tuple(
+        f'roll={np.degrees(r):+.0f} deg, alpha={np.degrees(a):+.1f} deg' for r, a in off
     )
     labels = (
-        tuple(
-            f'wind off, roll={np.degrees(r):+.0f} deg, alpha={np.degrees(a):+.1f} deg'
-            for r, a in off
-        )
+        tuple(f'wind off, {label}' for label in wind_off_labels)
         + tuple(f'alpha={np.degrees(a):+.1f} deg' for a in alphas)
-        + ('wind off, alpha=+0.0 deg',)
+        + tuple(f'wind off after the run, {label}' for label in wind_off_labels)
     )
 
     def body_at(attitude):
