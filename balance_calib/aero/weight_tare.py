@@ -246,7 +246,8 @@ def declared_weight_contradiction(
     if weight_n is None and cg_m is None:
         return ''
     estimate = None
-    for kept in ({}, {'cg_m': cg_m}, {'weight_n': weight_n}):  # all free, then what the sweep allows
+    # all four free; else what the sweep can estimate with the other held at its declared value
+    for kept in ({}, {'cg_m': cg_m}, {'weight_n': weight_n}):
         if any(v is None for v in kept.values()):
             continue
         try:
@@ -274,9 +275,7 @@ def declared_weight_contradiction(
         ]
     if not off:
         return ''
-    declared_cg = (
-        '' if cg_m is None else f' at ({", ".join(f"{1000 * c:.1f}" for c in cg_m)}) mm'
-    )
+    declared_cg = '' if cg_m is None else f' at ({", ".join(f"{1000 * c:.1f}" for c in cg_m)}) mm'
     declared_w = 'its weight' if weight_n is None else f'{weight_n:g} N'
     return (
         f'the wind-off sweep ({len(np.atleast_2d(readings))} held points) gives W = '
@@ -284,5 +283,5 @@ def declared_weight_contradiction(
         f'({", ".join(f"{1000 * c:.1f}" for c in estimate.cg_m)}) ± '
         f'({", ".join(f"{1000 * c:.1f}" for c in estimate.cg_sigma_m)}) mm; {model_name} declares '
         f'{declared_w}{declared_cg}: {", ".join(off)} beyond {CONTRADICTION_SIGMAS:g}σ; is it '
-        'the model that was run? (--estimate-weight takes the sweep\'s)'
+        "the model that was run? (--estimate-weight takes the sweep's)"
     )

@@ -152,9 +152,10 @@ def _not_isentropic(performance, shock_at_exit_pa: float) -> str:
             'C_F and I_sp (eqs. (5), (12), (15)) do not hold and are null'
         )
     if performance.flow_regime == 'not choked':
+        ratio = performance.ambient_pa / performance.chamber_pa
         return (
-            f'the throat is not choked: p_a/p_c = {performance.ambient_pa / performance.chamber_pa:.4g}'
-            " is above eq. (4)'s subsonic root; eqs. (2), (5), (12) do not hold and are null"
+            f"the throat is not choked: p_a/p_c = {ratio:.4g} is above eq. (4)'s subsonic root; "
+            'eqs. (2), (5), (12) do not hold and are null'
         )
     return ''
 

@@ -78,7 +78,9 @@ def read_wrench_bags(
     return (stamps - stamps[0]) / 1e9, loads
 
 
-def read_raw_bags(paths: Sequence[str | Path], inputs: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+def read_raw_bags(
+    paths: Sequence[str | Path], inputs: Sequence[str]
+) -> tuple[np.ndarray, np.ndarray]:
     """(S,) stamps in s from the first sample and (S, n) bridge outputs (mV, in `inputs` order) of
     the /balance/raw in the bags: a run recorded without a calibrator (launchless_scripts/windon),
     whose loads are the calibration's reading of them. BagError names the files when there is

@@ -163,7 +163,7 @@ def round_to_weight_set(
         rounded[:, k] = np.sign(applied[:, k]) * best
     notes = []
     beyond = np.abs(applied) > largest * (1 + 1e-9)
-    for k in np.flatnonzero(beyond.any(axis=0)):
+    for k in (int(i) for i in np.flatnonzero(beyond.any(axis=0))):
         worst = int(np.argmax(np.abs(applied[:, k])))
         unit = 'N' if config.components[k] in FORCES else 'N·m'
         notes.append(

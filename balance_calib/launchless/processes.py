@@ -11,7 +11,6 @@ import signal
 import subprocess
 import time
 
-
 MAX_DOMAIN_ID = 232  # ROS 2's limit on Linux (the DDS port formula)
 
 
@@ -28,7 +27,9 @@ def story_domain_id() -> int:
     except ValueError:
         domain = -1
     if not 0 <= domain <= MAX_DOMAIN_ID:
-        raise ValueError(f'ROS_DOMAIN_ID={text!r}: not a domain id (a whole number 0..{MAX_DOMAIN_ID})')
+        raise ValueError(
+            f'ROS_DOMAIN_ID={text!r}: not a domain id (a whole number 0..{MAX_DOMAIN_ID})'
+        )
     return domain
 
 

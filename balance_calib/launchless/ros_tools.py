@@ -960,7 +960,7 @@ def build_parser() -> argparse.ArgumentParser:
         actions.add_parser(
             'dump',
             help="every parameter's value as a params file (YAML)",
-            description="Print every parameter of a running node as the YAML of a params file "
+            description='Print every parameter of a running node as the YAML of a params file '
             '(NODE: ros__parameters: ...), as ros2 param dump does.',
         ),
         'the node',

@@ -90,7 +90,7 @@ def undeclared_overrides_warning(
         return ''
     named = []
     for name in unknown:
-        near = difflib.get_close_matches(name, list(table), n=1, cutoff=0.75)
+        near = difflib.get_close_matches(name, list(table), n=1, cutoff=0.6)
         named.append(f'{name} (did you mean {near[0]}?)' if near else name)
     return (
         f'ignoring parameter{"s" if len(named) > 1 else ""} it does not declare: '
