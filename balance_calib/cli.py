@@ -20,6 +20,8 @@ COMMAND_MODULES = (
     'balance_calib.commands.reduce',
     'balance_calib.commands.coverage',
     'balance_calib.commands.design',
+    'balance_calib.commands.check',
+    'balance_calib.commands.compare',
 )
 
 

@@ -58,6 +58,12 @@ class BalanceConfig:
     path: Path | None = None
 
     @property
+    def serial(self) -> str | None:
+        """The balance's serial number (optional key `serial`), None when the config has none."""
+        value = (self.raw or {}).get('serial')
+        return None if value is None or str(value).strip() == '' else str(value).strip()
+
+    @property
     def rated_outputs_by_name(self) -> dict[str, float]:
         return dict(zip(self.bridge_outputs, self.rated_output_mv.tolist()))
 
@@ -149,6 +155,11 @@ def balance_config_from_dict(data: Mapping[str, Any], path: Path | None = None) 
             )
             for order, m in (data.get('matrices') or {}).items()
         }
+        serial = data.get('serial')
+        if serial is not None and not isinstance(serial, (str, int)):
+            raise ConfigError(
+                f'{where}: serial: expected a text or a number, not {type(serial).__name__}'
+            )
         schedule = None
         if data.get('schedule'):
             schedule = _schedule(

@@ -11,6 +11,8 @@ import json
 from pathlib import Path
 import shutil
 
+from .record_arguments import add_record_arguments
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -80,6 +82,7 @@ def register(subparsers) -> None:
         'gates says which, forced: true)',
     )
     parser.add_argument('--no-plots', action='store_true', help='skip the residual figures')
+    add_record_arguments(parser, serial_default='null')
     parser.set_defaults(func=run)
 
     export = subparsers.add_parser(
@@ -131,6 +134,17 @@ def run(args) -> int:
         )
     except (TableError, TableCalibrationError, OutputError) as err:
         raise CommandError(str(err)) from None
+    from ..record import signed_record
+
+    if args.serial:
+        result.calibration.extra['serial'] = args.serial  # type: ignore[index]
+    result.report['record'] = signed_record(
+        balance=result.report['balance'],
+        serial=args.serial,
+        operator=args.operator,
+        inputs=[*args.tables, *args.validate],
+        calibration=result.calibration,
+    )
     try:
         out = write_fit_outputs(
             result, Path(args.out), plots=not args.no_plots, overwrite=args.overwrite
@@ -259,6 +273,8 @@ def _gates_and_selection(report) -> list[str]:
 
 def _signing(report) -> list[str]:
     """report.md: identification, largest residuals, effects offered, the adopted coefficients."""
+    from ..accuracy.tables import weak_coefficients, WEAK_MARK, WEAK_NOTE
+
     ident = report.get('identification', {})
     lines = [
         '## Identification',
@@ -295,15 +311,22 @@ def _signing(report) -> list[str]:
             f'## Coefficients of the adopted {coefficients["form"]} model ± standard error '
             f'({coefficients["units"]})',
             '',
+            f'{WEAK_NOTE}.',
+            '',
             '| term | ' + ' | '.join(targets) + ' |',
             '|---|' + '---|' * len(targets),
         ]
+        weak = {
+            t: weak_coefficients(coefficients['values'][t], coefficients['standard_errors'][t])
+            for t in targets
+        }
         for j, term in enumerate(coefficients['terms']):
             lines.append(
                 f'| {term} | '
                 + ' | '.join(
                     f'{coefficients["values"][t][j]:.6g} ± '
                     f'{coefficients["standard_errors"][t][j]:.2g}'
+                    f'{WEAK_MARK if weak[t][j] else ""}'
                     for t in targets
                 )
                 + ' |'
@@ -313,12 +336,14 @@ def _signing(report) -> list[str]:
 
 def report_markdown(report) -> str:
     from ..accuracy.sigma import format_sigma_table
+    from ..record import identification_markdown, signature_markdown
 
     loads = report['load_symbols']
     lines = (
         [
             f'# Calibration from tables: {report["balance"]}',
             '',
+            *identification_markdown(report.get('record') or {'balance': report['balance']}),
             f'{report["points"]["calibration"]} calibration points, '
             f'{report["points"]["validation"]} validation points '
             f'({report["disabled_points"]["calibration"]} + '
@@ -416,6 +441,7 @@ def report_markdown(report) -> str:
     if report.get('plots'):
         lines += ['## Residual plots', ''] + [f'![{p}]({p})' for p in report['plots']] + ['']
     lines += [f'Fitted {report["fitted_at"]} from {", ".join(report["sources"])}.']
+    lines += signature_markdown('calibration')
     return '\n'.join(lines) + '\n'
 
 

@@ -6,6 +6,8 @@ import argparse
 from pathlib import Path
 import sys
 
+from .record_arguments import add_record_arguments
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -73,6 +75,7 @@ def register(subparsers) -> None:
         'sheets, e.g. from balance-calib design) when it is not the balance '
         "config's own; the gates judge the campaign against it",
     )
+    add_record_arguments(parser)
     parser.add_argument(
         '--progress',
         action=argparse.BooleanOptionalAction,
@@ -104,6 +107,8 @@ def run(args) -> int:
             active_calibration=args.active,
             schedule=args.schedule,
             overwrite=args.overwrite,
+            serial=args.serial,
+            operator=args.operator,
         )
     except RefitError as err:
         raise CommandError(_one_line(str(err))) from None

@@ -94,7 +94,7 @@ def _extra_at_reference(model, rows: int) -> dict[str, np.ndarray] | None:
     }
 
 
-def _outputs_of(model, loads: np.ndarray) -> np.ndarray:
+def outputs_for_run_loads(model, loads: np.ndarray) -> np.ndarray:
     """(S, n_inputs) the outputs, mV, that the wind-on form of `model` reads as loads (S, n); NaN
     rows for loads not finite or beyond LOADS_BEYOND_CAPACITY x capacity (checked by caller).
     """
@@ -153,7 +153,7 @@ def run_coverage(
         )
         outputs_mv = np.full((len(loads), len(chosen.inputs)), np.nan)
         if reachable.any():
-            outputs_mv[reachable] = _outputs_of(chosen, loads[reachable])
+            outputs_mv[reachable] = outputs_for_run_loads(chosen, loads[reachable])
     else:
         outputs_mv = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
         loads = chosen.without_constant().loads(

@@ -189,3 +189,31 @@ def direct_point_uncertainty(fit: SeriesTareFit, outputs, series) -> np.ndarray:
     # fitted with it
     h = np.einsum('ij,jk,ik->i', z, cast(np.ndarray, fit.full_covariance_unscaled), z)
     return fit.residual_sigma[None, :] * np.sqrt(1.0 + h)[:, None]
+
+
+def tares_with_model_fixed(
+    totals, applied, series
+) -> tuple[np.ndarray, dict[int, np.ndarray], dict[int, np.ndarray]]:
+    """Each series' tare estimated from its own points with the model held fixed.
+
+    totals (N, n) the model's total loads, applied (N, n) the applied ones, series (N,) labels:
+    T_s = mean over the series' points of (total - applied), its standard error the scatter of
+    those differences / √n_s (NaN for a series of one point). Returns the tare of each point's
+    series (N, n) and, by series, the tares and their standard errors (n,), SI as given.
+    """
+    totals = np.atleast_2d(np.asarray(totals, dtype=float))
+    difference = totals - np.atleast_2d(np.asarray(applied, dtype=float))
+    series = np.asarray(series, dtype=int)
+    rows = np.zeros_like(totals)
+    tares, sigma = {}, {}
+    for label in np.unique(series):
+        mask = series == label
+        n = int(mask.sum())
+        tares[int(label)] = difference[mask].mean(axis=0)
+        sigma[int(label)] = (
+            difference[mask].std(axis=0, ddof=1) / np.sqrt(n)
+            if n > 1
+            else np.full(totals.shape[1], np.nan)
+        )
+        rows[mask] = tares[int(label)]
+    return rows, tares, sigma

@@ -114,12 +114,15 @@ def calibrate_points(
     active: Calibration | None = None,
     force: bool = False,
     schedule: LoadSchedule | None = None,
+    serial: str | None = None,
+    operator: str | None = None,
 ) -> CalibrationResult:
     """Everything after the load points; pure (writes nothing).
 
     Raises RefitError when an acceptance gate fails (refit/gates.py), unless force; active is the
     calibration in use, whose sensitivities the new one must stay near; schedule the load
-    schedule the campaign ran (None: the balance config's own), which the points must cover.
+    schedule the campaign ran (None: the balance config's own), which the points must cover;
+    serial (default the config's `serial`) and operator go into the signed record (record.py).
     """
     from .gates import (
         acceptance_limits,
@@ -210,6 +213,22 @@ def calibrate_points(
 
     calibration = build_calibration(config, reduction, fits, base_model, diagnosis, sources)
     report = build_report(config, points, reduction, fits, base_model, diagnosis, cut, sources)
+    from ..record import signed_record
+
+    serial = serial or config.serial
+    if serial:
+        cast(dict, calibration.extra)['serial'] = serial
+    # the lab's record first, then the numbers the report adds to it (report_sections.py)
+    report['record'] = {
+        **signed_record(
+            balance=config.name,
+            serial=serial,
+            operator=operator,
+            inputs=sources,
+            calibration=calibration,
+        ),
+        **report['record'],
+    }
     report['acceptance'] = gates_report(gates, forced=force)
     report['warnings'] = list(report.get('warnings', [])) + _missing_points_warning(gates)
     if cut is not None:
@@ -341,6 +360,8 @@ def run_refit(
     active_calibration: Calibration | str | Path | None = None,
     overwrite: bool = True,
     schedule: str | Path | None = None,
+    serial: str | None = None,
+    operator: str | None = None,
 ) -> RefitResult:
     """Refit from bags and write calibration.yaml, report.json, report.md and plots into out_dir.
 
@@ -353,6 +374,7 @@ def run_refit(
     --overwrite; output_dir.py). schedule (a CSV in the layout of ../data/*_schedule.csv): the
     schedule the campaign ran when it is not the balance config's own; it replaces
     config.schedule, which the gates (the schedule gate among them) judge the campaign against.
+    serial (default the balance config's) and operator: the signed record's (record.py).
     """
     from ..bags.errors import BagError
     from ..bags.messages import SIMULATION_TOPIC
@@ -433,6 +455,8 @@ def run_refit(
         sources=[str(p) for p in paths],
         active=active,
         force=force,
+        serial=serial,
+        operator=operator,
     )
     result.report['bag_integrity'] = {
         'salvaged': bool(salvage and bag.losses),

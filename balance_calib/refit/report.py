@@ -5,9 +5,10 @@ from __future__ import annotations
 from typing import cast, Mapping, Sequence
 
 from ..accuracy.sigma import format_sigma_table
-from ..accuracy.tables import format_coefficient_tables
+from ..accuracy.tables import format_coefficient_tables, WEAK_NOTE
 from ..calibration_file import now_iso
 from ..model.calibration import Calibration
+from ..record import identification_markdown, signature_markdown
 
 
 def _round(values: Mapping[str, float], digits: int = 5) -> dict[str, float]:
@@ -233,9 +234,9 @@ def report_markdown(report: Mapping, result=None, units: str = 'si') -> str:
     )
 
     components = list(report['sigma_pct_fs']['before'])
-    lines = [
-        f'# Calibration report: {report["balance"]}',
-        '',
+    lines = [f'# Calibration report: {report["balance"]}', '']
+    lines += identification_markdown(report.get('record') or {'balance': report['balance']})
+    lines += [
         f'{report["points"]} load points; base model **{report["base_model"]}** (TM-663 §2); '
         f'adopted model **{report.get("adopted_model", report["base_model"])}**.',
         '',
@@ -268,13 +269,14 @@ def report_markdown(report: Mapping, result=None, units: str = 'si') -> str:
         lines += ['', '## Residual plots', ''] + [f'![{p}]({p})' for p in report['plots']]
     if result is not None:
         lines += ['', '## Coefficients (layout of Tables 10-16; N or N·m per mV^k)', '']
+        lines += [WEAK_NOTE + '.', '']
         lines += coefficient_quality_markdown(report, result)
         for order, fit in result.fits.items():
             lines += [
                 f'### {order}',
                 '',
                 '```',
-                format_coefficient_tables(fit.fit.model),
+                format_coefficient_tables(fit.fit.model, fit.fit.standard_errors),
                 '```',
                 '',
             ]
@@ -284,7 +286,7 @@ def report_markdown(report: Mapping, result=None, units: str = 'si') -> str:
                 f'### {adopted.name} (adopted)',
                 '',
                 '```',
-                format_coefficient_tables(adopted),
+                format_coefficient_tables(adopted, _standard_errors(adopted)),
                 '```',
                 '',
             ]
@@ -293,7 +295,21 @@ def report_markdown(report: Mapping, result=None, units: str = 'si') -> str:
         f'Fitted {report.get("fitted_at", "")} from: '
         f'{", ".join(report.get("sources", [])) or "simulation"}.',
     ]
+    lines += signature_markdown('calibration')
     return '\n'.join(lines) + '\n'
+
+
+def _standard_errors(model):
+    """(n_components, n_terms) σ_k·√((XᵀX)⁻¹_jj) from the model's stored covariance, or None."""
+    import numpy as np
+
+    from ..model.uncertainty import covariance_and_sigma
+
+    pieces = covariance_and_sigma(model)
+    if pieces is None:
+        return None
+    covariance, sigma = pieces
+    return np.outer(sigma, np.sqrt(np.clip(np.diag(covariance), 0.0, None)))
 
 
 def acceptance_markdown(report: Mapping) -> list[str]:

@@ -19,7 +19,11 @@ from typing import cast, Mapping
 import numpy as np
 
 from ..fit.iterative import iterative_point_uncertainty
-from ..fit.series_tares import direct_point_uncertainty, SeriesTareFit
+from ..fit.series_tares import (
+    direct_point_uncertainty,
+    SeriesTareFit,
+    tares_with_model_fixed,
+)
 from ..model.inverse import InverseDidNotConverge
 from .errors import TableCalibrationError
 
@@ -55,20 +59,14 @@ def validate_form(
     known = np.isin(series, fit.series_labels)
     applied = validation.applied_loads_si
     tares = np.zeros_like(totals)
-    own, own_sigma = {}, {}
+    own: dict[int, np.ndarray] = {}
+    own_sigma: dict[int, np.ndarray] = {}
     if np.any(known):
         tares[known] = fit.tare_rows(series[known])
-    for s in np.unique(series[~known]):
-        mask = series == s
-        difference = totals[mask] - applied[mask]
-        own[int(s)] = difference.mean(axis=0)
-        n = int(mask.sum())
-        own_sigma[int(s)] = (
-            difference.std(axis=0, ddof=1) / np.sqrt(n)
-            if n > 1
-            else np.full(totals.shape[1], np.nan)
+    if np.any(~known):
+        tares[~known], own, own_sigma = tares_with_model_fixed(
+            totals[~known], applied[~known], series[~known]
         )
-        tares[mask] = own[int(s)]
     residuals = applied - (totals - tares)
     # uncertainty: the calibration's series rows where known; a zero series row (the model alone)
     # plus the own tare's variance where not
