@@ -163,6 +163,17 @@ def test_design_refuses_a_calibration_without_adopted_model(tmp_path, capsys, fi
     refused(answer, 'adopted_model')
 
 
+def test_check_refuses_a_calibration_without_adopted_model(tmp_path, capsys, fitted):
+    cal = without_line(fitted, tmp_path / 'cal.yaml', 'adopted_model:')
+    answer = cli(capsys, 'check', cal, tmp_path / 'check_loads.csv', '--out', tmp_path / 'out')
+    refused(answer, 'adopted_model')
+
+
+def test_compare_refuses_a_calibration_without_adopted_model(tmp_path, capsys, fitted):
+    cal = without_line(fitted, tmp_path / 'cal.yaml', 'adopted_model:')
+    refused(cli(capsys, 'compare', fitted, cal, '--out', tmp_path / 'out'), 'adopted_model')
+
+
 def test_a_deleted_full_scale_line_is_named_with_its_key(tmp_path, capsys, fitted):
     cal = without_capacity_of(fitted, tmp_path / 'cal.yaml', 'MZ')
     refused(cli(capsys, 'coverage', cal, loads_csv(tmp_path / 'l.csv', LOADS)), 'capacity:', 'MZ')
