@@ -24,6 +24,7 @@ depend on the offsets: the fit iterates offsets -> attitudes -> fit until nothin
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -246,32 +247,30 @@ def declared_weight_contradiction(
     if weight_n is None and cg_m is None:
         return ''
     estimate = None
+    held: dict[str, Any] = {}
     # all four free; else what the sweep can estimate with the other held at its declared value
-    for kept in ({}, {'cg_m': cg_m}, {'weight_n': weight_n}):
-        if any(v is None for v in kept.values()):
+    for held in ({}, {'cg_m': cg_m}, {'weight_n': weight_n}):
+        if any(v is None for v in held.values()):
             continue
         try:
             estimate = fit_weight_tare(
-                readings, support_attitude, sigma_loads=sigma_loads, deflection=deflection, **kept
+                readings, support_attitude, sigma_loads=sigma_loads, deflection=deflection, **held
             )
         except WeightTareError:
             continue
         break
     if estimate is None:
         return ''
-    off = []
-    sigma_w = estimate.weight_sigma_n  # 0 when the weight was held at its declared value
-    if weight_n is not None and sigma_w > 0:
-        if abs(estimate.weight_n - weight_n) > CONTRADICTION_SIGMAS * sigma_w:
+    off = []  # what is held at its declared value is no evidence
+    if weight_n is not None and 'weight_n' not in held:
+        if abs(estimate.weight_n - weight_n) > CONTRADICTION_SIGMAS * estimate.weight_sigma_n:
             off.append('weight')
-    if cg_m is not None:
-        sigma_cg = estimate.cg_sigma_m
+    if cg_m is not None and 'cg_m' not in held:
         difference = np.abs(estimate.cg_m - np.asarray(cg_m, float))
-        free = sigma_cg > 0  # a component held at its declared value is no evidence
         off += [
             f'{axis}_cg'
-            for axis, d, u, f in zip('xyz', difference, sigma_cg, free)
-            if f and d > CONTRADICTION_SIGMAS * u
+            for axis, d, u in zip('xyz', difference, estimate.cg_sigma_m)
+            if d > CONTRADICTION_SIGMAS * u
         ]
     if not off:
         return ''
