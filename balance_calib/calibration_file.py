@@ -26,6 +26,16 @@ from .model.calibration import Calibration
 from .units import BRIDGE_OUTPUTS, COMPONENTS
 
 MAX_CALIBRATION_BYTES = 16 << 20
+# What a calibration.yaml must say, each for a reason: a default would be a silent guess.
+# adopted_model: the first model is not the adopted one (a file without the line used to run as
+# 'linear'); capacity and rated_output_mv: the envelope, % FS and the bridges' range; models.
+REQUIRED_KEYS = {
+    'adopted_model': 'the model the calibration adopted, e.g. cubic',
+    'capacity': 'the full scale per component, N and N·m',
+    'rated_output_mv': 'the rated output per bridge, mV',
+    'models': 'the fitted models',
+}
+TEMPERATURE_VARIABLES = ('dT', 'dT2')  # terms in the temperature's difference from the reference
 
 
 def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -> Calibration:
@@ -50,6 +60,7 @@ def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -
             None,
             {'source': 'memo matrices (TM-663 Tables 10-16)'},
         )
+    _require_keys(data, where)
     try:
         components = tuple(data.get('components', COMPONENTS))
         outputs = tuple(data.get('bridge_outputs', BRIDGE_OUTPUTS))
@@ -71,14 +82,22 @@ def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -
             )
         if not models:
             raise ConfigError(f'{where}: no models')
-        capacity = np.array([float(data['capacity'][c]) for c in components])
-        rated = np.array([float(data['rated_output_mv'][c]) for c in outputs])
-        adopted = str(data.get('adopted_model') or next(iter(models)))
+        capacity = _per_name(data, 'capacity', components, where)
+        rated = _per_name(data, 'rated_output_mv', outputs, where)
+        adopted = str(data['adopted_model'])
         if adopted not in models:
             raise ConfigError(
                 f'{where}: adopted_model {adopted!r} is not among the models ({", ".join(models)})'
             )
         ref = data.get('reference_temperature_c')
+        needs_reference = [
+            n for n, m in models.items() if set(m.extra_variables) & set(TEMPERATURE_VARIABLES)
+        ]
+        if ref is None and needs_reference:
+            raise ConfigError(
+                f'{where}: missing key reference_temperature_c (model {needs_reference[0]} has '
+                'terms in the temperature difference from it)'
+            )
         return Calibration(
             str(data.get('balance', 'balance')),
             models,
@@ -100,6 +119,28 @@ def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -
     except (TypeError, ValueError, AttributeError) as err:
         text = ' '.join(str(err).split())  # the model's errors name the file already
         raise ConfigError(text if text.startswith(f'{where}: ') else f'{where}: {text}') from None
+
+
+def _require_keys(data: Mapping[str, Any], where: str) -> None:
+    """ConfigError naming every required key the file lacks (REQUIRED_KEYS), before any is used."""
+    missing = [key for key in REQUIRED_KEYS if data.get(key) in (None, '')]
+    if missing:
+        raise ConfigError(
+            f'{where}: missing key {missing[0]} ({REQUIRED_KEYS[missing[0]]})'
+            + (f'; also missing: {", ".join(missing[1:])}' if missing[1:] else '')
+            + '; a calibration file is written by refit or fit'
+        )
+
+
+def _per_name(data: Mapping[str, Any], key: str, names: tuple[str, ...], where: str) -> np.ndarray:
+    """The mapping data[key] as an array in `names` order; ConfigError naming key.name missing."""
+    given = data[key]
+    if not isinstance(given, Mapping):
+        raise ConfigError(f'{where}: {key}: expected a mapping of {", ".join(names)}')
+    lacking = [n for n in names if n not in given]
+    if lacking:
+        raise ConfigError(f'{where}: {key}: missing key {lacking[0]} (needs {", ".join(names)})')
+    return np.array([float(given[n]) for n in names])
 
 
 def _model_from_dict(data: Mapping[str, Any], where: str):

@@ -29,6 +29,7 @@ from balance_calib.aero.model_file import load_model, model_from_dict
 from balance_calib.aero.run import reduce_run
 from balance_calib.aero.weight_tare import (
     declared_tare,
+    declared_weight_contradiction,
     fit_weight_tare,
     weight_loads,
     WeightTareError,
@@ -272,3 +273,45 @@ def test_model_file_errors_name_the_file_and_key(tmp_path):
     ):
         load_model(path)
     assert load_model('euler_replica').weight_n == 40.0
+
+
+def _sweep(weight_n, cg_m, rolls_deg=(0.0, 90.0, 180.0, 270.0), alphas_deg=(-2.0, 10.0, 22.0)):
+    """A wind-off α/φ sweep (support attitudes (K, 3) rad) and what the balance reads: a model of
+    weight_n at cg_m plus a constant offset, no deflection, no noise.
+    """
+    support = np.radians([[phi, alpha, 0.0] for phi in rolls_deg for alpha in alphas_deg])
+    offset = np.array([3.0, -2.0, 5.0, 0.1, -0.2, 0.05])
+    return weight_loads(support, weight_n, cg_m) + offset, support
+
+
+def test_a_declared_weight_the_sweep_contradicts_is_named():
+    readings, support = _sweep(250.0, [0.015, 0.0, -0.004])
+    sigma = np.full(6, 0.5)  # N, N·m of a held point's mean: σ_W well below 1 N over 12 points
+    check = {'sigma_loads': sigma, 'model_name': 'model file euler_replica'}
+    # the right weight and CG: nothing said
+    assert (
+        declared_weight_contradiction(
+            readings, support, weight_n=250.0, cg_m=[0.015, 0.0, -0.004], **check
+        )
+        == ''
+    )
+    # another model's file: 40 N at 10 mm, both named
+    said = declared_weight_contradiction(
+        readings, support, weight_n=40.0, cg_m=[0.010, 0.0, 0.0], **check
+    )
+    assert 'W = 250' in said and '40 N' in said and 'weight' in said and 'x_cg' in said
+    # the weight right, the CG 5 mm off in z only
+    said = declared_weight_contradiction(
+        readings, support, weight_n=250.0, cg_m=[0.015, 0.0, 0.001], **check
+    )
+    assert 'z_cg' in said and 'weight,' not in said and 'x_cg' not in said
+
+
+def test_a_sweep_without_rolls_checks_what_it_can_estimate():
+    # no rolled attitude: y_cg and z_cg trade with the offsets, the four cannot all be estimated;
+    # with the CG held at its declared value the weight still can, and is checked
+    readings, support = _sweep(250.0, [0.015, 0.0, -0.004], rolls_deg=(0.0,))
+    said = declared_weight_contradiction(
+        readings, support, sigma_loads=np.full(6, 0.5), weight_n=40.0, cg_m=[0.015, 0.0, -0.004]
+    )
+    assert 'weight' in said and '_cg' not in said

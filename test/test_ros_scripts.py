@@ -59,7 +59,8 @@ def test_trigger_prints_the_reply_and_exits_by_success(tmp_path):
     missing = run_trigger(domain, '/no_such_node/refit', '--timeout', '1')
     assert (
         missing.returncode == 1
-        and 'service /no_such_node/refit is not available' in missing.stderr
+        and 'service /no_such_node/refit is not in the graph' in missing.stderr
+        and len(missing.stderr.strip().splitlines()) == 1
     )
 
 

@@ -86,6 +86,29 @@ def test_param_topic_and_service_verbs_on_a_running_calibrator(tmp_path):
         hz = float(rate.stdout.split('average rate:')[1].split()[0])
         assert 1.0 < hz < 25.0  # a 0.2 s period, within any scheduling a busy machine gives
 
+        once = ros(domain, 'topic', 'echo', '--once', '/diagnostics', '--timeout', 60)
+        assert once.returncode == 0 and once.stdout.count('---') == 1, once.stderr
+
+        # ros2 topic info -v: each endpoint with its QoS
+        info = ros(domain, 'topic', 'info', '/diagnostics', '-v', '--timeout', 60)
+        assert info.returncode == 0, info.stderr
+        assert 'Type: diagnostic_msgs/msg/DiagnosticArray' in info.stdout
+        publisher = info.stdout.split('Node name: balance_calibrator', 1)[1]
+        assert 'Endpoint type: PUBLISHER' in publisher
+        assert 'Reliability: RELIABLE' in publisher.split('Node name:')[0]
+
+        described = ros(domain, 'param', 'describe', '/balance_calibrator', 'tare_samples')
+        assert described.returncode == 0, described.stderr
+        lines = described.stdout.splitlines()
+        assert lines[:2] == ['Parameter name: tare_samples', '  Type: integer']
+        assert '    Min value: 10' in lines  # the table's range (live/parameters.py)
+
+        dumped = ros(domain, 'param', 'dump', '/balance_calibrator')
+        assert dumped.returncode == 0, dumped.stderr
+        values = yaml.safe_load(dumped.stdout)['/balance_calibrator']['ros__parameters']
+        assert values['tare_samples'] == 20 and values['envelope_margin'] == 2.0
+        assert values['calibration_bags'] == ['bags/c']
+
         called = ros(domain, 'service', 'call', '/balance_calibrator/tare', '--timeout', 60)
         assert called.returncode == 1  # no samples flowing: the tare must refuse
         assert called.stdout.startswith('success: false\nmessage: ')

@@ -23,7 +23,12 @@ import numpy as np
 from .coefficients import reduce_loads, Reduced
 from .held_points import find_holds, HoldSettings
 from .model_file import ModelDescription
-from .weight_tare import fit_weight_tare, WeightTare, WeightTareError
+from .weight_tare import (
+    declared_weight_contradiction,
+    fit_weight_tare,
+    WeightTare,
+    WeightTareError,
+)
 
 FALLBACK_SIGMA_PCT_FS = 0.1  # weights of the tare fit when the calibration states no σ
 
@@ -47,6 +52,7 @@ class TareTracker:
         self._readings: list[np.ndarray] = []
         self._attitudes: list[np.ndarray] = []
         self.fits = 0
+        self._contradiction_said = False
 
     def add_wind_off(self, readings_mean, support_attitude_mean) -> None:
         self._readings.append(np.asarray(readings_mean, float))
@@ -67,6 +73,18 @@ class TareTracker:
                     cg_m=self.model.centre_of_gravity_m,
                 )
                 self.fits += 1
+                contradiction = declared_weight_contradiction(
+                    readings,
+                    attitudes,
+                    sigma_loads=self.sigma_loads,
+                    deflection=self.model.deflection,
+                    weight_n=self.model.weight_n,
+                    cg_m=self.model.centre_of_gravity_m,
+                    model_name=f'model file {self.model.name}',
+                )
+                if contradiction and not self._contradiction_said:  # once a run
+                    self._contradiction_said = True
+                    self.warnings.append(contradiction)
             except WeightTareError as err:
                 kept = 'the previous tare is kept' if self.tare is not None else 'no tare yet'
                 self.warnings.append(

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+import sys
 
 SIX = ('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ')
 
@@ -21,7 +22,9 @@ def register(subparsers) -> None:
         "share of the run outside the support of the calibration's schedule, per "
         "component against the calibration's σ. Prints the summary; with --out "
         "writes coverage.json and coverage.png. A bag's wrenches are what the "
-        "calibrator published: a live tare has taken the model's weight out of them.",
+        "calibrator published: a live tare has taken the model's weight out of them. A bag "
+        'without them (launchless_scripts/windon records none) is read from its /balance/raw '
+        "through the calibration: the loads the balance carried, the model's weight included.",
     )
     parser.add_argument('calibration', help='calibration.yaml written by refit or fit')
     parser.add_argument(
@@ -51,7 +54,12 @@ def run(args) -> int:
     from ..calibration_file import ConfigError, load_calibration, write_text_atomically
     from ..coverage.plots import coverage_figure
     from ..coverage.run import run_coverage, summary_table
-    from ..coverage.run_inputs import read_loads_csv, read_wrench_bags, RunInputError
+    from ..coverage.run_inputs import (
+        read_loads_csv,
+        read_raw_bags,
+        read_wrench_bags,
+        RunInputError,
+    )
     from ..model.inverse import InverseDidNotConverge
     from ..model.uncertainty import UncertaintyUnavailable
     from ..tunnel_axes import parse_installation
@@ -59,7 +67,7 @@ def run(args) -> int:
 
     try:
         calibration = load_calibration(args.calibration)
-        time_s = None
+        time_s, loads, outputs = None, None, None
         first = Path(args.run[0])
         if len(args.run) == 1 and first.suffix.lower() == '.csv':
             loads = read_loads_csv(first, calibration.components)
@@ -70,10 +78,25 @@ def run(args) -> int:
                     f'calibration has components '
                     f'{", ".join(calibration.components)}: give a LOADS.csv'
                 )
-            time_s, loads = read_wrench_bags(
-                args.run, parse_installation(args.installation), args.wrench_topic
-            )
-        coverage = run_coverage(calibration, loads, model=args.model)
+            try:
+                time_s, loads = read_wrench_bags(
+                    args.run, parse_installation(args.installation), args.wrench_topic
+                )
+            except BagError as err:
+                if f'no messages on {args.wrench_topic}' not in str(err):
+                    raise
+                # a run recorded without a calibrator (launchless_scripts/windon): its raw outputs
+                time_s, outputs = read_raw_bags(args.run, calibration.model(args.model).inputs)
+                print(
+                    f'coverage: no {args.wrench_topic} in the bags: the loads are the '
+                    "calibration's reading of /balance/raw (the model's weight included)",
+                    file=sys.stderr,
+                )
+        coverage = (
+            run_coverage(calibration, loads, model=args.model)
+            if outputs is None
+            else run_coverage(calibration, outputs_mv=outputs, model=args.model)
+        )
     except (
         ConfigError,
         RunInputError,

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+import sys
 
 
 def register(subparsers) -> None:
@@ -19,7 +20,8 @@ def register(subparsers) -> None:
         'capacity, the combined-loading limit, an orientation the schedule uses) to '
         'minimise the predicted uncertainty over the envelope (I-optimal exchange), '
         'in blocks bracketed by zero points (TM-663 §5(4)). Writes schedule.csv '
-        '(layout of the Appendix A/B sheets, kgf) and design.json.',
+        '(layout of the Appendix A/B sheets, kgf) and design.json. With --weights the added '
+        "points are loads the rig's weight set can make.",
     )
     parser.add_argument(
         '--balance', required=True, help='balance config: lmc6522, b660h or a path'
@@ -47,6 +49,15 @@ def register(subparsers) -> None:
         default=DEFAULT_COMBINED_LIMIT,
         help='combined-loading limit of the rig, ‖total load / capacity‖₂ '
         f'(default {DEFAULT_COMBINED_LIMIT})',
+    )
+    parser.add_argument(
+        '--weights',
+        metavar='FILE',
+        help="the rig's weight set, a CSV with header name,mass_kg,count (one row per kind of "
+        'weight, e.g. W20,20,4): each component of an added point is rounded to the nearest '
+        'load the set makes: a force to a sum of the weights × g, a moment to such a sum at '
+        'one of the lever arms the schedule hangs weights at (|M|/|F| of its rows). Default: '
+        'loads rounded to 1 gf',
     )
     parser.add_argument('--out', required=True, help='output directory')
     parser.set_defaults(func=run)
@@ -83,6 +94,7 @@ def run(args) -> int:
     from ..config import load_balance_config
     from ..coverage.design import design_points, DesignError
     from ..coverage.run_inputs import read_loads_csv, RunInputError
+    from ..coverage.weight_set import read_weight_set
     from ..model.inverse import InverseDidNotConverge
     from ..schedule_file import schedule_csv_text
     from .errors import CommandError
@@ -95,6 +107,7 @@ def run(args) -> int:
         model, sigma = (
             _model_and_sigma(args.calibration, config) if args.calibration else (None, None)
         )
+        weight_set = read_weight_set(args.weights) if args.weights else None
         design = design_points(
             config,
             envelope,
@@ -103,6 +116,7 @@ def run(args) -> int:
             sigma=sigma,
             combined_limit=args.combined_limit,
             where=str(args.envelope),
+            weight_set=weight_set,
         )
     except (ConfigError, RunInputError, DesignError, InverseDidNotConverge, ValueError) as err:
         raise CommandError(' '.join(str(err).split())) from None
@@ -126,5 +140,9 @@ def run(args) -> int:
     print(f'{"before":8s}' + ''.join(f'{before[c]:9.4f}' for c in config.components))
     print(f'{"after":8s}' + ''.join(f'{after[c]:9.4f}' for c in config.components))
     print(f'worst component: {summary["worst_component"]}')
+    if args.weights:
+        print(f'added points rounded to the loads the weights of {args.weights} make')
+    for note in design.notes:
+        print(f'warning: {note}', file=sys.stderr)
     print(f'schedule: {out / "schedule.csv"}')
     return 0

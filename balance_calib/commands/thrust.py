@@ -21,7 +21,11 @@ def register(subparsers) -> None:
         help='ideal nozzle performance (thrust-stand manual eqs. 1-15) as JSON',
         description=(
             'Ideal isentropic nozzle at chamber pressure PC and ambient PA (both absolute, Pa; '
-            'p_c = p_G + p_a).'
+            'p_c = p_G + p_a). flow_regime says whether the isentropic theory holds: with a '
+            'normal shock inside the nozzle (PA above shock_at_exit_ambient_pa, the ambient at '
+            'which a normal shock stands at the exit) or a throat that is not choked, the '
+            'numbers it gets wrong (thrust_n, cf, isp_s, the exit state) are null and `warning` '
+            '(also on stderr) says why; the exit status stays 0.'
         ),
     )
     nozzle.add_argument(
@@ -76,7 +80,11 @@ def _finite_positive(name: str, value: float) -> None:
 
 
 def run_nozzle(args) -> int:
-    from balance_calib.thrust_stand.nozzle import critical_pressure_ratio, Nozzle
+    from balance_calib.thrust_stand.nozzle import (
+        critical_pressure_ratio,
+        Nozzle,
+        shock_free_ambient_ratio,
+    )
 
     for name in ('throat_mm', 'exit_mm', 'chamber_pa', 'gas_constant', 'chamber_k'):
         _finite_positive('--' + name.replace('_', '-'), getattr(args, name))
@@ -101,6 +109,7 @@ def run_nozzle(args) -> int:
         args.chamber_k,
         'subsonic' if args.subsonic else 'supersonic',
     )
+    shock_at_exit_pa = args.chamber_pa * shock_free_ambient_ratio(nozzle.area_ratio, args.gamma)
     result = {
         **performance.as_dict(),
         'throat_area_m2': nozzle.throat_area_m2,
@@ -108,10 +117,47 @@ def run_nozzle(args) -> int:
         'critical_pressure_ratio': critical_pressure_ratio(args.gamma),
         'gamma': args.gamma,
         'gas_constant_j_kg_k': args.gas_constant,
+        'shock_at_exit_ambient_pa': shock_at_exit_pa,
+        'warning': None,
     }
+    warning = _not_isentropic(performance, shock_at_exit_pa)
+    if warning:
+        # the isentropic formulas do not hold: their numbers would be silently wrong
+        for key in NOT_ISENTROPIC_KEYS[performance.flow_regime]:
+            result[key] = None
+        result['warning'] = warning
+        print(f'balance-calib nozzle: warning: {warning}', file=sys.stderr)
     json.dump(result, sys.stdout, indent=2, ensure_ascii=False)  # ± and σ as they are
     sys.stdout.write('\n')
     return 0
+
+
+# What the isentropic theory gets wrong in each regime where it does not hold: with a normal
+# shock inside the diverging section the exit flow is subsonic (exit state, thrust, C_F, I_sp);
+# below choking the throat is subsonic too (the mass flow of eq. (2) as well).
+_EXIT_AND_THRUST = ('exit_pa', 'exit_mach', 'exit_velocity_m_s', 'thrust_n', 'cf', 'isp_s')
+NOT_ISENTROPIC_KEYS = {
+    'shock in nozzle': _EXIT_AND_THRUST,
+    'not choked': ('mass_flow_kg_s',) + _EXIT_AND_THRUST,
+}
+
+
+def _not_isentropic(performance, shock_at_exit_pa: float) -> str:
+    """The one-line reason the isentropic thrust does not hold, '' when it does."""
+    if performance.flow_regime == 'shock in nozzle':
+        return (
+            f'a normal shock stands inside the nozzle: ambient {performance.ambient_pa:.6g} Pa is '
+            f'above {shock_at_exit_pa:.6g} Pa, where the shock reaches the exit (manual eq. (4) '
+            f'supersonic root, A_e/A_t = {performance.area_ratio:.4g}); the isentropic thrust, '
+            'C_F and I_sp (eqs. (5), (12), (15)) do not hold and are null'
+        )
+    if performance.flow_regime == 'not choked':
+        ratio = performance.ambient_pa / performance.chamber_pa
+        return (
+            f"the throat is not choked: p_a/p_c = {ratio:.4g} is above eq. (4)'s subsonic root; "
+            'eqs. (2), (5), (12) do not hold and are null'
+        )
+    return ''
 
 
 def _read_points(path: Path) -> dict[str, list[float]]:

@@ -55,6 +55,7 @@ class Design:
     predicted_after: np.ndarray  # (E, n)
     components: tuple[str, ...]
     capacity: np.ndarray
+    notes: tuple[str, ...] = ()  # what the user should know (a weight set that falls short)
 
     def summary(self) -> dict:
         """design.json (interfaces.md)."""
@@ -136,10 +137,14 @@ def rig_loading(
 
 
 def schedule_with(
-    config: BalanceConfig, total_loads, combined_limit: float = DEFAULT_COMBINED_LIMIT
+    config: BalanceConfig,
+    total_loads,
+    combined_limit: float = DEFAULT_COMBINED_LIMIT,
+    weight_set=None,
 ) -> LoadSchedule:
     """The balance's schedule with these total loads (A, n) added as rig_loading applies them
-    (weights rounded to ROUND_KGF), in blocks of one orientation bracketed by zero points,
+    (weights rounded to ROUND_KGF, or with weight_set = (masses kg, counts) to the loads that set
+    makes, coverage/weight_set.py), in blocks of one orientation bracketed by zero points,
     numbered after the last point. DesignError if one of them cannot be applied.
     """
     feasible, orientations, applied = rig_loading(config, total_loads, combined_limit)
@@ -148,8 +153,16 @@ def schedule_with(
             f'load {int(np.flatnonzero(~feasible)[0]) + 1} to add cannot be applied '
             f'within capacity and the combined-loading limit {combined_limit}'
         )
-    step = ROUND_KGF * STANDARD_GRAVITY_M_S2
-    hung = np.round(applied / step) * step
+    if weight_set is not None:
+        from .weight_set import round_to_weight_set, WeightSetError
+
+        try:
+            hung, _ = round_to_weight_set(applied, config, *weight_set)
+        except WeightSetError as err:
+            raise DesignError(str(err)) from None
+    else:
+        step = ROUND_KGF * STANDARD_GRAVITY_M_S2
+        hung = np.round(applied / step) * step
     base = _schedule(config)
     number = int(np.max(base.point)) + 1
     points, orientation_rows, load_rows = [], [], []
@@ -231,6 +244,7 @@ def design_points(
     sigma=None,
     combined_limit: float = DEFAULT_COMBINED_LIMIT,
     where: str = 'envelope',
+    weight_set=None,
 ) -> Design:
     """Add at most `points` combined load points to the balance's schedule for this envelope.
 
@@ -243,6 +257,8 @@ def design_points(
         matrix): it maps loads to the bridge outputs the design rows are made of.
     sigma : (n,) the residual σ the calibration reaches, N / N·m (default Table 17's cubic row).
     combined_limit : the rig's combined-loading limit, ‖total load / capacity‖₂.
+    weight_set : (masses kg, counts) of the rig's weights: the added points are rounded to the
+        loads they make (coverage/weight_set.py); default: to ROUND_KGF.
 
     Returns
     -------
@@ -286,14 +302,26 @@ def design_points(
     weight = (envelope_rows / scales).T @ (envelope_rows / scales) / len(envelope_rows)
     chosen = _exchange(_rows(model, candidates) / scales, base_inverse, weight, int(points))
 
-    schedule = schedule_with(config, candidates[chosen], combined_limit)
+    schedule = schedule_with(config, candidates[chosen], combined_limit, weight_set)
+    notes: list[str] = []
+    if weight_set is not None:
+        from .weight_set import round_to_weight_set
+
+        applied = rig_loading(config, candidates[chosen], combined_limit)[2]
+        notes = round_to_weight_set(applied, config, *weight_set)[1]
     base_points = len(_schedule(config))
     total = schedule_total_loads(config, schedule)
     loaded = ~np.all(schedule.loads[base_points:] == 0.0, axis=1)
     before = predicted_uncertainty(model, base_rows, sigma, envelope)
     after = predicted_uncertainty(model, _rows(model, total), sigma, envelope)
     return Design(
-        schedule, total[base_points:][loaded], before, after, tuple(config.components), capacity
+        schedule,
+        total[base_points:][loaded],
+        before,
+        after,
+        tuple(config.components),
+        capacity,
+        tuple(notes),
     )
 
 

@@ -76,3 +76,20 @@ def read_wrench_bags(
     stamps = data.raw.stamps_ns[order]
     loads = installation.from_tunnel(np.asarray(data.raw.values, dtype=float)[order])
     return (stamps - stamps[0]) / 1e9, loads
+
+
+def read_raw_bags(
+    paths: Sequence[str | Path], inputs: Sequence[str]
+) -> tuple[np.ndarray, np.ndarray]:
+    """(S,) stamps in s from the first sample and (S, n) bridge outputs (mV, in `inputs` order) of
+    the /balance/raw in the bags: a run recorded without a calibrator (launchless_scripts/windon),
+    whose loads are the calibration's reading of them. BagError names the files when there is
+    none.
+    """
+    from ..units import BRIDGE_OUTPUTS
+
+    data = read_bags([Path(p) for p in paths], required=('raw',))
+    order = np.argsort(data.raw.stamps_ns, kind='stable')
+    stamps = data.raw.stamps_ns[order]
+    outputs = np.asarray(data.raw.values, dtype=float)[order]
+    return (stamps - stamps[0]) / 1e9, outputs[:, [BRIDGE_OUTPUTS.index(v) for v in inputs]]

@@ -219,33 +219,48 @@ def plot_contrasts(diagnosis: Diagnosis, path, contrasts=None) -> Path | None:
     contrasts = contrasts if contrasts is not None else schedule_contrasts(diagnosis)
     if not any(c.count for pair in contrasts.values() for c in pair):
         return None
-    figure = Figure(figsize=(9, 11.5))  # two panels wide, one row per component
+    # only the contrasts the schedule offers pairs for: an empty panel says nothing
+    shown = [
+        (component, contrast)
+        for component in diagnosis.components
+        for contrast in contrasts[component]
+        if contrast.count
+    ]
+    missing = [
+        f'{component} {contrast.kind}'
+        for component in diagnosis.components
+        for contrast in contrasts[component]
+        if not contrast.count
+    ]
+    rows = (len(shown) + 1) // 2
+    figure = Figure(figsize=(9, 1.2 + 1.9 * rows))  # two panels wide
     figure.suptitle(
         f'{diagnosis.balance} — what the schedule tells: loop (direction) vs sign '
         f'(base model residuals, % F.S.)'
+        + (f'\nno pairs in the schedule for: {", ".join(missing)}' if missing else ''),
+        fontsize=10,
     )
-    for k, component in enumerate(diagnosis.components):
+    for index, (component, contrast) in enumerate(shown):
         s = float(diagnosis.repeatability_pct_fs.get(component, float('nan')))
-        for row, contrast in enumerate(contrasts[component]):
-            axes = figure.add_subplot(len(diagnosis.components), 2, 2 * k + row + 1)
-            axes.axhline(0.0, color='0.6', linewidth=0.8)
-            if np.isfinite(s) and s > 0:
-                axes.axhspan(-2 * np.sqrt(2) * s, 2 * np.sqrt(2) * s, color='0.9')
-            axes.plot(
-                contrast.load_fraction,
-                contrast.value_pct_fs,
-                'o',
-                markersize=3,
-                color='C3' if contrast.kind == 'direction' else 'C0',
-            )
-            what = 'falling − rising' if contrast.kind == 'direction' else 'r(+L) + r(−L)'
-            ratio = f'{contrast.ratio:.1f}' if np.isfinite(contrast.ratio) else '–'
-            axes.set_title(
-                f'{component} {contrast.kind}: {contrast.count} pairs, {ratio}× s²', fontsize=8
-            )
-            axes.set_xlabel('|L| / capacity', fontsize=7)
-            axes.set_ylabel(what, fontsize=7)
-            axes.tick_params(labelsize=7)
+        axes = figure.add_subplot(rows, 2, index + 1)
+        axes.axhline(0.0, color='0.6', linewidth=0.8)
+        if np.isfinite(s) and s > 0:
+            axes.axhspan(-2 * np.sqrt(2) * s, 2 * np.sqrt(2) * s, color='0.9')
+        axes.plot(
+            contrast.load_fraction,
+            contrast.value_pct_fs,
+            'o',
+            markersize=3,
+            color='C3' if contrast.kind == 'direction' else 'C0',
+        )
+        what = 'falling − rising' if contrast.kind == 'direction' else 'r(+L) + r(−L)'
+        ratio = f'{contrast.ratio:.1f}' if np.isfinite(contrast.ratio) else '–'
+        axes.set_title(
+            f'{component} {contrast.kind}: {contrast.count} pairs, {ratio}× s²', fontsize=8
+        )
+        axes.set_xlabel(f'|{component}| / capacity of {component} (–)', fontsize=7)
+        axes.set_ylabel(f'{what}, % FS', fontsize=7)
+        axes.tick_params(labelsize=7)
     figure.tight_layout()
     return _save(figure, path)
 

@@ -19,7 +19,6 @@ import argparse
 import csv
 import os
 from pathlib import Path
-import random
 import shutil
 import stat
 import sys
@@ -27,7 +26,7 @@ import threading
 
 import numpy as np
 
-from .processes import close_graph, NodeProcess
+from .processes import close_graph, NodeProcess, story_domain_id
 from .processes import wait_until as _wait
 
 MODEL = 'euler_replica_lmc6522'
@@ -83,7 +82,7 @@ def run_story(
     bag, logs = out_dir / 'bag', out_dir / 'logs'
     if bag.exists():
         raise FileExistsError(f'{bag} exists already: choose a new output directory')
-    domain = random.randint(1, 99)
+    domain = story_domain_id()
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     context = Context()
     rclpy.init(context=context, domain_id=domain)
@@ -283,7 +282,7 @@ def main(argv=None) -> int:
             installation=args.installation,
             noise_sigma_pct_fs=args.noise_pct_fs,
         )
-    except (FileExistsError, RuntimeError, TimeoutError) as err:
+    except (FileExistsError, RuntimeError, TimeoutError, ValueError) as err:
         print(f'aero_story: {err}', file=sys.stderr)
         return 1
     return 0

@@ -21,14 +21,13 @@ from dataclasses import dataclass, field
 import json
 import os
 from pathlib import Path
-import random
 import sys
 import threading
 import time
 
 import numpy as np
 
-from .processes import close_graph, NodeProcess
+from .processes import close_graph, NodeProcess, story_domain_id
 from .processes import wait_until as _wait
 
 
@@ -85,7 +84,7 @@ def run_story(
         raise FileExistsError(f'{bag} exists already: choose a new output directory')
     report_dir = out_dir / 'report'
     logs = out_dir / 'logs'
-    domain = domain_id if domain_id is not None else random.randint(1, 99)
+    domain = domain_id if domain_id is not None else story_domain_id()
     # real DDS, never off this machine
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
@@ -323,8 +322,14 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
     out = Path(args.out) / time.strftime('campaign_%Y%m%dT%H%M%S')
+    try:
+        domain_id = story_domain_id()
+    except ValueError as err:
+        print(f'campaign: {err}', file=sys.stderr)
+        return 2
     result = run_story(
         out,
+        domain_id=domain_id,
         balance=args.balance,
         effects=args.effects,
         rate_hz=args.rate,

@@ -6,9 +6,31 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+import random
 import signal
 import subprocess
 import time
+
+MAX_DOMAIN_ID = 232  # ROS 2's limit on Linux (the DDS port formula)
+
+
+def story_domain_id() -> int:
+    """The shell's ROS_DOMAIN_ID when it is set (a story runs where the user asked), else a random
+    domain 1-99 (a lone demo keeps clear of domain 0's other nodes). ValueError, one line, for a
+    ROS_DOMAIN_ID that is not a whole number 0..232.
+    """
+    text = os.environ.get('ROS_DOMAIN_ID', '').strip()
+    if not text:
+        return random.randint(1, 99)
+    try:
+        domain = int(text)
+    except ValueError:
+        domain = -1
+    if not 0 <= domain <= MAX_DOMAIN_ID:
+        raise ValueError(
+            f'ROS_DOMAIN_ID={text!r}: not a domain id (a whole number 0..{MAX_DOMAIN_ID})'
+        )
+    return domain
 
 
 def ros_args(parameters: dict) -> list[str]:
@@ -35,19 +57,19 @@ class NodeProcess:
         parameters: dict | None = None,
         extra_args: list[str] | None = None,
     ):
-        self.name = executable
+        self.name = Path(executable).name  # an absolute path names its log files by its base name
         env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id), PYTHONUNBUFFERED='1')
         log_dir.mkdir(parents=True, exist_ok=True)
         # bridge_publisher.1.out, bridge_publisher.2.out, ... in the order the runs started
         run = 1
         while True:
             try:  # exclusive creation: two processes started at once never share a log
-                self._stdout = open(log_dir / f'{executable}.{run}.out', 'x')
+                self._stdout = open(log_dir / f'{self.name}.{run}.out', 'x')
                 break
             except FileExistsError:
                 run += 1
-        self.stdout_path = log_dir / f'{executable}.{run}.out'
-        self.stderr_path = log_dir / f'{executable}.{run}.err'
+        self.stdout_path = log_dir / f'{self.name}.{run}.out'
+        self.stderr_path = log_dir / f'{self.name}.{run}.err'
         self._stderr = open(self.stderr_path, 'w')
         self.process = subprocess.Popen(
             [executable] + ros_args(parameters or {}) + (extra_args or []),

@@ -8,8 +8,13 @@ of it, only the everyday verbs, with the same spelling:
     ros param set NODE NAME VALUE       ros2 param set NODE NAME VALUE   (VALUE in YAML: 3, 0.5,
                                                                          true,
                                         "[a.mcap, b.mcap]"; kept in the parameter's current type)
+    ros param describe NODE NAME ...    ros2 param describe NODE NAME    (type, description,
+                                                                         constraints)
+    ros param dump NODE                 ros2 param dump NODE             (a params-file YAML)
     ros topic list                      ros2 topic list -t
-    ros topic echo TOPIC [--count N]    ros2 topic echo TOPIC            (YAML documents, ---)
+    ros topic info TOPIC [-v]           ros2 topic info TOPIC [-v]       (-v: each endpoint's QoS)
+    ros topic echo TOPIC [--count N]    ros2 topic echo TOPIC            (YAML documents, ---;
+                                                                         --once = --count 1)
     ros topic hz TOPIC [--duration S]   ros2 topic hz TOPIC
     ros service list                    ros2 service list -t
     ros service call SERVICE            ros2 service call SERVICE std_srvs/srv/Trigger
@@ -216,6 +221,8 @@ class _Session:
     def call(self, service_type, name: str, request, timeout: float):
         client = self.node.create_client(service_type, name)
         try:
+            if not name.split('/')[-1].endswith('parameters'):
+                await_service_in_graph(self, name, timeout)  # says at once when nobody serves it
             if not client.wait_for_service(timeout_sec=timeout):
                 raise ToolError(
                     f'service {name} is not available (is the node running? waited {timeout:g} s)'
@@ -258,6 +265,29 @@ class _Session:
             reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
         )
+
+
+SERVICE_DISCOVERY_S = 4.0  # a service on the graph is discovered well within this
+
+
+def await_service_in_graph(session, name: str, timeout: float) -> None:
+    """Return once some node on the graph offers the service `name`; ToolError (one line) when
+    none does after discovery has had SERVICE_DISCOVERY_S (not the whole timeout: a service that
+    is not there will not answer, and a refit's timeout is minutes).
+    """
+    import os
+
+    wanted = _node_name(name)
+    deadline = time.monotonic() + min(timeout, SERVICE_DISCOVERY_S)
+    while not any(n == wanted for n, _ in session.node.get_service_names_and_types()):
+        if time.monotonic() > deadline:
+            nodes = _other_nodes(session)
+            seen = f'nodes seen: {", ".join(nodes)}' if nodes else 'no other node seen'
+            raise ToolError(
+                f'service {wanted} is not in the graph ({seen} on ROS_DOMAIN_ID='
+                f'{os.environ.get("ROS_DOMAIN_ID", "0")}); is the node running?'
+            )
+        session.rclpy.spin_once(session.node, timeout_sec=0.1)
 
 
 def _node_name(name: str) -> str:
@@ -385,6 +415,71 @@ def param_set(args) -> int:
     return 0
 
 
+def param_describe(args) -> int:
+    from rcl_interfaces.srv import DescribeParameters
+
+    node = _node_name(args.node)
+    with _Session() as session:
+        reply = session.call(
+            DescribeParameters,
+            f'{node}/describe_parameters',
+            DescribeParameters.Request(names=list(args.names)),
+            args.timeout,
+        )
+    for name, descriptor in zip(args.names, reply.descriptors):
+        if descriptor.type == 0:
+            raise ToolError(f'{node} has no parameter {name!r}; see "ros param list {args.node}"')
+        print(f'Parameter name: {name}')
+        print(f'  Type: {_TYPE_NAMES.get(descriptor.type, descriptor.type)}')
+        if descriptor.description:
+            print(f'  Description: {descriptor.description}')
+        print('  Constraints:')
+        if descriptor.read_only:
+            print('    Read only: true')
+        for bound in list(descriptor.floating_point_range) + list(descriptor.integer_range):
+            print(f'    Min value: {bound.from_value}')
+            print(f'    Max value: {bound.to_value}')
+            if bound.step:
+                print(f'    Step: {bound.step}')
+        if descriptor.additional_constraints:
+            print(f'    Additional constraints: {descriptor.additional_constraints}')
+    return 0
+
+
+def param_dump(args) -> int:
+    """The node's parameters as a params file (`--params-file`), as ros2 param dump prints it:
+    dotted names nested.
+    """
+    from rcl_interfaces.srv import ListParameters
+    import yaml
+
+    node = _node_name(args.node)
+    with _Session() as session:
+        names = sorted(
+            session.call(
+                ListParameters, f'{node}/list_parameters', ListParameters.Request(), args.timeout
+            ).result.names
+        )
+        values = _get(session, node, names, args.timeout) if names else []
+        if len(values) != len(names):  # rclpy answers nothing when one is unset: one by one
+            values = [(_get(session, node, [name], args.timeout) or [None])[0] for name in names]
+    tree: dict = {}
+    for name, value in zip(names, values):
+        if value is None or value.type == 0:
+            continue  # not set (a string array without a default)
+        *path, leaf = name.split('.')
+        branch = tree
+        for part in path:
+            branch = branch.setdefault(part, {})
+        branch[leaf] = parameter_value_to_python(value)
+    print(
+        yaml.safe_dump(
+            {node: {'ros__parameters': tree}}, sort_keys=False, allow_unicode=True
+        ).rstrip()
+    )
+    return 0
+
+
 # ---------------------------------------------------------------------------- topic
 
 
@@ -395,6 +490,69 @@ def topic_list(args) -> int:
         )
     for name, types in topics:
         print(f'{name} [{", ".join(types)}]')
+    return 0
+
+
+def _qos_lines(qos) -> list[str]:
+    """A QoS profile as ros2 topic info -v prints it."""
+
+    def policy(value) -> str:
+        return getattr(value, 'name', str(value))
+
+    def duration(value) -> str:
+        nanoseconds = getattr(value, 'nanoseconds', None)
+        if nanoseconds is None or nanoseconds >= 0x7FFFFFFFFFFFFFFF:
+            return 'Infinite'
+        return f'{nanoseconds} nanoseconds'
+
+    return [
+        '  QoS profile:',
+        f'    Reliability: {policy(qos.reliability)}',
+        f'    History (Depth): {policy(qos.history)} ({qos.depth})',
+        f'    Durability: {policy(qos.durability)}',
+        f'    Lifespan: {duration(qos.lifespan)}',
+        f'    Deadline: {duration(qos.deadline)}',
+        f'    Liveliness: {policy(qos.liveliness)}',
+        f'    Liveliness lease duration: {duration(qos.liveliness_lease_duration)}',
+    ]
+
+
+def topic_info(args) -> int:
+    with _Session() as session:
+        session.topic_type(args.topic, args.timeout)  # ToolError when nobody publishes it
+        graph = session.node
+        own = session.node.get_name()
+
+        def endpoints():
+            found = []
+            for kind, infos in (
+                ('PUBLISHER', graph.get_publishers_info_by_topic(args.topic)),
+                ('SUBSCRIPTION', graph.get_subscriptions_info_by_topic(args.topic)),
+            ):
+                found += [(kind, info) for info in infos if info.node_name != own]
+            return found
+
+        def key(found):
+            return sorted((k, i.node_namespace, i.node_name) for k, i in found)
+
+        shown = settled(session, lambda: key(endpoints()), args.timeout)
+        every = [e for e in endpoints() if (e[0], e[1].node_namespace, e[1].node_name) in shown]
+    types = sorted({info.topic_type for _, info in every})
+    publishers = [info for kind, info in every if kind == 'PUBLISHER']
+    subscriptions = [info for kind, info in every if kind == 'SUBSCRIPTION']
+    print(f'Type: {", ".join(types)}')
+    for title, infos in (('Publisher', publishers), ('Subscription', subscriptions)):
+        print(f'{title} count: {len(infos)}')
+        if not args.verbose:
+            continue
+        print()
+        for info in infos:
+            print(f'Node name: {info.node_name}')
+            print(f'Node namespace: {info.node_namespace}')
+            print(f'Topic type: {info.topic_type}')
+            print(f'Endpoint type: {title.upper()}')
+            print('\n'.join(_qos_lines(info.qos_profile)))
+            print()
     return 0
 
 
@@ -746,9 +904,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     param = verbs.add_parser(
         'param',
-        help="list, get or set a running node's parameters",
-        description='List, get or set the parameters of a running node through its '
-        'rcl_interfaces parameter services.',
+        help="list, get, set, describe or dump a running node's parameters",
+        description='List, get, set, describe or dump the parameters of a running node through '
+        'its rcl_interfaces parameter services.',
     )
     actions = param.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
     sub = with_timeout(
@@ -786,11 +944,35 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_argument('name', help='parameter name, e.g. calibration_bags')
     sub.add_argument('value', help='new value in YAML, e.g. "[bags/campaign_1]" or 1.2')
     sub.set_defaults(func=param_set)
+    sub = with_timeout(
+        actions.add_parser(
+            'describe',
+            help="parameters' type, description and constraints",
+            description='Print the type, description and constraints (range, read-only) of '
+            'parameters of a running node.',
+        ),
+        'the node',
+    )
+    sub.add_argument('node', help='node name, e.g. /balance_calibrator')
+    sub.add_argument('names', nargs='+', metavar='name', help='parameter names')
+    sub.set_defaults(func=param_describe)
+    sub = with_timeout(
+        actions.add_parser(
+            'dump',
+            help="every parameter's value as a params file (YAML)",
+            description='Print every parameter of a running node as the YAML of a params file '
+            '(NODE: ros__parameters: ...), as ros2 param dump does.',
+        ),
+        'the node',
+    )
+    sub.add_argument('node', help='node name, e.g. /balance_calibrator')
+    sub.set_defaults(func=param_dump)
 
     topic = verbs.add_parser(
         'topic',
-        help='list topics, echo one, measure its rate',
-        description="List topics, print a topic's messages as YAML, or measure its rate.",
+        help='list topics, show one, echo one, measure its rate',
+        description="List topics, show a topic's endpoints and QoS, print its messages as YAML, "
+        'or measure its rate.',
     )
     actions = topic.add_subparsers(dest='action', required=True, metavar='ACTION', title='actions')
     sub = with_timeout(
@@ -818,7 +1000,24 @@ def build_parser() -> argparse.ArgumentParser:
     sub.add_argument(
         '--count', type=int, default=0, help='stop after this many messages (default 0: never)'
     )
+    sub.add_argument(
+        '--once', action='store_const', const=1, dest='count', help='one message, then stop'
+    )
     sub.set_defaults(func=topic_echo)
+    sub = with_timeout(
+        actions.add_parser(
+            'info',
+            help="a topic's type and its publishers and subscriptions",
+            description="Print a topic's type and how many publishers and subscriptions it has; "
+            'with -v each endpoint with its node and QoS profile.',
+        ),
+        'the topic and discovery to settle',
+    )
+    sub.add_argument('topic', help='topic name, e.g. /balance/wrench')
+    sub.add_argument(
+        '-v', '--verbose', action='store_true', help="each endpoint's node and QoS profile"
+    )
+    sub.set_defaults(func=topic_info)
     sub = with_timeout(
         actions.add_parser(
             'hz',

@@ -10,6 +10,7 @@ for a double parameter (tare_timeout_s:=5) means the double. A node that takes c
 
 from __future__ import annotations
 
+import difflib
 import math
 from typing import Callable, Mapping
 
@@ -71,7 +72,30 @@ def declare_table(node, table: Mapping[str, Spec], check: Check | None = None) -
         except ParameterException as err:  # what our check let through and rclpy did not
             raise ParameterError(f'parameter {name}: {err}') from None
         values[name] = _checked(check, name, declared.value)
+    warning = undeclared_overrides_warning(node.get_name(), overrides, node.has_parameter, table)
+    if warning:
+        node.get_logger().warning(warning)
     return values
+
+
+def undeclared_overrides_warning(
+    node_name: str, overrides: Mapping[str, object], declared: Callable[[str], bool], table
+) -> str:
+    """One line naming every override (command line, params file) the node does not declare,
+    with the nearest declared name; '' when there is none. rclpy drops such an override without
+    a word (a misspelled `calibraton_file` left the nominal matrix running).
+    """
+    unknown = [name for name in overrides if not declared(name)]
+    if not unknown:
+        return ''
+    named = []
+    for name in unknown:
+        near = difflib.get_close_matches(name, list(table), n=1, cutoff=0.6)
+        named.append(f'{name} (did you mean {near[0]}?)' if near else name)
+    return (
+        f'ignoring parameter{"s" if len(named) > 1 else ""} it does not declare: '
+        f'{", ".join(named)}; `{node_name} --help` lists its parameters'
+    )
 
 
 def _checked(check: Check, name: str, value: object) -> object:
