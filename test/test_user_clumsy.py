@@ -342,7 +342,7 @@ def run_process(command, domain_id: int, timeout: float = 60.0, **env) -> Answer
     return Answer(done.returncode, done.stdout, done.stderr)
 
 
-def node_until(command, domain_id: int, needle: str, timeout: float = 15.0) -> Answer:
+def node_until(command, domain_id: int, needle: str, timeout: float = 60.0) -> Answer:
     """A node that keeps running: its output up to the line holding `needle` (or the timeout),
     then SIGINT; status 0 when it ran until stopped.
     """
