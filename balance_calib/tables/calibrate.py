@@ -39,6 +39,7 @@ from .model_selection import (
     terms_dropped,
     with_statistics,
 )
+from .closing import channel_keys, close_the_loop, report_closing, temperature_reference_c
 from .odd_components import odd_components
 from .table_report import build_report, in_file_units, point_rows, sigma_pct, signing_sections
 from .validation import coverage_warning, FormValidation, range_warnings, validate_form
@@ -223,6 +224,12 @@ def calibrate_table(
         {m: c.candidate.term_set for m, c in choices.items()},
     )
     report['terms_dropped'] = {m: terms_dropped(c) for m, c in choices.items()}
+    # the loop closed on the table: effects found in its points and adopted beyond chance
+    closing = close_the_loop(table, outputs, fits, chosen, term_sets)
+    base_fit = fit
+    if closing.adopted:
+        fit = cast(SeriesTareFit, closing.fit)
+    report_closing(report, table, closing)
     if validation is not None:
         own = validations[chosen]
         report['validation_series_tares'] = {
@@ -247,8 +254,8 @@ def calibrate_table(
     if validation is not None:
         sets['validation'] = (validation, validations[chosen].residuals)
     report.update(signing_sections(table, fit, chosen, outputs, sets))
-    effects, odd = odd_components(chosen, fit, term_sets[chosen], table, outputs)
-    report['effects'] = effects
+    effects, odd = odd_components(chosen, base_fit, term_sets[chosen], table, outputs)
+    report['effects'] = report['effects'] + effects
     report['unexplained'] = report['unexplained'] + odd
     report['model_selection'] = {
         'candidates': [compared_entry(k, loads) for c in choices.values() for k in c.compared],
@@ -291,7 +298,8 @@ def calibrate_table(
             report['sigma_pct_capacity']['calibration'],
             report['sigma_pct_fs_crossval']['after'],
             table.points,
-            len(term_sets[chosen]) + len(fit.series_labels),
+            len(fit.model.terms if closing.adopted else term_sets[chosen])
+            + len(fit.series_labels),
             f'{chosen} model',
         ),
         condition_gate(fit.condition_number, f'{chosen} model'),
@@ -303,6 +311,8 @@ def calibrate_table(
         raise TableCalibrationError(_refusal(table, refused))
     rated = np.where(np.isfinite(rated) & (rated > 0), rated, np.max(np.abs(outputs), axis=0))
     models = {m: f.model for m, f in fits.items()}
+    if closing.adopted:
+        models[closing.model_name] = fit.model
     output_unit = (
         'mV'
         if excitation_v is not None or table.output_internal_unit == 'mV'
@@ -311,7 +321,7 @@ def calibrate_table(
     calibration = Calibration(
         table.balance_name or 'balance',
         models,
-        chosen,
+        closing.model_name,
         chosen,
         capacity,
         rated,
@@ -319,7 +329,7 @@ def calibrate_table(
         tuple(inputs),
         report['sigma_pct_fs']['after'],
         now_iso(),
-        None,
+        temperature_reference_c(closing),
         {
             'format': 'balfit',
             'source': table.source,
@@ -334,6 +344,7 @@ def calibrate_table(
                 for s, row in zip(fit.series_labels, fit.tare_sigma)
             },
             'points': table.points,
+            **channel_keys(closing),
         },
     )
     return TableCalibration(table, validation, fits, chosen, calibration, report, rows)
