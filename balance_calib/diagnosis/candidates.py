@@ -100,7 +100,8 @@ def _single(name: str, terms: Sequence[str], max_groups: int) -> CandidateFamily
 
 def temperature_family(outputs: Sequence[str], variable: str = 'dT') -> CandidateFamily:
     """Zero and sensitivity moving with the temperature difference `variable` (a table's
-    temperature channel TEMP enters as dTEMP), linearly and by its square."""
+    temperature channel TEMP enters as dTEMP), linearly and by its square.
+    """
     d = variable
     return _single(
         'temperature',
@@ -115,7 +116,8 @@ def channel_family(
     """Any other extra channel (a position, a supply voltage: interfaces.md `channel`): a zero
     and a sensitivity linear in its difference from the mean, dJAW and dJAW*rN1. A channel
     constant within each load series offers only the products: its term alone is what the series
-    tares already carry, never an effect."""
+    tares already carry, never an effect.
+    """
     alone = [variable] if varies_within_series else []
     return _single('channel', alone + [f'{variable}*{v}' for v in outputs], 3)
 

@@ -1,12 +1,12 @@
 """The diagnosis on what a table carries (interfaces.md, "Effects found in table calibrations").
 
-The same machinery as the bag diagnosis (diagnose.py): candidate families of terms
-(candidates.py: hysteresis keyed to the load direction, zero_drift to the point order, the
-bidirectional sign terms, temperature, and `channel` for any other extra channel), forward selection
-by partial F-tests Bonferroni-corrected within a family (statistics.forward_select), families
-ranked by their BIC gain, the best added and the search repeated. A table has no zero points, no
-times and no gravity directions: the fit is the direct form (TM-663: loads from the outputs) with
-the series tares as columns, and the tests are ordinary (not whitened).
+The same machinery as the bag diagnosis (diagnose.py): candidate families of terms (candidates.py:
+hysteresis keyed to the load direction, zero_drift to the point order, the bidirectional sign
+terms, temperature, and `channel` for any other extra channel), forward selection by partial
+F-tests Bonferroni-corrected within a family (statistics.forward_select), families ranked by their
+BIC gain, the best added and the search repeated. A table has no zero points, no times and no
+gravity directions: the fit is the direct form (TM-663: loads from the outputs) with the series
+tares as columns, and the tests are ordinary (not whitened).
 
 An effect is adopted only where it lowers the cross-validated σ beyond chance, judged at the level
 at which its regressor varies:
@@ -49,7 +49,7 @@ from .statistics import ComponentFit, fit_columns, forward_select
 TABLE_EFFECTS = ('temperature', 'channel', 'zero_drift', 'hysteresis', 'bidirectional')
 ALPHA = 1e-4  # one family's forward selection (Bonferroni within it), as diagnose.py
 ALPHA_CROSSVAL = 1e-3  # the cross-validated σ lower beyond chance, per component
-PERMUTATIONS = 199  # among series, for a channel constant within each series
+PERMUTATIONS = 1999  # among series (p down to 5e-4), for a channel constant within each series
 TRACKS_LOAD_R2 = 0.5  # a channel this much explained by the applied loads follows the loads
 MAX_ROUNDS = 5
 
@@ -128,6 +128,31 @@ class _Columns:
         return np.column_stack([self.cache[t] for t in names])
 
 
+def _even_part(family: CandidateFamily) -> CandidateFamily:
+    """The sign family's terms even in their variable (|V|, V²|V|, |x|, x²|x|): a response that
+    differs between the signs of the load. The odd ones (V|V|, x|x|) are a nonlinearity of the
+    same shape on both sides (a knee at low load, tanh-like), which is not a sign effect and
+    which, without the bag's loading/unloading contrasts (loop_or_sign.py), nothing here could
+    tell from one.
+    """
+    groups = []
+    for group in family.groups:
+        even = tuple(t for t in group if not _odd(t))
+        if even:
+            groups.append(even)
+    return CandidateFamily(family.name, tuple(groups), family.max_groups, family.labels)
+
+
+def _odd(term: str) -> bool:
+    """A term odd in its variable: the plain powers sum to an odd number (|V| is even); of the
+    load-keyed ones x|x| (absload2).
+    """
+    if term.startswith('absload'):
+        return term.startswith('absload2_')
+    factors = parse_terms([term])[0].factors
+    return sum(f.power for f in factors if not f.absolute) % 2 == 1
+
+
 def _own_output(points: CalibrationPoints, k: int) -> str:
     """The bridge that follows load k most (its own, on a balance with one bridge a load)."""
     outputs = points.outputs
@@ -189,8 +214,7 @@ def diagnose_points(
     """
     components, outputs_names = points.load_symbols, points.output_symbols
     capacity = points.capacity
-    n = points.points
-    labels, index, onehot = series_indicator(points.series)
+    _, _, onehot = series_indicator(points.series)
     skipped: dict[str, str] = {}
     warnings: list[str] = []
     variables: dict[str, np.ndarray] = {}
@@ -234,7 +258,7 @@ def diagnose_points(
             )
     if 'bidirectional' in wanted:
         variables.update(absolute_load_variables(fitted_loads, capacity, components))
-        families.append((bidirectional_family(outputs_names, components), None))
+        families.append((_even_part(bidirectional_family(outputs_names, components)), None))
     for channel in points.channels:
         if channel.kind not in wanted:
             continue
@@ -378,22 +402,25 @@ def _examine(
             cv_after = _series_out_residuals(after_design, target, series, p_after)
             gain = fits[k].rss - after.rss
             labels = np.unique(series)
-            beaten = 0
             values = np.asarray(columns([variable]))[:, 0]
-            per_series = {s: values[series == s][0] for s in labels}
+            per_series = np.array([values[series == s][0] for s in labels])
+            position = np.searchsorted(labels, series)
+            basis, residual = fits[k].basis, fits[k].residuals
+            beaten = 0
             for _ in range(permutations):
-                shuffled = dict(zip(labels, rng.permutation([per_series[s] for s in labels])))
-                permuted = np.array([shuffled[s] for s in series])
+                permuted = rng.permutation(per_series)[position]
                 trial = _with_variable(columns, variable, permuted, added)
-                trial_fit = fit_columns(np.hstack([before_design, trial]), target)
-                beaten += fits[k].rss - trial_fit.rss >= gain
+                trial = trial - basis @ (basis.T @ trial)  # what the fit before cannot absorb
+                coefficients = np.linalg.lstsq(trial, residual, rcond=None)[0]
+                left = residual - trial @ coefficients
+                beaten += fits[k].rss - float(left @ left) >= gain
             p_cv = (1 + beaten) / (1 + permutations)
             lower = float(np.mean(cv_after**2)) < float(np.mean(cv_before**2))
         else:
             cv_before, cv_after = fits[k].press_residuals, after.press_residuals
             p_cv = _drop_p(cv_before, cv_after)
             lower = float(np.mean(cv_after**2)) < float(np.mean(cv_before**2))
-        if not (lower and p_cv < alpha_crossval):
+        if not (lower and p_cv <= alpha_crossval):
             continue
         passing[k] = (added, after)
         stats[k] = (

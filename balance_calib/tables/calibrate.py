@@ -19,6 +19,13 @@ from ..fit.series_tares import SeriesTareFit
 from ..model.calibration import Calibration
 from ..refit.gates import gates_report
 from .balfit_reader import CalibrationTable
+from .closing import (
+    channel_keys,
+    close_the_loop,
+    live_model,
+    report_closing,
+    temperature_reference_c,
+)
 from .errors import TableCalibrationError
 from .gates import (
     channel_gate,
@@ -39,7 +46,6 @@ from .model_selection import (
     terms_dropped,
     with_statistics,
 )
-from .closing import channel_keys, close_the_loop, report_closing, temperature_reference_c
 from .odd_components import odd_components
 from .table_report import build_report, in_file_units, point_rows, sigma_pct, signing_sections
 from .validation import coverage_warning, FormValidation, range_warnings, validate_form
@@ -311,8 +317,8 @@ def calibrate_table(
         raise TableCalibrationError(_refusal(table, refused))
     rated = np.where(np.isfinite(rated) & (rated > 0), rated, np.max(np.abs(outputs), axis=0))
     models = {m: f.model for m, f in fits.items()}
-    if closing.adopted:
-        models[closing.model_name] = fit.model
+    if closing.adopted and closing.diagnosis is not None:
+        models[closing.model_name] = live_model(fit.model, closing.diagnosis)
     output_unit = (
         'mV'
         if excitation_v is not None or table.output_internal_unit == 'mV'

@@ -72,7 +72,7 @@ def fit_with_effects(
         statistics=False,
     )
     model = fit.model
-    live = BalanceModel(
+    full = BalanceModel(
         name,
         model.terms,
         model.coefficients,
@@ -80,7 +80,19 @@ def fit_with_effects(
         tuple(points.output_symbols),
         model.metadata,
     )
-    return replace(fit, model=live)
+    return replace(fit, model=full)
+
+
+def live_model(model: BalanceModel, diagnosis: TableDiagnosis) -> BalanceModel:
+    """The adopted model without the terms a calibrator cannot evaluate, as the bag diagnosis'
+    live model (diagnose.py): the point order (zero_drift, a nuisance of the campaign) and the
+    sign of the fitted load; kept: outputs, the extra channels (a temperature from
+    /balance/temperature) and the load directions.
+    """
+    ok = set(model.inputs) | {c.variable for c in diagnosis.channels}
+    ok |= {v for v in diagnosis.variables if v.startswith('dir_')}
+    kept = [t.name for t in model.terms if set(t.variables) <= ok]
+    return model.restricted_to(kept)
 
 
 def close_the_loop(table, outputs, fits, chosen: str, term_sets) -> ClosedLoop:
@@ -106,9 +118,24 @@ def close_the_loop(table, outputs, fits, chosen: str, term_sets) -> ClosedLoop:
         return ClosedLoop(
             points, diagnosis, None, False, chosen, (f'the effects could not be fitted: {err}',)
         )
+    capacity = table.load_capacity_si
+    worse = _worse_loads(fit, fits['direct'], capacity, table.load_symbols)
+    if worse:
+        # the joint fit gives every load every added term: where that costs a load more than
+        # the chance scatter of its cross-validated σ, the effects are listed, not adopted
+        return ClosedLoop(
+            points,
+            diagnosis,
+            fit,
+            False,
+            chosen,
+            (
+                'effects found, not adopted: fitted into every load they raise the '
+                f'cross-validated σ of {worse}',
+            ),
+        )
     notes: tuple[str, ...] = ()
     if chosen != 'direct':
-        capacity = table.load_capacity_si
         mine = float(np.mean(crossval_pct(fit, capacity)))
         theirs = float(np.mean(crossval_pct(fits[chosen], capacity)))
         if mine > theirs:
@@ -120,7 +147,7 @@ def close_the_loop(table, outputs, fits, chosen: str, term_sets) -> ClosedLoop:
                 chosen,
                 (
                     f'effects found in the direct form, not adopted: with them its mean '
-                    f'cross-validated σ ({mine:.3g} %) stays above the {chosen} form\'s '
+                    f"cross-validated σ ({mine:.3g} %) stays above the {chosen} form's "
                     f'({theirs:.3g} %)',
                 ),
             )
@@ -129,6 +156,17 @@ def close_the_loop(table, outputs, fits, chosen: str, term_sets) -> ClosedLoop:
             f'{chosen} form ({theirs:.3g} %): it is adopted',
         )
     return ClosedLoop(points, diagnosis, fit, True, name, notes)
+
+
+def _worse_loads(fit, base, capacity, symbols) -> str:
+    """Loads whose cross-validated σ with the effects exceeds the base's by more than its
+    chance scatter, 1/sqrt(2N) of it (model_selection.SELECTION_MARGIN's reasoning).
+    """
+    after, before = crossval_pct(fit, capacity), crossval_pct(base, capacity)
+    margin = 1.0 + 2.0 / np.sqrt(2.0 * len(fit.load_residuals))
+    return ', '.join(
+        f'{s} ({b:.3g} → {a:.3g} %)' for s, a, b in zip(symbols, after, before) if a > margin * b
+    )
 
 
 def channel_keys(closing: ClosedLoop) -> dict:
@@ -175,7 +213,9 @@ def report_closing(report: dict, table, closing: ClosedLoop) -> None:
     fit = closing.fit
     loads, capacity = table.load_symbols, table.load_capacity_si
     report['adopted_model'] = closing.model_name
-    report['adopted_terms'] = [t.name for t in fit.model.terms]
+    # the adopted fit's terms (its coefficients in report.json), the base's kept beside them
+    report['base_terms'] = report['terms']
+    report['terms'] = [t.name for t in fit.model.terms]
     after = sigma_pct(fit.load_residuals, capacity, loads)
     crossval = _rms_pct(fit.press_load_residuals, capacity, loads)
     report['sigma_pct_fs']['after'] = after
