@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from table_cases import table as make_table
 
 from balance_calib.calibration_file import load_calibration, save_calibration
 from balance_calib.calibration_points import load_direction, returning_series
 from balance_calib.errors import ConfigError
 from balance_calib.model.active_calibration import activate
 from balance_calib.tables.calibrate import calibrate_table
-from table_cases import table as make_table
 
 LOADS = ('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ')
 BRIDGES = ('FXV', 'FYV', 'FZV', 'MXV', 'MYV', 'MZV')
@@ -257,6 +257,16 @@ def test_a_channel_no_topic_provides_is_refused_naming_it(tmp_path):
     with pytest.raises(ConfigError, match='JAW.*no topic provides'):
         activate(load_calibration(path), source=str(path))
     activate(load_calibration(path), model='direct')  # the base model needs no channel
+    # what balance_calibrator does at start-up: one line naming the file and the channel
+    from balance_calib.live.parameters import PARAMETERS
+    from balance_calib.live.session import CalibratorSession
+
+    values = {name: spec.default for name, spec in PARAMETERS.items()}
+    values.update(calibration_file=str(path), tare_file=str(tmp_path / 'tare.yaml'))
+    with pytest.raises(ConfigError) as refused:
+        CalibratorSession(lambda name: values[name], 'test', lambda level, line: None)
+    message = str(refused.value)
+    assert len(message.splitlines()) == 1 and str(path) in message and 'JAW' in message
 
 
 def test_a_channel_that_tracks_a_load_is_not_an_effect():
@@ -316,8 +326,8 @@ def test_a_channel_constant_within_each_series_is_never_an_effect_alone():
 def test_a_sensitivity_on_a_series_constant_temperature_is_judged_by_whole_series():
     """The schedule run three times, each series at its own bench temperature, the sensitivity
     changing with it: adopted, only as products dTEMP*V (never dTEMP alone), judged with whole
-    series left out. (Run once, 12 series, a load is carried by 4 of them: 4! orders of their
-    temperatures cannot show p < 1e-3, and the loads are rightly not all listed.)
+    series left out. Run once (12 series, a load carried by 4 of them: 4! orders of their
+    temperatures cannot show p < 1e-3) the loads are rightly not all listed.
     """
     rng = np.random.default_rng(6)
     probe = _balance(np.random.default_rng(6), repeats=3)
@@ -338,3 +348,23 @@ def test_a_sensitivity_on_a_series_constant_temperature_is_judged_by_whole_serie
     assert 'whole series left out' in effect[0]['evidence']
     floor = 100 * NOISE_V / RATED_V
     assert max(report['sigma_pct_fs']['after'].values()) < 1.15 * floor
+
+
+def test_the_generated_tables_of_the_fit_tests_adopt_nothing():
+    """table_cases' balances (a knee, eight gauges, cross-talk and squares): no temperature, no
+    channel, no direction or order effect in them, and none adopted (a knee is odd in the load,
+    not a sign effect).
+    """
+    import table_cases as tc
+
+    tables = [
+        tc.three_component_cell(np.random.default_rng(11), series_per_axis=3)[0],
+        tc.eight_channel_sensor(np.random.default_rng(2))[0],
+        tc.six_component_balance(np.random.default_rng(3))[0],
+    ]
+    for table in tables:
+        report = calibrate_table(table, statistics=False, force=True).report
+        assert [e for e in report['effects'] if e.get('adopted')] == [], (
+            table.source,
+            report['effects'],
+        )
