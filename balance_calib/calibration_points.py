@@ -3,8 +3,8 @@
 One value for what a bag or a table carries (issue 36, Deliver 1): applied loads, bridge outputs,
 load series, gravity and times where known, the extra channels with their units and symbols, the
 load direction and the order of each point within its series. The table reader's side is
-`points_from_table`; the bag reader could produce the same value later (today the bag path is
-unchanged).
+`tables/table_points.points_from_table`; the bag reader could produce the same value later
+(today the bag path is unchanged).
 
 The load direction and the returning series follow interfaces.md, "Effects found in table
 calibrations": a point's direction is the sign of the change, since the previous point of its
@@ -141,40 +141,10 @@ def returning_series(applied, series, capacity) -> np.ndarray:
 
 
 def temperature_in_degc(values, unit: str) -> np.ndarray:
+    """A temperature in degC, K or degF as degC."""
     values = np.asarray(values, float)
     if unit == 'degF':
         return (values - 32.0) * 5.0 / 9.0
     if unit == 'K':
         return values - 273.15
     return values
-
-
-def points_from_table(table, outputs: np.ndarray) -> CalibrationPoints:
-    """The points of a CalibrationTable; `outputs` its bridge outputs as the fit takes them.
-
-    Extra channels are read as written: the natural zero is subtracted from bridge outputs only
-    (a channel's cell in a natural-zero row is its reading at that time, interfaces.md).
-    """
-    from .tables.units import unit_factor
-
-    channels = []
-    for i, symbol in enumerate(table.output_symbols):
-        if i in table.bridge_columns:
-            continue
-        found = unit_factor(table.output_units[i])
-        unit = found[1] if found is not None else table.output_units[i].strip()
-        values = np.asarray(table.outputs[:, i], float)
-        if unit in TEMPERATURE_UNITS:
-            values = temperature_in_degc(values, unit)
-        channels.append(ExtraChannel(symbol, unit, values))
-    return CalibrationPoints(
-        source=table.source,
-        point_id=tuple(table.point_id),
-        load_symbols=tuple(table.load_symbols),
-        output_symbols=tuple(table.bridge_symbols),
-        capacity=np.asarray(table.load_capacity_si, float),
-        applied_loads=np.asarray(table.applied_loads_si, float),
-        outputs=np.asarray(outputs, float),
-        series=np.asarray(table.series, int),
-        channels=tuple(channels),
-    )

@@ -33,7 +33,7 @@ import scipy.stats
 from ..accuracy.sigma import sigma_pct_fs
 from ..calibration_points import CalibrationPoints, ExtraChannel
 from ..fit.series_tares import series_indicator
-from ..model.terms import as_variables, design_matrix, parse_terms
+from ..model.terms import as_variables, design_matrix, parse_terms, Term
 from .candidates import (
     absolute_load_variables,
     bidirectional_family,
@@ -257,8 +257,19 @@ def diagnose_points(
                 'no series returns to a load it had: order cannot be told from the load'
             )
     if 'bidirectional' in wanted:
-        variables.update(absolute_load_variables(fitted_loads, capacity, components))
-        families.append((_even_part(bidirectional_family(outputs_names, components)), None))
+        # a sign term even in its variable stands in for a missing square: offered only for
+        # the bridges (and the loads whose own bridge) the base model has the square of
+        squared = {v for v in outputs_names if Term.parse(f'{v}^2').name in set(base)}
+        signed = [c for k, c in enumerate(components) if _own_output(points, k) in squared]
+        if squared:
+            variables.update(absolute_load_variables(fitted_loads, capacity, components))
+            family = _even_part(bidirectional_family(sorted(squared), signed))
+            families.append((family, None))
+        else:
+            skipped['bidirectional'] = (
+                'the base model has no square of a bridge output: a sign term would stand in '
+                'for it'
+            )
     for channel in points.channels:
         if channel.kind not in wanted:
             continue
@@ -424,11 +435,11 @@ def _examine(
             continue
         passing[k] = (added, after)
         stats[k] = (
-            sigma_pct_fs(fits[k].residuals, capacity[k]),
-            sigma_pct_fs(after.residuals, capacity[k]),
-            sigma_pct_fs(cv_before, capacity[k]),
-            sigma_pct_fs(cv_after, capacity[k]),
-            p_cv,
+            float(sigma_pct_fs(fits[k].residuals, capacity[k])),
+            float(sigma_pct_fs(after.residuals, capacity[k])),
+            float(sigma_pct_fs(cv_before, capacity[k])),
+            float(sigma_pct_fs(cv_after, capacity[k])),
+            float(p_cv),
         )
         score += n * np.log(fits[k].rss / max(after.rss, 1e-300)) - len(added) * np.log(n)
     if not passing:

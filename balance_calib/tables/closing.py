@@ -13,12 +13,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..calibration_points import CalibrationPoints, points_from_table
+from ..calibration_points import CalibrationPoints
 from ..diagnosis.table_effects import diagnose_points, TableDiagnosis
 from ..fit.series_tares import fit_direct, SeriesTareFit
 from ..model.balance_model import BalanceModel
 from ..model.terms import Term
 from .model_selection import crossval_pct, FIT_ERRORS
+from .table_points import points_from_table
 
 
 @dataclass(frozen=True)
