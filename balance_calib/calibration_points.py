@@ -98,6 +98,10 @@ class CalibrationPoints:
         return load_direction(self.applied_loads, self.series, self.capacity)
 
     @property
+    def signed_directions(self) -> np.ndarray:
+        return signed_directions(self.applied_loads, self.series, self.capacity)
+
+    @property
     def returning_series(self) -> np.ndarray:
         """(N,) True for the points of a series that returns to a load it had earlier."""
         return returning_series(self.applied_loads, self.series, self.capacity)
@@ -120,6 +124,23 @@ def load_direction(applied, series, capacity) -> np.ndarray:
                 grown = abs(relative[i, k]) - abs(relative[previous, k])
                 direction[i] = np.sign(grown)
         last[int(s)] = i
+    return direction
+
+
+def signed_directions(applied, series, capacity) -> np.ndarray:
+    """(N, n) per load: +1 where it last rose within its series, -1 where it last fell (kept
+    through points where it does not move), 0 before its first move: the bag's load history
+    (diagnosis/candidates.load_directions) within each series.
+    """
+    relative = np.asarray(applied, float) / np.asarray(capacity, float)
+    series = np.asarray(series)
+    direction = np.zeros_like(relative)
+    for s in np.unique(series):
+        index = np.flatnonzero(series == s)
+        for previous, i in zip(index[:-1], index[1:]):
+            step = relative[i] - relative[previous]
+            moved = np.abs(step) > SAME_LOAD_FRACTION
+            direction[i] = np.where(moved, np.sign(step), direction[previous])
     return direction
 
 

@@ -63,10 +63,12 @@ def _balance(
     zero_per_k2=None,
     extra=(),
     repeats=1,
+    shape=None,
 ):
     """A table (loads lbs / in-lbs, outputs V) of a balance with 2 % cross-talk and a small
     square, optionally warmed up during the campaign: output = response(x)·(1 + s·ΔT) + z·ΔT²
-    (ΔT in K from 20 °C). `extra`: (symbol, unit, values) channels appended.
+    (ΔT in K from 20 °C). `extra`: (symbol, unit, values) channels appended; `shape(x, series)`
+    adds to the response (fractions of rated output) what a test puts in.
     """
     fraction, series = _schedule(rng, repeats)
     applied = fraction * CAPACITY_LBS
@@ -74,6 +76,8 @@ def _balance(
     x = fraction + np.array([tares[s] for s in series])
     crosstalk = np.eye(6) + rng.uniform(-0.02, 0.02, (6, 6)) * (1 - np.eye(6))
     response = x @ crosstalk.T + 0.003 * x**2
+    if shape is not None:
+        response = response + shape(x, series)
     outputs = RATED_V * response
     symbols, units, columns = list(BRIDGES), ['V'] * 6, [outputs]
     if temperature_f is not None:
@@ -368,3 +372,65 @@ def test_the_generated_tables_of_the_fit_tests_adopt_nothing():
             table.source,
             report['effects'],
         )
+
+
+def _rising(x, series):
+    """(N, 6) +1 / -1: the generator's own history, per bridge: each load's last move within
+    its series (up or down, kept through unchanged points), starting up.
+    """
+    direction = np.ones_like(x)
+    for s in np.unique(series):
+        index = np.flatnonzero(series == s)
+        for previous, i in zip(index[:-1], index[1:]):
+            step = x[i] - x[previous]
+            direction[i] = np.where(np.abs(step) > 1e-9, np.sign(step), direction[previous])
+    return direction
+
+
+def _order(series):
+    order = np.zeros(len(series))
+    for s in np.unique(series):
+        mask = series == s
+        order[mask] = np.arange(mask.sum())
+    return order
+
+
+@pytest.mark.parametrize(
+    'name, shape, loads',
+    [
+        # a friction loop widest at mid-range, closed at the ends: dir·h·(1 - x²) on FZ and MY
+        (
+            'hysteresis',
+            lambda x, s: 2e-3 * _rising(x, s) * (1 - x**2) * np.array([0, 0, 1, 0, 1, 0]),
+            {'FZ', 'MY'},
+        ),
+        # FZ's bridge stiffer in compression, smoothly: b·x·tanh(x / 0.1) ≈ b|x|
+        (
+            'bidirectional',
+            lambda x, s: 4e-3 * x * np.tanh(x / 0.1) * np.array([0, 0, 1, 0, 0, 0]),
+            {'FZ'},
+        ),
+        # FX's zero creeping away from its series' start, 1 - exp(-i/12)
+        (
+            'zero_drift',
+            lambda x, s: (
+                2e-3 * (1 - np.exp(-_order(s) / 12.0))[:, None] * np.array([1, 0, 0, 0, 0, 0])
+            ),
+            {'FX'},
+        ),
+    ],
+)
+def test_a_loop_a_sign_step_and_a_creeping_zero_are_adopted(name, shape, loads):
+    """Shapes the candidate terms hold only in part (dir, dir·V, |V|, order, order²): the
+    family is named on the loads the data put it in, and their cross-validated σ comes down.
+    """
+    table = _balance(np.random.default_rng(21), shape=shape)
+    report = calibrate_table(table, method='direct', statistics=False, force=True).report
+    _note(name, report)
+    adopted = [e for e in report['effects'] if e.get('adopted')]
+    assert [e['name'] for e in adopted] == [name], report['effects']
+    assert loads <= set(adopted[0]['components']), adopted[0]['components']
+    before = report['sigma_pct_fs_crossval']['before']
+    after = report['sigma_pct_fs_crossval']['after']
+    for load in loads:
+        assert after[load] < before[load], (load, before[load], after[load])

@@ -38,6 +38,7 @@ from .candidates import (
     absolute_load_variables,
     bidirectional_family,
     CandidateFamily,
+    canonical,
     channel_family,
     hysteresis_family,
     own_terms_only,
@@ -234,11 +235,21 @@ def diagnose_points(
     if 'hysteresis' in wanted:
         direction = points.load_direction
         if np.any(direction != 0):
-            for c in components:
-                variables[f'dir_{c}'] = direction
+            # the point's direction (interfaces.md: the magnitude of the load that changed most
+            # grew or shrank), and each load's own signed direction within its series (what the
+            # live calibrator's load history keeps: dir_X, candidates.hysteresis_family): a loop
+            # symmetric about zero load is keyed to the second, a loop in |load| to the first
+            variables['dir'] = direction
+            signed = points.signed_directions
+            for k, c in enumerate(components):
+                variables[f'dir_{c}'] = signed[:, k]
             family = hysteresis_family(components, outputs_names)
-            keep = tuple(g for g in family.groups if all(t.startswith('dir_') for t in g))
-            families.append((CandidateFamily('hysteresis', keep, family.max_groups, {}), None))
+            keep = [g for g in family.groups if all(t.startswith('dir_') for t in g)]
+            keep += [('dir',)] + [(f'dir*{v}',) for v in outputs_names]
+            keep += [(canonical(f'dir*|{v}|'),) for v in outputs_names]
+            families.append(
+                (CandidateFamily('hysteresis', tuple(keep), family.max_groups, {}), None)
+            )
         else:
             skipped['hysteresis'] = 'no load direction in any series'
     if 'zero_drift' in wanted:

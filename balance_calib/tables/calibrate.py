@@ -233,9 +233,19 @@ def calibrate_table(
     # the loop closed on the table: effects found in its points and adopted beyond chance
     closing = close_the_loop(table, outputs, fits, chosen, term_sets)
     base_fit = fit
+    form, label = chosen, f'{chosen} model'  # the adopted fit's form, the gates' name for it
     if closing.adopted:
         fit = cast(SeriesTareFit, closing.fit)
+        form, label = 'direct', f'{closing.model_name} model'
+        report['method'] = form
+        if chosen != form:
+            report['method_choice'] += '; then ' + '; '.join(closing.notes)
     report_closing(report, table, closing)
+    if closing.adopted and validation is not None:
+        report['warnings'].append(
+            "validation σ and methods_compared are the base model's: the adopted effects' "
+            'terms are not evaluated on the validation table'
+        )
     if validation is not None:
         own = validations[chosen]
         report['validation_series_tares'] = {
@@ -259,7 +269,7 @@ def calibrate_table(
     sets = {'calibration': (table, fit.load_residuals)}
     if validation is not None:
         sets['validation'] = (validation, validations[chosen].residuals)
-    report.update(signing_sections(table, fit, chosen, outputs, sets))
+    report.update(signing_sections(table, fit, form, outputs, sets))
     effects, odd = odd_components(chosen, base_fit, term_sets[chosen], table, outputs)
     report['effects'] = report['effects'] + effects
     report['unexplained'] = report['unexplained'] + odd
@@ -297,7 +307,7 @@ def calibrate_table(
             fit.load_residuals,
             fit.press_load_residuals,
             capacity,
-            f'{chosen} model',
+            label,
             applied=table.applied_loads_si,
         ),
         overfit_gate(
@@ -306,9 +316,9 @@ def calibrate_table(
             table.points,
             len(fit.model.terms if closing.adopted else term_sets[chosen])
             + len(fit.series_labels),
-            f'{chosen} model',
+            label,
         ),
-        condition_gate(fit.condition_number, f'{chosen} model'),
+        condition_gate(fit.condition_number, label),
     ]
     acceptance = gates_report(gates, forced=force)
     report['gates'], report['forced'] = acceptance['gates'], acceptance['forced']

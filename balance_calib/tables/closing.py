@@ -87,8 +87,9 @@ def fit_with_effects(
 def live_model(model: BalanceModel, diagnosis: TableDiagnosis) -> BalanceModel:
     """The adopted model without the terms a calibrator cannot evaluate, as the bag diagnosis'
     live model (diagnose.py): the point order (zero_drift, a nuisance of the campaign) and the
-    sign of the fitted load; kept: outputs, the extra channels (a temperature from
-    /balance/temperature) and the load directions.
+    sign of the fitted load and the point's direction `dir` (it needs the series); kept:
+    outputs, the extra channels (a temperature from /balance/temperature) and each load's
+    signed direction dir_X (the live load history).
     """
     ok = set(model.inputs) | {c.variable for c in diagnosis.channels}
     ok |= {v for v in diagnosis.variables if v.startswith('dir_')}
