@@ -129,6 +129,18 @@ class _Columns:
         return np.column_stack([self.cache[t] for t in names])
 
 
+def _where_reversing(direction: np.ndarray, series: np.ndarray) -> np.ndarray:
+    """(N, m) the directions, set to 0 in every series (and column) where they do not take
+    both signs.
+    """
+    out = np.array(direction, dtype=float)
+    for s in np.unique(series):
+        mask = series == s
+        both = np.any(out[mask] > 0, axis=0) & np.any(out[mask] < 0, axis=0)
+        out[np.ix_(mask, ~both)] = 0.0
+    return out
+
+
 def _even_part(family: CandidateFamily) -> CandidateFamily:
     """The sign family's terms even in their variable (|V|, V²|V|, |x|, x²|x|): a response that
     differs between the signs of the load. The odd ones (V|V|, x|x|) are a nonlinearity of the
@@ -234,13 +246,16 @@ def diagnose_points(
     wanted = set(effects)
     if 'hysteresis' in wanted:
         direction = points.load_direction
-        if np.any(direction != 0):
+        if np.any(_where_reversing(direction[:, None], points.series) != 0):
             # the point's direction (interfaces.md: the magnitude of the load that changed most
             # grew or shrank), and each load's own signed direction within its series (what the
             # live calibrator's load history keeps: dir_X, candidates.hysteresis_family): a loop
             # symmetric about zero load is keyed to the second, a loop in |load| to the first
-            variables['dir'] = direction
-            signed = points.signed_directions
+            # only in series where the direction reverses: in a series that only rises the
+            # direction is 0 at its first point and +1 after, a step in the load that a
+            # nonlinearity near zero (a knee) fills as well as a loop would
+            variables['dir'] = _where_reversing(direction[:, None], points.series)[:, 0]
+            signed = _where_reversing(points.signed_directions, points.series)
             for k, c in enumerate(components):
                 variables[f'dir_{c}'] = signed[:, k]
             family = hysteresis_family(components, outputs_names)
@@ -251,7 +266,9 @@ def diagnose_points(
                 (CandidateFamily('hysteresis', tuple(keep), family.max_groups, {}), None)
             )
         else:
-            skipped['hysteresis'] = 'no load direction in any series'
+            skipped['hysteresis'] = (
+                'no series reverses its load: direction cannot be told from the load'
+            )
     if 'zero_drift' in wanted:
         returning = points.returning_series
         if returning.any():
