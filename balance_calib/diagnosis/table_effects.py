@@ -288,10 +288,10 @@ def diagnose_points(
         # a sign term even in its variable stands in for a missing square: offered only for
         # the bridges (and the loads whose own bridge) the base model has the square of
         squared = {v for v in outputs_names if Term.parse(f'{v}^2').name in set(base)}
-        signed = [c for k, c in enumerate(components) if _own_output(points, k) in squared]
+        keyed = [c for k, c in enumerate(components) if _own_output(points, k) in squared]
         if squared:
             variables.update(absolute_load_variables(fitted_loads, capacity, components))
-            family = _even_part(bidirectional_family(sorted(squared), signed))
+            family = _even_part(bidirectional_family(sorted(squared), keyed))
             families.append((family, None))
         else:
             skipped['bidirectional'] = (
