@@ -110,7 +110,7 @@ def calibration_from_dict(data: Mapping[str, Any], where: str = 'calibration') -
             {str(k): float(v) for k, v in (data.get('sigma_pct_fs') or {}).items()},
             str(data.get('fitted_at', '')),
             None if ref is None else float(ref),
-            dict(data.get('extra') or {}),
+            {**dict(data.get('extra') or {}), **_channels_from_dict(data, where)},
         )
     except ConfigError:
         raise
@@ -141,6 +141,36 @@ def _per_name(data: Mapping[str, Any], key: str, names: tuple[str, ...], where: 
     if lacking:
         raise ConfigError(f'{where}: {key}: missing key {lacking[0]} (needs {", ".join(names)})')
     return np.array([float(given[n]) for n in names])
+
+
+def _channels_from_dict(data: Mapping[str, Any], where: str) -> dict:
+    """calibration.yaml's `requires` (the extra channels the models read) and `channels` (each
+    one's kind, unit and the reference its d<SYMBOL> is taken from), kept in Calibration.extra.
+    """
+    requires = data.get('requires')
+    if requires is None:
+        return {}
+    channels = data.get('channels') or {}
+    if not isinstance(requires, list) or not all(isinstance(r, str) for r in requires):
+        raise ConfigError(f'{where}: requires: expected a list of channel symbols')
+    if not isinstance(channels, Mapping) or set(requires) - set(channels):
+        missing = sorted(set(requires) - set(channels or {}))
+        raise ConfigError(f'{where}: channels: no reference for {", ".join(missing)}')
+    return {'requires': list(requires), 'channels': {k: dict(v) for k, v in channels.items()}}
+
+
+def _channel_keys_to_top(content: dict) -> dict:
+    """The calibration's dict with `requires` and `channels` moved from `extra` to the top,
+    beside the models that read them (interfaces.md, "Effects found in table calibrations").
+    """
+    extra = dict(content.get('extra') or {})
+    if 'requires' not in extra:
+        return content
+    moved = {key: extra.pop(key) for key in ('requires', 'channels') if key in extra}
+    result = {k: v for k, v in content.items() if k != 'extra'}
+    if extra:
+        result['extra'] = extra
+    return {**result, **moved}
 
 
 def _model_from_dict(data: Mapping[str, Any], where: str):
@@ -267,7 +297,9 @@ def save_calibration(path: str | Path, calibration: Calibration) -> None:
         f'outputs in {calibration.output_unit}.\n'
     )
     write_text_atomically(
-        path, header + yaml.safe_dump(calibration.to_dict(), sort_keys=False, width=160)
+        path,
+        header
+        + yaml.safe_dump(_channel_keys_to_top(calibration.to_dict()), sort_keys=False, width=160),
     )
 
 

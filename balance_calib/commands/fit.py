@@ -299,9 +299,16 @@ def _signing(report) -> list[str]:
             )
         )
     for effect in report.get('effects', []):
+        how = 'adopted' if effect.get('adopted') else 'offered, not adopted'
+        channel = f' (channel {effect["channel"]})' if effect.get('channel') else ''
         lines.append(
-            f'- offered, not adopted: {effect["name"]} on {", ".join(effect["components"])}: '
+            f'- {how}: {effect["name"]}{channel} on {", ".join(effect["components"])}: '
             f'{effect["evidence"]}'
+        )
+    if report.get('requires'):
+        lines.append(
+            f'- the adopted model reads channel(s) {", ".join(report["requires"])} '
+            '(calibration.yaml `requires`)'
         )
     coefficients = report.get('coefficients')
     if coefficients:

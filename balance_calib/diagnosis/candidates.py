@@ -98,12 +98,28 @@ def _single(name: str, terms: Sequence[str], max_groups: int) -> CandidateFamily
     return CandidateFamily(name, tuple((t,) for t in names), max_groups, {})
 
 
-def temperature_family(outputs: Sequence[str]) -> CandidateFamily:
+def temperature_family(outputs: Sequence[str], variable: str = 'dT') -> CandidateFamily:
+    """Zero and sensitivity moving with the temperature difference `variable` (a table's
+    temperature channel TEMP enters as dTEMP), linearly and by its square.
+    """
+    d = variable
     return _single(
         'temperature',
-        ['dT', 'dT^2'] + [f'dT*{v}' for v in outputs] + [f'dT^2*{v}' for v in outputs],
+        [d, f'{d}^2'] + [f'{d}*{v}' for v in outputs] + [f'{d}^2*{v}' for v in outputs],
         3,
     )
+
+
+def channel_family(
+    outputs: Sequence[str], variable: str, varies_within_series: bool = True
+) -> CandidateFamily:
+    """Any other extra channel (a position, a supply voltage: interfaces.md `channel`): a zero
+    and a sensitivity linear in its difference from the mean, dJAW and dJAW*rN1. A channel
+    constant within each load series offers only the products: its term alone is what the series
+    tares already carry, never an effect.
+    """
+    alone = [variable] if varies_within_series else []
+    return _single('channel', alone + [f'{variable}*{v}' for v in outputs], 3)
 
 
 def hysteresis_family(components: Sequence[str], outputs: Sequence[str]) -> CandidateFamily:

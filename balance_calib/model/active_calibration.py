@@ -7,9 +7,11 @@ Pure (no rclpy): the live calibrator (live/calibrator_core.py), the offline redu
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import datetime as _dt
 from functools import cached_property
+import re
+from typing import Mapping
 
 import numpy as np
 
@@ -19,6 +21,7 @@ from ..units import BRIDGE_OUTPUTS, COMPONENTS
 from .balance_model import BalanceModel
 from .calibration import Calibration
 from .identity_cache import IdentityCache
+from .terms import Term
 
 MODEL_CHOICES = ('linear', 'quadratic', 'cubic', 'adopted')
 DEFAULT_ENVELOPE_MARGIN = 1.1
@@ -237,6 +240,20 @@ class ActiveCalibration:
         return (now - fitted).total_seconds() / 86400.0
 
 
+def live_variable_names(model: BalanceModel, renames: Mapping[str, str]) -> BalanceModel:
+    """The model with its variables renamed (a table's dTEMP -> dT): the live calibrator feeds
+    dT from /balance/temperature less the calibration's reference_temperature_c.
+    """
+    used = set(renames) & set(model.extra_variables)
+    if not used:
+        return model
+    pattern = re.compile(r'\b(' + '|'.join(map(re.escape, sorted(used))) + r')\b')
+    terms = tuple(
+        Term.parse(pattern.sub(lambda m: renames[m.group(1)], t.name)) for t in model.terms
+    )
+    return replace(model, terms=terms)
+
+
 def activate(
     calibration: Calibration,
     model: str = 'adopted',
@@ -279,6 +296,15 @@ def activate(
     chosen = calibration.model(model)  # ConfigError names the models it has
     model_name = calibration.adopted if model in ('adopted', '') else model
     requires = calibration.requires(model_name)
+    unprovided = [r for r in requires if r not in ('temperature', 'load_history')]
+    if unprovided:
+        raise ConfigError(
+            f'{source or calibration.balance}: model {model_name!r} reads channel '
+            f'{", ".join(unprovided)}, which no topic provides (only temperature comes in, on '
+            f'/balance/temperature); choose another model of the calibration (it has '
+            f'{", ".join(calibration.models)}) or fit it without that channel'
+        )
+    chosen = live_variable_names(chosen, calibration.temperature_variables())
     base_name = (
         calibration.base_model if calibration.base_model in calibration.models else model_name
     )

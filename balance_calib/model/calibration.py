@@ -66,10 +66,29 @@ class Calibration:
         """
         needed = []
         for variable in self.model(name).extra_variables:
-            kind = VARIABLE_INPUTS.get(variable, variable)
+            kind = VARIABLE_INPUTS.get(variable) or self.channel_input(variable) or variable
             if kind not in needed:
                 needed.append(kind)
         return tuple(needed)
+
+    def channel_input(self, variable: str) -> str | None:
+        """The live input a table channel's variable needs: 'temperature' for a temperature
+        channel (its d<SYMBOL> is dT), the channel's symbol for any other; None if not one.
+        """
+        for symbol, entry in ((self.extra or {}).get('channels') or {}).items():
+            if entry.get('variable', f'd{symbol}') == variable:
+                return 'temperature' if entry.get('kind') == 'temperature' else str(symbol)
+        return None
+
+    def temperature_variables(self) -> dict[str, str]:
+        """{d<SYMBOL>: 'dT'} for a table's temperature channel: the live calibrator evaluates it
+        as the bag calibrations' dT (°C from /balance/temperature less the reference).
+        """
+        return {
+            str(entry.get('variable', f'd{symbol}')): 'dT'
+            for symbol, entry in ((self.extra or {}).get('channels') or {}).items()
+            if entry.get('kind') == 'temperature'
+        }
 
     @property
     def output_unit(self) -> str:

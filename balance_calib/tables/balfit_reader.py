@@ -77,7 +77,8 @@ class CalibrationTable:
 
     @cached_property
     def output_factor(self) -> np.ndarray:
-        return np.array([known_unit(u)[0] for u in self.output_units])
+        # an extra channel in a unit of its own (mm, %RH) is read as written
+        return np.array([(unit_factor(u) or (1.0,))[0] for u in self.output_units])
 
     @property
     def load_si_units(self) -> tuple[str, ...]:
@@ -302,12 +303,16 @@ def read_table(
         where = f'{name}: row {unit_line}, column {column_letter(FIRST_DATA_COLUMN + i)}'
         if not unit:
             raise TableError(f'{where}: symbol {symbols[i]} has no unit')
-        if unit_factor(unit) is None:
+
+    n_loads = _count_loads(zero_rows, capacity_row, units, n_columns)
+    for i, unit in enumerate(units):
+        # an extra channel may carry any unit (field_data_format.md: mm, %RH); a load may not,
+        # nor an output in volts we cannot convert (mV/mA): that is a bridge signal
+        where = f'{name}: row {unit_line}, column {column_letter(FIRST_DATA_COLUMN + i)}'
+        if unit_factor(unit) is None and (i < n_loads or 'V' in unit):
             raise TableError(
                 f'{where}: unit {unit!r} of {symbols[i]} is not known (known: {known_units()})'
             )
-
-    n_loads = _count_loads(zero_rows, capacity_row, units, n_columns)
     if not 0 < n_loads < n_columns:
         raise TableError(
             f'{name}: cannot tell loads from outputs ({n_loads} loads among {n_columns} symbols)'

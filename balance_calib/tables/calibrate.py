@@ -19,6 +19,13 @@ from ..fit.series_tares import SeriesTareFit
 from ..model.calibration import Calibration
 from ..refit.gates import gates_report
 from .balfit_reader import CalibrationTable
+from .closing import (
+    channel_keys,
+    close_the_loop,
+    live_model,
+    report_closing,
+    temperature_reference_c,
+)
 from .errors import TableCalibrationError
 from .gates import (
     channel_gate,
@@ -223,6 +230,22 @@ def calibrate_table(
         {m: c.candidate.term_set for m, c in choices.items()},
     )
     report['terms_dropped'] = {m: terms_dropped(c) for m, c in choices.items()}
+    # the loop closed on the table: effects found in its points and adopted beyond chance
+    closing = close_the_loop(table, outputs, fits, chosen, term_sets)
+    base_fit = fit
+    form, label = chosen, f'{chosen} model'  # the adopted fit's form, the gates' name for it
+    if closing.adopted:
+        fit = cast(SeriesTareFit, closing.fit)
+        form, label = 'direct', f'{closing.model_name} model'
+        report['method'] = form
+        if chosen != form:
+            report['method_choice'] += '; then ' + '; '.join(closing.notes)
+    report_closing(report, table, closing)
+    if closing.adopted and validation is not None:
+        report['warnings'].append(
+            "validation σ and methods_compared are the base model's: the adopted effects' "
+            'terms are not evaluated on the validation table'
+        )
     if validation is not None:
         own = validations[chosen]
         report['validation_series_tares'] = {
@@ -246,9 +269,9 @@ def calibrate_table(
     sets = {'calibration': (table, fit.load_residuals)}
     if validation is not None:
         sets['validation'] = (validation, validations[chosen].residuals)
-    report.update(signing_sections(table, fit, chosen, outputs, sets))
-    effects, odd = odd_components(chosen, fit, term_sets[chosen], table, outputs)
-    report['effects'] = effects
+    report.update(signing_sections(table, fit, form, outputs, sets))
+    effects, odd = odd_components(chosen, base_fit, term_sets[chosen], table, outputs)
+    report['effects'] = report['effects'] + effects
     report['unexplained'] = report['unexplained'] + odd
     report['model_selection'] = {
         'candidates': [compared_entry(k, loads) for c in choices.values() for k in c.compared],
@@ -284,17 +307,18 @@ def calibrate_table(
             fit.load_residuals,
             fit.press_load_residuals,
             capacity,
-            f'{chosen} model',
+            label,
             applied=table.applied_loads_si,
         ),
         overfit_gate(
             report['sigma_pct_capacity']['calibration'],
             report['sigma_pct_fs_crossval']['after'],
             table.points,
-            len(term_sets[chosen]) + len(fit.series_labels),
-            f'{chosen} model',
+            len(fit.model.terms if closing.adopted else term_sets[chosen])
+            + len(fit.series_labels),
+            label,
         ),
-        condition_gate(fit.condition_number, f'{chosen} model'),
+        condition_gate(fit.condition_number, label),
     ]
     acceptance = gates_report(gates, forced=force)
     report['gates'], report['forced'] = acceptance['gates'], acceptance['forced']
@@ -303,6 +327,8 @@ def calibrate_table(
         raise TableCalibrationError(_refusal(table, refused))
     rated = np.where(np.isfinite(rated) & (rated > 0), rated, np.max(np.abs(outputs), axis=0))
     models = {m: f.model for m, f in fits.items()}
+    if closing.adopted and closing.diagnosis is not None:
+        models[closing.model_name] = live_model(fit.model, closing.diagnosis)
     output_unit = (
         'mV'
         if excitation_v is not None or table.output_internal_unit == 'mV'
@@ -311,7 +337,7 @@ def calibrate_table(
     calibration = Calibration(
         table.balance_name or 'balance',
         models,
-        chosen,
+        closing.model_name,
         chosen,
         capacity,
         rated,
@@ -319,7 +345,7 @@ def calibrate_table(
         tuple(inputs),
         report['sigma_pct_fs']['after'],
         now_iso(),
-        None,
+        temperature_reference_c(closing),
         {
             'format': 'balfit',
             'source': table.source,
@@ -334,6 +360,7 @@ def calibrate_table(
                 for s, row in zip(fit.series_labels, fit.tare_sigma)
             },
             'points': table.points,
+            **channel_keys(closing),
         },
     )
     return TableCalibration(table, validation, fits, chosen, calibration, report, rows)

@@ -161,7 +161,8 @@ def build_report(
     ]
     if extra:
         report['warnings'].append(
-            f'channels {", ".join(extra)} are not bridge outputs: not used by the fit'
+            f'channels {", ".join(extra)} are not bridge outputs: examined as extra channels, '
+            'in the model only where an effect of theirs is adopted (effects, requires)'
         )
     from ..units import BRIDGE_OUTPUTS, COMPONENTS
 
@@ -178,10 +179,9 @@ def build_report(
     report['unexplained'] = structure['unexplained']
     report['diagnosis'] = {'examined': structure['examined'], 'skipped': structure['skipped']}
     report['warnings'].append(
-        "the refit's diagnosis of effects needs sample times, temperatures "
-        'and gravity directions a table lacks: residuals examined against '
-        'point order, load direction and extra channels only (report.json '
-        'diagnosis.skipped)'
+        'a table has no sample times, zero points or gravity directions: creep, excitation '
+        'and the calibration-body tare are not examined; effects are sought in the load '
+        'direction, point order, load sign and extra channels (report.json diagnosis)'
     )
     return report
 
