@@ -20,6 +20,7 @@ COMMAND_MODULES = (
     'balance_calib.commands.reduce',
     'balance_calib.commands.coverage',
     'balance_calib.commands.design',
+    'balance_calib.commands.virtual_daq',
 )
 
 

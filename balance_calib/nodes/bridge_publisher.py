@@ -85,8 +85,8 @@ class StartupError(ValueError):
 
 
 class BridgePublisher(Node):
-    def __init__(self, **kwargs):
-        super().__init__('bridge_publisher', **kwargs)
+    def __init__(self, node_name: str = 'bridge_publisher', **kwargs):
+        super().__init__(node_name, **kwargs)
         try:  # every parameter read once, here (read-only); mode, rate_hz, speed... checked
             self._settings = declare_table(self, TABLE)
         except ValueError as err:
