@@ -17,6 +17,7 @@ setup(
         ('share/' + package_name + '/config/models', glob('config/models/*.yaml')),
         ('share/' + package_name + '/config/plotjuggler', glob('config/plotjuggler/*.xml')),
         ('share/' + package_name + '/config/foxglove', glob('config/foxglove/*.json')),
+        ('share/' + package_name + '/config/daq', glob('config/daq/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.yaml')),
     ],
     # the live calibrator's lone sample in C (live/lone_sample.py), the pure core's only
@@ -45,6 +46,7 @@ setup(
             'balance_recorder = balance_calib.nodes.balance_recorder:main',
             'thrust_analyzer = balance_calib.nodes.thrust_analyzer:main',
             'aero_coefficients = balance_calib.nodes.aero_coefficients:main',
+            'balance_daq = balance_calib.nodes.balance_daq:main',
         ],
     },
 )

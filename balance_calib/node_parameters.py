@@ -12,6 +12,7 @@ from typing import Mapping
 
 from .aero.live_parameters import PARAMETERS as AERO_COEFFICIENTS
 from .bags.recorder_parameters import PARAMETERS as BALANCE_RECORDER
+from .daq.parameters import PARAMETERS as BALANCE_DAQ
 from .live.parameters import PARAMETERS as BALANCE_CALIBRATOR
 from .parameter_table import range_text, show_default, Spec
 from .simulation.publisher_parameters import PARAMETERS as BRIDGE_PUBLISHER
@@ -23,6 +24,7 @@ TABLES: dict[str, Mapping[str, Spec]] = {
     'balance_recorder': BALANCE_RECORDER,
     'thrust_analyzer': THRUST_ANALYZER,
     'aero_coefficients': AERO_COEFFICIENTS,
+    'balance_daq': BALANCE_DAQ,
 }
 
 REGENERATE = 'python -m balance_calib.node_parameters > docs/parameters.md'

@@ -44,6 +44,7 @@ class Spec:
     read_only: bool = False
     choices: tuple[str, ...] = ()
     low_open: bool = False
+    inf_allowed: bool = False  # a list of doubles whose items may be +-inf (a limit left open)
 
     @property
     def kind(self) -> str:
@@ -146,7 +147,10 @@ def check_value(name: str, spec: Spec, value: object) -> object:
         if items is None or not all(isinstance(item, str) for item in items):
             raise ParameterError(f'parameter {name} must be a list of strings, not {value!r}')
         return items
-    if items is None or not all(_is_number(item) and math.isfinite(item) for item in items):
+    if spec.inf_allowed:
+        if items is None or not all(_is_number(item) and not math.isnan(item) for item in items):
+            raise ParameterError(f'parameter {name} must be a list of numbers, not {value!r}')
+    elif items is None or not all(_is_number(item) and math.isfinite(item) for item in items):
         raise ParameterError(f'parameter {name} must be a list of finite numbers, not {value!r}')
     return [float(item) for item in items]
 
@@ -196,6 +200,8 @@ def problems(table: Mapping[str, Spec]) -> list[str]:
             found.append(f'{name}: a range on a {kind} parameter')
         if spec.choices and kind != STRING:
             found.append(f'{name}: choices on a {kind} parameter')
+        if spec.inf_allowed and kind != DOUBLE_ARRAY:
+            found.append(f'{name}: inf_allowed on a {kind} parameter')
         if len(spec.description) < 10:
             found.append(f'{name}: no description')
     return found

@@ -45,6 +45,7 @@ ROSDEP_KEYS = {
     'mcap-ros2-support',
     'python3-setuptools',
     'python3-pil',
+    'python3-serial',
 }
 # import name -> the key that installs it (zstandard and lz4 come with mcap, mcap with
 # mcap-ros2-support)
@@ -62,6 +63,7 @@ IMPORTS = {
     'hypothesis': 'python3-hypothesis',
     'setuptools': 'python3-setuptools',
     'PIL': 'python3-pil',
+    'serial': 'python3-serial',
     **{name: name for name in JAZZY_PACKAGES},
 }
 
