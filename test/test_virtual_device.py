@@ -85,6 +85,8 @@ def test_counts_are_whole_and_within_half_a_count_and_a_prefix_leads_the_line():
 def test_an_rdt_record_is_36_big_endian_bytes_and_clips_like_an_adc():
     device = device_format(
         {
+            'transport': 'udp',
+            'device': '127.0.0.1:49152',
             'framing': 'binary',
             'record_format': '>3I6i',
             'columns': ['seq', '_', 'status', 'FXV', 'FYV', 'FZV', 'MXV', 'MYV', 'MZV'],
@@ -111,8 +113,15 @@ def test_an_rdt_record_is_36_big_endian_bytes_and_clips_like_an_adc():
         ({'columns': ['FXV', 'FYV', 'FZV', 'MXV', 'MYV']}, 'exactly once'),
         ({'columns': ['FXV', 'FXV', 'FYV', 'FZV', 'MXV', 'MYV', 'MZV']}, 'exactly once'),
         ({'units': 'mV/A'}, 'units'),
-        ({'framing': 'binary', 'record_format': '>6q9'}, 'record_format'),
-        ({'framing': 'binary', 'record_format': '>5i'}, '5 fields'),
+        (
+            {'transport': 'udp', 'device': 'h:1', 'framing': 'binary', 'record_format': '>6q9'},
+            'record_format',
+        ),
+        (
+            {'transport': 'udp', 'device': 'h:1', 'framing': 'binary', 'record_format': '>5i'},
+            'holds 5 fields',
+        ),
+        ({'framing': 'binary', 'record_format': '>6i'}, 'udp'),
         ({'start_request': '12zz'}, 'hex'),
         ({'units': 'counts', 'counts_to_mv': [0.0]}, 'counts_to_mv'),
     ],
@@ -123,7 +132,9 @@ def test_a_format_the_device_cannot_send_is_refused_naming_the_parameter(paramet
 
 
 def test_binary_records_only_over_udp(tmp_path):
-    device = device_format({'framing': 'binary', 'record_format': '>6i'})
+    device = device_format(
+        {'transport': 'udp', 'device': 'h:1', 'framing': 'binary', 'record_format': '>6i'}
+    )
     with pytest.raises(DeviceError, match='udp only'):
         VirtualDevice('tcp', '127.0.0.1:0', device)
 
@@ -131,7 +142,8 @@ def test_binary_records_only_over_udp(tmp_path):
 def test_the_format_is_read_from_a_presets_balance_daq_section(tmp_path):
     preset = tmp_path / 'p.yaml'
     preset.write_text(
-        'balance_daq:\n  ros__parameters:\n    transport: udp\n    units: uV/V\n'
+        'balance_daq:\n  ros__parameters:\n    transport: udp\n    device: 192.0.2.1:49152\n'
+        '    units: uV/V\n'
         '    excitation_v: 2.5\n    start_request: "1234000200000000"\n'
     )
     device = read_format(preset)
@@ -217,6 +229,8 @@ def test_udp_answers_the_rdt_request_with_count_records_and_stops_on_command_zer
         '127.0.0.1:0',
         device_format(
             {
+                'transport': 'udp',
+                'device': '127.0.0.1:49152',
                 'framing': 'binary',
                 'record_format': '>3I6i',
                 'columns': ['seq', '_', 'status', 'FXV', 'FYV', 'FZV', 'MXV', 'MYV', 'MZV'],

@@ -132,7 +132,7 @@ def run(args) -> int:
     parameters = publisher_parameters(args)
     path = format_path(args.transport, args.format)
     try:
-        device = VirtualDevice(args.transport, args.device, read_format(path))
+        device = VirtualDevice(args.transport, args.device, read_format(path), str(path))
     except DeviceError as err:
         raise CommandError(str(err)) from None
     try:

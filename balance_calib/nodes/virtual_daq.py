@@ -52,7 +52,7 @@ class VirtualDaq(BridgePublisher):
         self._start_temperature()
 
     def _in_device(self, kind: int) -> bool:
-        return kind == tl.RAW or (kind == tl.TEMPERATURE and self._device.format.has_temperature)
+        return kind == tl.RAW or (kind == tl.TEMPERATURE and self._device.has_temperature)
 
     def _publisher(self, kind, msg_type, topic, qos=EVENT_QOS):
         if self._in_device(kind):
@@ -71,7 +71,7 @@ class VirtualDaq(BridgePublisher):
         if kind == tl.RAW:
             time_s = float(self._timeline.times_s[index]) / self._speed  # device seconds
             self._device.add_sample(self._timeline.values[index], time_s)
-        elif kind == tl.TEMPERATURE and self._device.format.has_temperature:
+        elif kind == tl.TEMPERATURE and self._device.has_temperature:
             self._device.temperature_c = float(self._timeline.values[index, 0])
         else:
             super()._publish(index, now)

@@ -12,7 +12,6 @@ balance_daq binds. No rclpy here: the device is tested without DDS.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import errno
 import fcntl
 import os
@@ -23,30 +22,18 @@ import socket
 import struct
 import termios
 import tty
+from typing import Mapping
 
 import numpy as np
 import yaml
 
-BRIDGES = ('FXV', 'FYV', 'FZV', 'MXV', 'MYV', 'MZV')
-OTHER_COLUMNS = ('seq', 'status', 'temperature', 'excitation', 'time', '_')
-UNITS = ('mV', 'V', 'mV/V', 'uV/V', 'counts')
-TRANSPORTS = ('serial', 'tcp', 'udp')
-# balance_daq's defaults (interfaces.md, the parameter table of "Acquisition")
-DEFAULTS = {
-    'framing': 'line',
-    'record_format': '',
-    'columns': list(BRIDGES),
-    'line_prefix': '',
-    'start_request': '',
-    'stop_request': '',
-    'units': 'mV',
-    'counts_to_mv': [1.0],
-    'excitation_v': 5.0,
-}
+from ..daq.parameters import BRIDGES, daq_settings, DaqSettings
+
 RDT_HEADER = 0x1234
 RDT_START, RDT_STOP = 2, 0
 RDT_REQUEST = struct.Struct('>HHI')
 SEQ_MODULUS = 2**32
+TRANSPORTS = ('serial', 'tcp', 'udp')
 # struct codes that carry an integer, and their ranges (standard sizes, as a '>'/'<' format has)
 _INTEGER_RANGES = {
     'b': (-(2**7), 2**7 - 1),
@@ -66,34 +53,6 @@ class DeviceError(ValueError):
     """A format file or device address the virtual device cannot serve; one line saying which."""
 
 
-@dataclass(frozen=True)
-class DeviceFormat:
-    """What one record of the device holds, read from a preset's balance_daq parameters."""
-
-    framing: str  # line | binary
-    columns: tuple[str, ...]
-    units: str
-    counts_to_mv: np.ndarray  # (6,) mV per count
-    excitation_v: float
-    record_format: str  # binary: struct format of one record
-    line_prefix: str
-    start_request: bytes
-    stop_request: bytes
-    source: str = '(defaults)'
-
-    @property
-    def has_temperature(self) -> bool:
-        return 'temperature' in self.columns
-
-
-def _hex(value: object, name: str, source: str) -> bytes:
-    text = str(value or '').replace(' ', '')
-    try:
-        return bytes.fromhex(text)
-    except ValueError:
-        raise DeviceError(f'{source}: {name} {value!r} is not hex bytes') from None
-
-
 def _struct_fields(record_format: str) -> list[str]:
     """The struct code of each field of a record format ('>3I6i' -> ['I']*3 + ['i']*6)."""
     fields = []
@@ -104,58 +63,14 @@ def _struct_fields(record_format: str) -> list[str]:
     return fields
 
 
-def device_format(parameters: dict, source: str = '(defaults)') -> DeviceFormat:
-    """A DeviceFormat from balance_daq parameters (missing ones take the node's defaults)."""
-    settings = {**DEFAULTS, **{k: v for k, v in parameters.items() if k in DEFAULTS}}
-    columns = tuple(str(c) for c in settings['columns'])
-    unknown = [c for c in columns if c not in BRIDGES + OTHER_COLUMNS]
-    if unknown or any(columns.count(b) != 1 for b in BRIDGES):
-        raise DeviceError(
-            f'{source}: columns {list(columns)} must name each of {", ".join(BRIDGES)} exactly '
-            f'once, besides {", ".join(OTHER_COLUMNS)}'
-        )
-    units = str(settings['units'])
-    if units not in UNITS:
-        raise DeviceError(f'{source}: units {units!r} is not one of {", ".join(UNITS)}')
+def device_format(parameters: Mapping[str, object], source: str = 'format') -> DaqSettings:
+    """balance_daq's own settings of these parameters (its table and checks: what the node
+    accepts, the device can send); DeviceError naming `source` and the parameter otherwise.
+    """
     try:
-        counts = np.broadcast_to(np.asarray(settings['counts_to_mv'], dtype=float), (6,)).copy()
-        excitation = float(settings['excitation_v'])
-    except (TypeError, ValueError):
-        raise DeviceError(
-            f'{source}: counts_to_mv (one value or six) and excitation_v must be numbers'
-        ) from None
-    if not (np.all(np.isfinite(counts)) and np.all(counts > 0)):
-        raise DeviceError(f'{source}: counts_to_mv {list(counts)} must be finite and > 0')
-    if not (np.isfinite(excitation) and excitation > 0):
-        raise DeviceError(f'{source}: excitation_v {excitation} must be finite and > 0')
-    framing = str(settings['framing'])
-    record_format = str(settings['record_format'])
-    if framing not in ('line', 'binary'):
-        raise DeviceError(f'{source}: framing {framing!r} is not line or binary')
-    if framing == 'binary':
-        try:
-            struct.calcsize(record_format)
-        except struct.error:
-            raise DeviceError(
-                f'{source}: record_format {record_format!r} is not a struct format'
-            ) from None
-        if len(_struct_fields(record_format)) != len(columns):
-            raise DeviceError(
-                f'{source}: record_format {record_format!r} has '
-                f'{len(_struct_fields(record_format))} fields, columns {len(columns)}'
-            )
-    return DeviceFormat(
-        framing=framing,
-        columns=columns,
-        units=units,
-        counts_to_mv=counts,
-        excitation_v=excitation,
-        record_format=record_format,
-        line_prefix=str(settings['line_prefix']),
-        start_request=_hex(settings['start_request'], 'start_request', source),
-        stop_request=_hex(settings['stop_request'], 'stop_request', source),
-        source=source,
-    )
+        return daq_settings(parameters)
+    except ValueError as err:
+        raise DeviceError(f'{source}: {err}') from None
 
 
 def preset_parameters(path: Path) -> dict:
@@ -181,11 +96,11 @@ def preset_parameters(path: Path) -> dict:
     )
 
 
-def read_format(path: Path) -> DeviceFormat:
+def read_format(path: Path) -> DaqSettings:
     return device_format(preset_parameters(path), str(path))
 
 
-def bridge_fields(raw_mv: np.ndarray, device: DeviceFormat) -> np.ndarray:
+def bridge_fields(raw_mv: np.ndarray, device: DaqSettings) -> np.ndarray:
     """Bridge outputs (mV, (..., 6)) in the device's units: the inverse of balance_daq's
     conversion (mV = V·1000 = mV/V·excitation = µV/V·excitation/1000 = counts·counts_to_mv).
     Counts are rounded to whole counts (the device's resolution).
@@ -199,7 +114,7 @@ def bridge_fields(raw_mv: np.ndarray, device: DeviceFormat) -> np.ndarray:
         return raw_mv / device.excitation_v
     if device.units == 'uV/V':
         return raw_mv / device.excitation_v * 1000.0
-    return np.rint(raw_mv / device.counts_to_mv)
+    return np.rint(raw_mv / np.asarray(device.counts_to_mv))
 
 
 class Encoder:
@@ -208,13 +123,14 @@ class Encoder:
     to their type's range (an A/D converter at full scale); the seq column counts samples.
     """
 
-    def __init__(self, device: DeviceFormat, line_end: str = '\n'):
+    def __init__(self, device: DaqSettings, line_end: str = '\n'):
         self.device = device
         self.line_end = line_end
         self.seq = 0
         self._fields = _struct_fields(device.record_format) if device.framing == 'binary' else []
         self._struct = struct.Struct(device.record_format) if device.framing == 'binary' else None
         self._bridge_index = {name: i for i, name in enumerate(BRIDGES)}
+        self._prefix = f'{device.line_prefix},' if device.line_prefix else ''
 
     def values(self, raw_mv, time_s: float, temperature_c: float) -> list[float]:
         bridges = bridge_fields(raw_mv, self.device)
@@ -249,8 +165,7 @@ class Encoder:
         text = ','.join(
             self._text(column, value) for column, value in zip(self.device.columns, values)
         )
-        prefix = f'{self.device.line_prefix},' if self.device.line_prefix else ''
-        return (prefix + text + self.line_end).encode('ascii')
+        return (self._prefix + text + self.line_end).encode('ascii')
 
     def _text(self, column: str, value: float) -> str:
         if column in ('seq', 'status', '_') or (
@@ -397,7 +312,7 @@ class UdpDevice:
 
     line_end = '\n'
 
-    def __init__(self, address: str, device: DeviceFormat):
+    def __init__(self, address: str, device: DaqSettings):
         host, port = split_address(address)
         self.device = device
         self._socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -479,13 +394,14 @@ class UdpDevice:
         self._socket.close()
 
 
-def open_device(transport: str, address: str | None, device: DeviceFormat):
+def open_device(transport: str, address: str | None, device: DaqSettings, source: str = ''):
     """The transport for `device`: PtyDevice, TcpDevice or UdpDevice; DeviceError if it cannot."""
     if transport not in TRANSPORTS:
         raise DeviceError(f'transport {transport!r} is not one of {", ".join(TRANSPORTS)}')
     if device.framing == 'binary' and transport != 'udp':
         raise DeviceError(
-            f'{device.source}: binary records go over udp only (interfaces.md), not {transport}'
+            f'{source or "format"}: binary records go over udp only (interfaces.md), not '
+            f'{transport}'
         )
     if transport == 'serial':
         return PtyDevice(address)
@@ -499,10 +415,11 @@ def open_device(transport: str, address: str | None, device: DeviceFormat):
 class VirtualDevice:
     """A transport with its encoder: samples go in as mV, are sent as records at flush()."""
 
-    def __init__(self, transport: str, address: str | None, device: DeviceFormat):
+    def __init__(self, transport: str, address: str | None, device: DaqSettings, source: str = ''):
         self.format = device
+        self.has_temperature = 'temperature' in device.columns
         self.transport = transport
-        self.link = open_device(transport, address, device)
+        self.link = open_device(transport, address, device, source)
         self.encoder = Encoder(device, self.link.line_end)
         self.temperature_c = 20.0
         self._pending: list[bytes] = []
