@@ -204,6 +204,10 @@ def test_setup_installs_config_models_and_the_launch_file(monkeypatch):
     assert sorted(data_files['share/balance_calib/config/models']) == models
     assert data_files['share/balance_calib/launch'] == ['launch/graph.launch.yaml']
     assert 'config/graph_params.yaml' in data_files['share/balance_calib/config']
+    presets = sorted(
+        p.relative_to(ROOT).as_posix() for p in (ROOT / 'config' / 'daq').glob('*.yaml')
+    )
+    assert len(presets) == 3 and sorted(data_files['share/balance_calib/config/daq']) == presets
 
 
 def test_an_installed_package_finds_its_models_in_its_share_directory(tmp_path, monkeypatch):

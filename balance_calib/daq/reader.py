@@ -162,6 +162,8 @@ class DeviceReader:
     def _records(self, link, data: bytes) -> Records:
         if isinstance(self._parser, RecordParser):
             return self._parser.parse([data])
+        if link.datagrams and not data.endswith(b'\n'):  # a datagram of text ends its line
+            data += b'\n'
         lines, overlong = self._framer.feed(data)
         records = self._parser.parse(lines)
         records.malformed += overlong
