@@ -160,8 +160,8 @@ def test_launch_file_starts_the_graphs_nodes_with_parameters_they_declare():
     publishers = [n for n in nodes if n['exec'] == 'bridge_publisher']
     no_daq = "'$(var daq_params)' == ''"
     assert sorted((n['if'], n.get('on_exit')) for n in publishers) == [
-        (f'''$(eval "'$(var stop_with_campaign)' != 'true' and {no_daq}")''', None),
-        (f'''$(eval "'$(var stop_with_campaign)' == 'true' and {no_daq}")''', 'shutdown'),
+        (f"""$(eval "'$(var stop_with_campaign)' != 'true' and {no_daq}")""", None),
+        (f"""$(eval "'$(var stop_with_campaign)' == 'true' and {no_daq}")""", 'shutdown'),
     ]
     (daq,) = [n for n in nodes if n['exec'] == 'balance_daq']
     assert daq['unless'] == f'$(eval "{no_daq}")' and 'if' not in daq

@@ -25,7 +25,7 @@ COMPONENTS = ('force/x', 'force/y', 'force/z', 'torque/x', 'torque/y', 'torque/z
 
 
 def interface_topics() -> dict[str, str]:
-    """topic -> message type, from interfaces.md's topic tables and its sentences
+    """Topic -> message type, from interfaces.md's topic tables and its sentences
     "`/topic` (`pkg/msg/Type`".
     """
     text = INTERFACES.read_text()

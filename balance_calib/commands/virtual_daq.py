@@ -9,7 +9,6 @@ through the device (simulation/virtual_device.py), the rig's and the tunnel's to
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 import sys
 
@@ -70,7 +69,7 @@ def register(subparsers) -> None:
     parser.add_argument(
         '--params-file',
         metavar='FILE',
-        help="a ros__parameters file whose bridge_publisher section sets the run "
+        help='a ros__parameters file whose bridge_publisher section sets the run '
         '(e.g. config/graph_params.yaml)',
     )
     parser.add_argument(
@@ -79,7 +78,7 @@ def register(subparsers) -> None:
         action='append',
         default=[],
         metavar='NAME:=VALUE',
-        help="a bridge_publisher parameter (bridge_publisher --help lists them), e.g. "
+        help='a bridge_publisher parameter (bridge_publisher --help lists them), e.g. '
         '-p rate_hz:=1000 -p seed:=3; after --params-file',
     )
     parser.set_defaults(func=run)

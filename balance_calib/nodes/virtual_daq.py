@@ -129,7 +129,7 @@ class VirtualDaq(BridgePublisher):
                     self._said_unmatched = True
                     self.get_logger().warn(
                         f'no /balance/raw sample came back from balance_daq within '
-                        f'{MARKER_WAIT_S:g} s: the rig\'s messages are stamped on this '
+                        f"{MARKER_WAIT_S:g} s: the rig's messages are stamped on this "
                         "node's clock"
                     )
             else:

@@ -74,7 +74,9 @@ def device_format(parameters: Mapping[str, object], source: str = 'format') -> D
 
 
 def preset_parameters(path: Path) -> dict:
-    """balance_daq's ros__parameters in a params file (section balance_daq, /**, or the only one)."""
+    """balance_daq's ros__parameters in a params file (section balance_daq, /**, or the only
+    one).
+    """
     try:
         data = yaml.safe_load(Path(path).read_text())
     except (OSError, yaml.YAMLError) as err:
@@ -118,7 +120,7 @@ def bridge_fields(raw_mv: np.ndarray, device: DaqSettings) -> np.ndarray:
 
 
 class Encoder:
-    """One sample -> the bytes of one record: a text line (with '\\r\\n' on serial, as a
+    """One sample -> the bytes of one record: a text line (ending CR LF on serial, as a
     microcontroller's println sends) or a struct record. Integer fields are rounded and clipped
     to their type's range (an A/D converter at full scale); the seq column counts samples.
     """
