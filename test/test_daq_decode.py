@@ -135,6 +135,12 @@ def test_a_serial_ports_first_line_is_dropped_uncounted_a_tcp_streams_is_kept():
 def test_a_line_longer_than_the_limit_is_one_malformed_record_and_its_tail_is_dropped():
     lines, overlong, _ = lines_of(b'1,2\n' + b'9' * 3000, b'9' * 3000, b'9,9\n3,4\n')
     assert lines == [b'1,2', b'3,4'] and overlong == 1
+    # however many chunks it spans, and whether or not it ends before the device goes away
+    endless = [b'9' * 3000] * 7
+    lines, overlong, framer = lines_of(*endless, b'9\n5,6\n')
+    assert lines == [b'5,6'] and overlong == 1
+    lines, overlong, framer = lines_of(*endless)
+    assert lines == [] and overlong == 1 and framer.lost_partial() is False
 
 
 @pytest.mark.parametrize(
@@ -438,3 +444,39 @@ def test_the_rdt_preset_is_atis_request_and_record():
     assert settings.stop_request == struct.pack('>HHI', 0x1234, 0, 0)
     assert struct.calcsize(settings.record_format) == 36 and settings.address[1] == 49152
     assert settings.columns[:3] == ('seq', '_', 'status')
+
+
+def test_the_plain_chunk_shortcut_gives_what_the_record_by_record_check_gives():
+    """SampleStream._plain passes a chunk whole; with it refused, every chunk goes through
+    _checked: both must publish and count the same, chunk after chunk (random streams with
+    every kind of record, cut into random chunks).
+    """
+    rng = np.random.default_rng(5)
+    columns = ['seq', 'status'] + BRIDGES + ['time', 'excitation']
+    for trial in range(30):
+        n = 200
+        seq = np.cumsum(rng.choice([1, 1, 1, 1, 0, 2, -3, -5000], n)) % 2**32 + 7000
+        records = np.column_stack(
+            [
+                seq,
+                rng.choice([0, 0, 0, 0, 0, 0, 1], n),
+                rng.normal(0, 4, (n, 6)),
+                np.cumsum(rng.choice([1e-3, 1e-3, 1e-3, 2.0, -0.5], n)),
+                rng.choice([5.0, 5.0, 5.0, 5.0, 0.0], n),
+            ]
+        )
+        records[rng.random((n, len(columns))) < 0.01] = np.nan
+        cuts = np.sort(rng.choice(np.arange(1, n), 60, replace=False))
+        settings = {'columns': columns, 'units': 'mV/V', 'saturation': [9.0]}
+        shortcut, checked = stream(**settings), stream(**settings)
+        checked._plain = lambda fields: False
+        plain = shortcut._plain
+        passed = []
+        shortcut._plain = lambda fields: passed.append(plain(fields)) or passed[-1]
+        for k, chunk in enumerate(np.split(records, cuts)):
+            arrival = 10**9 * (k + 1)
+            one, other = shortcut.take(chunk, arrival), checked.take(chunk, arrival)
+            assert one.stamps_ns.tolist() == other.stamps_ns.tolist()
+            assert one.bridges_mv.tolist() == other.bridges_mv.tolist()
+        assert shortcut.counts == checked.counts, trial
+        assert shortcut.counts.samples_published > 20 and any(passed)  # both ways were taken

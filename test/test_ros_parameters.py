@@ -109,6 +109,11 @@ BAD_STARTS = [
         {'min_samples': 0},
         'aero_coefficients: parameter min_samples must be in [1, inf), not 0',
     ),
+    (
+        'balance_daq',
+        {'transport': 'can'},
+        "parameter transport must be one of serial, tcp, udp (transport = 'can' given)",
+    ),
 ]
 
 

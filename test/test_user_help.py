@@ -23,6 +23,7 @@ NODES = [
     'balance_recorder',
     'thrust_analyzer',
     'aero_coefficients',
+    'balance_daq',
 ]
 # scripts whose options another issue's engineer documents (diagnosis_rates: issue 11)
 OPTIONS_DOCUMENTED_ELSEWHERE = {'diagnosis_rates'}

@@ -49,7 +49,7 @@ class LineFramer:
         self._pending, self._skip_first, self._overlong = b'', partial_first, False
 
     def lost_partial(self) -> bool:
-        cut = bool(self._pending.strip()) and not self._skip_first
+        cut = bool(self._pending.strip()) and not (self._skip_first or self._overlong)
         self._pending = b''
         return cut
 
@@ -62,12 +62,9 @@ class LineFramer:
             lines.pop(0)  # the tail of a partial first line, or of an overlong one
             self._skip_first = self._overlong = False
         if len(self._pending) > self._max:
-            self._pending = b''
-            if self._skip_first:  # a partial first line that is also too long: still uncounted
-                self._skip_first = False
-            else:
-                overlong = 1
-            self._overlong = True
+            # counted once, when it first overflows (a partial first line is never counted)
+            overlong = int(not (self._skip_first or self._overlong))
+            self._pending, self._skip_first, self._overlong = b'', False, True
         return lines, overlong
 
 

@@ -3,7 +3,8 @@
 `DeviceReader(settings, on_samples, log, now_ns)` reads with blocking reads that time out
 (transports.READ_TIMEOUT_S: no busy loop) and calls `on_samples(Samples)` from its thread for each
 chunk that gave samples (the node publishes them there: no queue between). It never gives up on
-the device: a link that cannot be opened or is lost is tried again every reconnect_period_s,
+the device: a link that cannot be opened or is lost (or an error of its own while reading: it is
+logged) is tried again every reconnect_period_s,
 each attempt after the first counted in `reconnects`; a UDP device asked with a start_request
 that stays silent that long is asked again, which counts as a reconnect too. Console lines go to
 `log(level, text)`, at most one a second per kind of trouble. `snapshot()` gives the counts, the
@@ -100,7 +101,8 @@ class DeviceReader:
             attempts += 1
             try:
                 link = open_link(settings)
-            except (OSError, ValueError) as err:  # serial.SerialException is an OSError
+            # serial.SerialException is an OSError; ImportError: pyserial is missing
+            except (OSError, ValueError, ImportError) as err:
                 self._say(
                     'connect',
                     'warning',
@@ -120,6 +122,12 @@ class DeviceReader:
                 self._read(link)
             except OSError as err:
                 self._say('lost', 'warning', f'lost {settings.device}: {err}; reconnecting')
+            except Exception as err:  # noqa: BLE001 (a bug must not end the device's thread)
+                if self._stop.is_set():  # shutting down: the publishers may be gone already
+                    break
+                self._say(
+                    'error', 'error', f'unexpected {err!r} reading {settings.device}; reconnecting'
+                )
             finally:
                 link.close()
                 with self._lock:
@@ -160,10 +168,11 @@ class DeviceReader:
             self._tell(records)
 
     def _records(self, link, data: bytes) -> Records:
+        datagrams = [data] + link.waiting() if link.datagrams else [data]
         if isinstance(self._parser, RecordParser):
-            return self._parser.parse([data])
-        if link.datagrams and not data.endswith(b'\n'):  # a datagram of text ends its line
-            data += b'\n'
+            return self._parser.parse(datagrams)
+        if link.datagrams:  # a datagram of text ends its line
+            data = b''.join(d if d.endswith(b'\n') else d + b'\n' for d in datagrams)
         lines, overlong = self._framer.feed(data)
         records = self._parser.parse(lines)
         records.malformed += overlong

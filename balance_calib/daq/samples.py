@@ -73,27 +73,36 @@ class Samples:
         return len(self.stamps_ns)
 
 
+EMPTY = Samples(np.zeros(0, np.int64), np.zeros((0, 6)), None)
+
+
 class SampleStream:
     """The state between chunks (last seq, time offset, last stamp) and the counts."""
 
     def __init__(self, settings: DaqSettings):
         self.counts = Counts()
-        self._bridges = np.array(settings.bridge_columns)
+        first = settings.bridge_columns[0]  # FXV ... MZV side by side: a view, not a copy
+        side_by_side = settings.bridge_columns == tuple(range(first, first + 6))
+        self._bridges: slice | np.ndarray = (
+            slice(first, first + 6) if side_by_side else np.array(settings.bridge_columns)
+        )
         used = [i for i, name in enumerate(settings.columns) if name != '_']
         self._used = np.array(used, dtype=int)
+        self._all_used = len(used) == len(settings.columns)
         self._seq = settings.column('seq')
         self._status = settings.column('status')
         self._temperature = settings.column('temperature')
         self._excitation = settings.column('excitation')
         self._time = settings.column('time')
         self._saturation = np.array(settings.saturation)
+        self._saturable = bool(np.isfinite(self._saturation).any())
         self._ratiometric = settings.units in RATIOMETRIC
-        if settings.units == 'counts':
-            self._mv_per_unit = np.array(settings.counts_to_mv)
-        elif self._ratiometric:  # mV per (unit x volt of excitation)
-            self._mv_per_unit = np.full(6, MV_PER_UNIT[settings.units])
-        else:
-            self._mv_per_unit = np.full(6, MV_PER_UNIT[settings.units])
+        # mV per unit of each bridge field (mV/V and uV/V: per volt of excitation too)
+        self._mv_per_unit = (
+            np.array(settings.counts_to_mv)
+            if settings.units == 'counts'
+            else np.full(6, MV_PER_UNIT[settings.units])
+        )
         self._excitation_v = settings.excitation_v
         self._last_stamp_ns = -1
         self.restart()
@@ -108,34 +117,22 @@ class SampleStream:
         """The samples to publish of fields (N, columns): whole records in arrival order, arrived
         at arrival_ns (host clock); malformed: records the framing already dropped.
         """
-        counts = self.counts
-        counts.records_malformed += malformed
-        if len(fields):
-            fields = fields[self._usable(fields)]
-        n = len(fields)
-        if n == 0:
-            return Samples(np.zeros(0, np.int64), np.zeros((0, 6)), None)
-        fresh = self._sequence(fields[:, self._seq]) if self._seq is not None else None
-        if fresh is not None and not fresh.all():
-            fields = fields[fresh]
-        time_ns = (
-            self._device_time(fields[:, self._time], arrival_ns)
-            if self._time is not None
-            else None
-        )
-        good = np.ones(len(fields), bool)
-        if self._status is not None:
-            good &= fields[:, self._status] == 0
-            counts.samples_invalid += int(len(good) - good.sum())
-        bridges = fields[:, self._bridges]
-        saturated = good & (np.abs(bridges) >= self._saturation).any(axis=1)
-        counts.samples_saturated += int(saturated.sum())
-        good &= ~saturated
-        if not good.all():
-            bridges = bridges[good]
-            fields = fields[good]
-            time_ns = time_ns[good] if time_ns is not None else None
-        bridges_mv = bridges * self._mv_per_unit
+        self.counts.records_malformed += malformed
+        if not len(fields):
+            return EMPTY
+        if self._plain(fields):  # the usual chunk: every record good, seq stepping by one
+            if self._seq is not None:
+                self._last_seq = int(fields[-1, self._seq])
+            time_ns = (
+                None
+                if self._time is None
+                else self._device_time(fields[:, self._time], arrival_ns)
+            )
+        else:
+            fields, time_ns = self._checked(fields, arrival_ns)
+            if not len(fields):
+                return EMPTY
+        bridges_mv = fields[:, self._bridges] * self._mv_per_unit
         if self._ratiometric:
             excitation = (
                 fields[:, self._excitation, None]
@@ -144,9 +141,62 @@ class SampleStream:
             )
             bridges_mv = bridges_mv * excitation
         stamps = self._stamps(time_ns, arrival_ns, len(bridges_mv))
-        counts.samples_published += len(stamps)
+        self.counts.samples_published += len(stamps)
         temperature = fields[:, self._temperature] if self._temperature is not None else None
         return Samples(stamps, bridges_mv, temperature)
+
+    def _plain(self, fields: np.ndarray) -> bool:
+        """True when every record is usable, fresh, unflagged and unsaturated, its seq (if any)
+        following the last one by one each: what _checked would pass whole, in a few operations.
+        """
+        if not np.isfinite(fields if self._all_used else fields[:, self._used]).all():
+            return False
+        if self._seq is not None:
+            seq = fields[:, self._seq]
+            if self._last_seq is None or seq[0] != self._last_seq + 1:
+                return False
+            if len(seq) > 1 and not (seq[1:] - seq[:-1] == 1).all():
+                return False
+            if seq[-1] >= SEQ_MODULUS:
+                return False
+        if self._status is not None and fields[:, self._status].any():
+            return False
+        if self._excitation is not None and not (fields[:, self._excitation] > 0).all():
+            return False
+        return not (
+            self._saturable and (np.abs(fields[:, self._bridges]) >= self._saturation).any()
+        )
+
+    def _checked(
+        self, fields: np.ndarray, arrival_ns: int
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Record by record as the module says: -> the records to publish and their device time
+        carried onto the host clock (ns; None without a time column); counts the others.
+        """
+        counts = self.counts
+        fields = fields[self._usable(fields)]
+        if not len(fields):
+            return fields, None
+        if self._seq is not None:
+            fresh = self._sequence(fields[:, self._seq])
+            if not fresh.all():
+                fields = fields[fresh]
+        time_ns = (
+            self._device_time(fields[:, self._time], arrival_ns)
+            if self._time is not None and len(fields)
+            else None
+        )
+        good = np.ones(len(fields), bool)
+        if self._status is not None:
+            good &= fields[:, self._status] == 0
+            counts.samples_invalid += int(len(good) - good.sum())
+        saturated = good & (np.abs(fields[:, self._bridges]) >= self._saturation).any(axis=1)
+        counts.samples_saturated += int(saturated.sum())
+        good &= ~saturated
+        if not good.all():
+            fields = fields[good]
+            time_ns = time_ns[good] if time_ns is not None else None
+        return fields, time_ns
 
     def _usable(self, fields: np.ndarray) -> np.ndarray:
         """Mask of the records whose used fields are all finite numbers (and seq an integer of
@@ -208,6 +258,9 @@ class SampleStream:
         """Strictly increasing stamps: the device's carried time, or the arrival time."""
         if count == 0:
             return np.zeros(0, np.int64)
+        if count == 1 and time_ns is None:  # one sample a read: the usual case at high rates
+            self._last_stamp_ns = max(arrival_ns, self._last_stamp_ns + 1)
+            return np.array([self._last_stamp_ns], np.int64)
         index = np.arange(count, dtype=np.int64)
         wanted = np.full(count, arrival_ns, np.int64) if time_ns is None else time_ns
         # s_i strictly increasing <=> s_i - i non-decreasing

@@ -5,17 +5,21 @@ cannot be), sends `start_request` once open, and `read()` blocks at most READ_TI
 or None when nothing came; OSError when the device is gone (LinkLost for a closed TCP stream).
 `close()` sends `stop_request` first. A UDP link with a start_request sends it to host:port and
 reads the replies (`resend()` sends it again); without one it binds host:port. Datagram links
-read one datagram per call (a datagram is a unit of binary records).
+read one datagram per call (a datagram is a unit of binary records), and `waiting()` takes those
+that arrived meanwhile without blocking.
 """
 
 from __future__ import annotations
 
+import select
 import socket
 
 from .parameters import DaqSettings
 
 READ_TIMEOUT_S = 0.2  # a read returns at least this often, so a stop is seen promptly
 MAX_DATAGRAM = 65536
+MAX_BATCH = 256  # datagrams taken at one wake-up: one decode and one publish loop for them all
+RECEIVE_BUFFER_BYTES = 4 << 20  # asked for (the kernel caps it at net.core.rmem_max)
 STREAM_CHUNK = 65536
 
 
@@ -95,7 +99,11 @@ class TcpLink:
 
 
 class UdpLink:
-    """UDP: with a start_request, a client of the device at host:port; without, bound to it."""
+    """UDP: with a start_request, a client of the device at host:port; without, bound to it.
+
+    The socket is non-blocking; read() waits for it with poll(), so that `waiting()` can take
+    what else has arrived without a wait of its own.
+    """
 
     partial_first = False
     datagrams = True
@@ -112,24 +120,39 @@ class UdpLink:
             else:
                 self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
                 self._socket.bind(address)
-            self._socket.settimeout(READ_TIMEOUT_S)
+            self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RECEIVE_BUFFER_BYTES)
+            self._socket.setblocking(False)
+            self._poll = select.poll()
+            self._poll.register(self._socket, select.POLLIN)
             self.resend()
         except OSError:
             self._socket.close()
             raise
 
     def read(self) -> bytes | None:
+        if not self._poll.poll(READ_TIMEOUT_S * 1000):
+            return None
         try:
             return self._socket.recv(MAX_DATAGRAM)
-        except (TimeoutError, ConnectionRefusedError):  # nobody there (yet): silence
-            return None
+        except (BlockingIOError, InterruptedError, ConnectionRefusedError):
+            return None  # nobody there (yet): silence
+
+    def waiting(self, limit: int = MAX_BATCH) -> list[bytes]:
+        """The datagrams already waiting (at most `limit`), without blocking: a batch."""
+        batch = []
+        try:
+            for _ in range(limit):
+                batch.append(self._socket.recv(MAX_DATAGRAM))
+        except (BlockingIOError, InterruptedError, ConnectionRefusedError):
+            pass
+        return batch
 
     def resend(self) -> None:
         """Send the start_request (again); nothing for a bound socket."""
         if self._request:
             try:
                 self._socket.send(self._request)
-            except ConnectionRefusedError:  # an earlier send found no one: silence
+            except (BlockingIOError, ConnectionRefusedError):  # found no one: silence
                 pass
 
     @property
@@ -149,5 +172,6 @@ class UdpLink:
 
 def open_link(settings: DaqSettings) -> SerialLink | TcpLink | UdpLink:
     """The link of settings.transport, open; OSError when the device cannot be reached."""
-    kind = {'serial': SerialLink, 'tcp': TcpLink, 'udp': UdpLink}[settings.transport]
-    return kind(settings)
+    if settings.transport == 'serial':
+        return SerialLink(settings)
+    return TcpLink(settings) if settings.transport == 'tcp' else UdpLink(settings)

@@ -64,11 +64,15 @@ class BalanceDaq(Node):
         logger = self.get_logger()  # rclpy wants one severity per call site
         if level == 'info':
             logger.info(line)
-        else:
+        elif level == 'warning':
             logger.warning(line)
+        else:
+            logger.error(line)
 
     def _publish(self, samples: Samples) -> None:
         """In the device's thread: the samples of one chunk."""
+        if not self.context.ok():  # Ctrl-C: rclpy shut down before destroy_node stops the thread
+            return
         publish = self._raw.publish
         for data in self._encoder.encode(samples.stamps_ns, samples.bridges_mv):
             publish(data)
@@ -98,7 +102,7 @@ class BalanceDaq(Node):
         self._diagnostics.publish(array)
 
     def destroy_node(self):
-        self._reader.close()  # stop_request sent, link closed
+        self._reader.close()  # stop_request sent, link closed (the thread ends before the node)
         return super().destroy_node()
 
 
@@ -114,9 +118,9 @@ def main(args=None):
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except ParameterError as err:
-        print(f'balance_daq: {err}', file=sys.stderr)
-        status = 2
+    except ParameterError as err:  # one line naming the parameter, as every node says it
+        rclpy.logging.get_logger('balance_daq').error(str(err))
+        status = 1
     finally:
         if node is not None:
             node.destroy_node()
