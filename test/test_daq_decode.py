@@ -480,3 +480,12 @@ def test_the_plain_chunk_shortcut_gives_what_the_record_by_record_check_gives():
             assert one.bridges_mv.tolist() == other.bridges_mv.tolist()
         assert shortcut.counts == checked.counts, trial
         assert shortcut.counts.samples_published > 20 and any(passed)  # both ways were taken
+
+
+def test_a_device_time_jump_is_said_in_the_message_at_no_level_of_its_own():
+    checker = health()
+    status = checker.status(Counts(samples_published=100, time_jumps=1), True, 1.0, 1.0)
+    assert status.level == OK
+    assert status.message == 'ok; device time jumped 1 time(s): stamps re-fixed'
+    status = checker.status(Counts(samples_published=200, time_jumps=1), True, 2.0, 2.0)
+    assert status.message == 'ok'

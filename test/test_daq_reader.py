@@ -187,3 +187,20 @@ def test_a_udp_device_sending_unasked_to_a_bound_port_one_line_a_datagram():
     finally:
         run.close()
         sender.close()
+
+
+def test_a_serial_device_unplugged_is_said_and_tried_again_without_a_busy_loop():
+    pty = PtyDevice()
+    run = Run(transport='serial', device=pty.path, reconnect_period_s=0.05)
+    try:
+        wait_for(run.connected, what='the port open')
+        pty.write(b'junk\n1 2 3 4 5 6\n')
+        wait_for(lambda: len(run.bridges) == 1, what='a sample')
+        pty.close()  # unplugged: the pty's path goes away
+        wait_for(lambda: run.counts().reconnects >= 3, what='attempts to reopen it')
+        assert not run.connected()
+        assert any('lost' in text for _, text in run.logged)
+        assert any('cannot reach' in text for _, text in run.logged)
+    finally:
+        run.close()
+    assert not run.reader._thread.is_alive()

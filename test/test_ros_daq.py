@@ -207,6 +207,7 @@ def test_a_tcp_line_device_survives_every_bad_input_and_a_refusing_peer_is_retri
         said = statuses(diagnostics, name)
         assert any(level == ERROR and 'saturated' in message for level, message, _ in said)
         assert any('dropped' in message for _, message, _ in said)
+        assert any('device time jumped 1 time(s)' in message for _, message, _ in said)
         # the refusing peer: retried every period, never connected, never exited
         other = f'balance_daq: {refused}'
         wait_for(

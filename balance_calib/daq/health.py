@@ -4,6 +4,7 @@ One status a period (1 Hz), named `balance_daq: ` + device. Level ERROR while di
 stale (no valid sample for stale_after_s) or saturated (a saturated sample in the period); WARN
 while the rate is off expected_rate_hz by more than RATE_TOLERANCE or samples were dropped in the
 period (malformed, invalid, missing, duplicate); OK otherwise. docs/interfaces.md, "Acquisition".
+A device-time jump (the stamps' offset fixed again) is said in the message, at no level of its own.
 """
 
 from __future__ import annotations
@@ -71,6 +72,8 @@ class Health:
             warnings.append(f'rate {rate:.1f} Hz, expected {self._expected:g} Hz')
         if dropped:
             warnings.append(f'{dropped} dropped (malformed, invalid, missing or duplicate)')
+        jumps = counts.time_jumps - self._last.time_jumps  # said, but no level of its own
+        notes = [f'device time jumped {jumps} time(s): stamps re-fixed'] if jumps else []
         level = ERROR if errors else WARN if warnings else OK
         values = tuple((key, str(getattr(counts, key))) for key in COUNTER_KEYS)
         values = (
@@ -85,7 +88,7 @@ class Health:
         return DaqStatus(
             level,
             NAME_PREFIX + self._device,
-            '; '.join(errors + warnings) or 'ok',
+            '; '.join((errors + warnings or ['ok']) + notes),
             self._device,
             values,
         )

@@ -42,11 +42,14 @@ class Throttle:
         self._log, self._period = log, period_s
         self._last: dict[str, float] = {}
 
-    def __call__(self, kind: str, level: str, text: str) -> None:
+    def __call__(self, kind: str, level: str, text: str) -> bool:
+        """Log `text` unless this kind was logged less than period_s ago; -> whether it was."""
         now = time.monotonic()
-        if now - self._last.get(kind, -float('inf')) >= self._period:
-            self._last[kind] = now
-            self._log(level, text)
+        if now - self._last.get(kind, -float('inf')) < self._period:
+            return False
+        self._last[kind] = now
+        self._log(level, text)
+        return True
 
 
 class DeviceReader:
@@ -180,10 +183,13 @@ class DeviceReader:
 
     def _tell(self, records: Records) -> None:
         """Console lines for what this chunk added to the counts, one a second per kind."""
-        for line in records.non_data:
-            if line not in self._non_data_seen and len(self._non_data_seen) < NON_DATA_REMEMBERED:
+        for line in records.non_data:  # each distinct one once (when the second allows it)
+            if (
+                line not in self._non_data_seen
+                and len(self._non_data_seen) < NON_DATA_REMEMBERED
+                and self._say('non-data', 'info', f'skipped a line that is not data: {line!r}')
+            ):
                 self._non_data_seen.add(line)
-                self._say('non-data', 'info', f'skipped a line that is not data: {line!r}')
         with self._lock:
             counts = self._stream.counts.copy()
         for key, what in COUNTED:
