@@ -202,6 +202,10 @@ class PtyDevice:
         os.set_blocking(self.master, False)
         self.path = os.ttyname(self._slave)
         self.backlog_bytes = backlog_bytes
+        # an empty line before the first record: the line balance_daq drops after opening a port
+        # (it may be a tail) is this one, not the first sample (not written now: pyserial
+        # empties the input when it opens the port)
+        self._lead = self.line_end.encode()
         self.dropped_bytes = 0
         self.link = Path(link) if link else None
         if self.link is not None:
@@ -227,7 +231,7 @@ class PtyDevice:
         if waiting > self.backlog_bytes:
             termios.tcflush(self._slave, termios.TCIFLUSH)
             self.dropped_bytes += waiting
-        data = b''.join(records)
+        data, self._lead = self._lead + b''.join(records), b''
         try:
             os.write(self.master, data)
         except OSError as err:
