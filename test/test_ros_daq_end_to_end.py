@@ -105,7 +105,7 @@ def refit(bag: Path, out: Path) -> dict:
 
 def test_a_campaign_through_a_tcp_device_refits_to_the_simulators_calibration(tmp_path):
     preset = PRESETS / 'tcp_mvv.yaml'
-    rate_hz, point_s, transition_s, seed, speed = 200.0, 0.06, 0.03, 5, 2.0
+    rate_hz, point_s, transition_s, seed, speed = 200.0, 0.06, 0.03, 5, 4.0
     config = load_balance_config('lmc6522')
     # the campaign bridge_publisher plays with these parameters (its calibration mode)
     campaign = simulate_campaign(
