@@ -272,3 +272,21 @@ def test_udp_answers_the_rdt_request_with_count_records_and_stops_on_command_zer
     finally:
         peer.close()
         device.close()
+
+
+@pytest.mark.parametrize(
+    ('args', 'says'),
+    [
+        (['--transport', 'tcp', '--device', '127.0.0.1:0', '--format', 'nosuch'], 'nosuch'),
+        (['--transport', 'tcp', '--device', 'nonsense'], 'host:port'),
+        (['--transport', 'tcp', '--device', '127.0.0.1:0', '--format', 'netft_rdt'], 'udp only'),
+        (['--transport', 'udp', '--device', '127.0.0.1:0', '-p', 'mode:=replay'], 'replay'),
+        (['--transport', 'udp', '--device', '127.0.0.1:0', '-p', 'rate_hz'], 'NAME:=VALUE'),
+    ],
+)
+def test_virtual_daq_refuses_bad_options_in_one_line_before_ros_starts(args, says, capsys):
+    from balance_calib.cli import main
+
+    assert main(['virtual-daq', *args]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and says in err and err.startswith('balance-calib virtual-daq:')

@@ -122,6 +122,11 @@ def publisher_parameters(args) -> dict:
     for name, value in parameters.items():
         if value is None:
             raise CommandError(f'parameter {name}: no value')
+    if parameters.get('mode', MODES[0]) not in MODES:
+        raise CommandError(
+            f'mode {parameters["mode"]!r}: virtual-daq plays {" or ".join(MODES)} '
+            "(bridge_publisher's modes with a balance behind the bridges)"
+        )
     return parameters
 
 
