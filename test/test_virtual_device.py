@@ -21,6 +21,7 @@ from balance_calib.simulation.virtual_device import (
     DeviceError,
     Encoder,
     read_format,
+    ReturnedSamples,
     VirtualDevice,
 )
 
@@ -290,3 +291,27 @@ def test_virtual_daq_refuses_bad_options_in_one_line_before_ros_starts(args, say
     assert main(['virtual-daq', *args]) == 2
     err = capsys.readouterr().err
     assert err.count('\n') == 1 and says in err and err.startswith('balance-calib virtual-daq:')
+
+
+def test_returned_samples_are_told_apart_by_value_so_a_lost_one_shifts_no_marker():
+    rng = np.random.default_rng(3)
+    written = rng.normal(0.0, 1e-3, (8, 6)) + 1.0  # noise of a µV between samples
+    device = device_format({'units': 'counts', 'counts_to_mv': [1e-6]})
+    returned = ReturnedSamples(device)
+    for values in written:
+        returned.written(values)
+    quantised = np.rint(written / 1e-6) * 1e-6  # what balance_daq publishes from counts
+    assert returned.marker_stamp(0) is None and returned.marker_stamp(1) is None
+    assert returned.returned(quantised[0], 100)
+    assert returned.marker_stamp(1) == 101  # 1 ns after sample 0
+    assert returned.marker_stamp(2) is None  # sample 1 not resolved yet
+    assert returned.returned(quantised[3], 400)  # 1 and 2 lost on the way
+    assert returned.lost == 2
+    assert returned.marker_stamp(2) == 101 and returned.marker_stamp(3) == 101
+    assert returned.marker_stamp(4) == 401
+    assert not returned.returned(quantised[3] + 1e-4, 500)  # matches nothing written
+    first_lost = ReturnedSamples(device)
+    for values in written[:3]:
+        first_lost.written(values)
+    first_lost.returned(quantised[1], 200)  # the very first one lost (a port's first line)
+    assert first_lost.marker_stamp(1) == 199  # before the next that came back

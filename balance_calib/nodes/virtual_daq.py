@@ -17,8 +17,9 @@ carried onto the host clock), a little later than this node sends them and by an
 node cannot know. So each rig message waits until the /balance/raw sample that came just before
 it in the run has come back from balance_daq, and is stamped 1 ns after that sample: every
 sample falls on the same side of every marker as in bridge_publisher's run, whatever the device's
-latency or this node's timer jitter. A marker still waiting after MARKER_WAIT_S (no balance_daq
-publishing) goes out stamped now, said once.
+latency or this node's timer jitter. The samples that come back are told apart by their values
+(simulation/virtual_device.ReturnedSamples), so one lost on the way shifts nothing. A marker
+still waiting after MARKER_WAIT_S (no balance_daq publishing) goes out stamped now, said once.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from rclpy.duration import Duration
 from rclpy.time import Time
 
 from balance_calib.simulation import timeline as tl
-from balance_calib.simulation.virtual_device import VirtualDevice
+from balance_calib.simulation.virtual_device import ReturnedSamples, VirtualDevice
 
 from ._qos import STREAM_QOS
 from .bridge_publisher import BridgePublisher, EVENT_QOS, StartupError
@@ -73,7 +74,7 @@ class VirtualDaq(BridgePublisher):
         self._speed = float(self._settings['speed'])
         self._start_temperature()
         self._written = 0  # raw samples handed to the device
-        self._returned: list[int] = []  # stamps (ns) of the samples balance_daq published
+        self._returned = ReturnedSamples(device.format)  # which came back, stamped how
         self._held: deque = deque()  # (samples before it, kind, values, held since ns)
         self._said_unmatched = False
         if self.mode == 'calibration':
@@ -101,6 +102,8 @@ class VirtualDaq(BridgePublisher):
         if kind == tl.RAW:
             time_s = float(self._timeline.times_s[index]) / self._speed  # device seconds
             self._device.add_sample(self._timeline.values[index], time_s)
+            if self.mode == 'calibration':  # only the rig's markers need them back
+                self._returned.written(self._timeline.values[index])
             self._written += 1
         elif kind == tl.TEMPERATURE and self._device.has_temperature:
             self._device.temperature_c = float(self._timeline.values[index, 0])
@@ -112,17 +115,20 @@ class VirtualDaq(BridgePublisher):
             super()._publish(index, now)
 
     def _on_raw(self, msg: WrenchStamped) -> None:
-        self._returned.append(Time.from_msg(msg.header.stamp).nanoseconds)
+        w = msg.wrench
+        values = (w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z)
+        self._returned.returned(values, Time.from_msg(msg.header.stamp).nanoseconds)
         self._release(self.get_clock().now())
 
     def _release(self, now: Time) -> None:
         """Publish the held markers whose preceding sample has come back (see the docstring)."""
         while self._held:
             before, kind, values, since_ns = self._held[0]
+            matched = self._returned.marker_stamp(before) if before else None
             if before == 0:  # nothing before it: it goes first
                 stamp_ns = now.nanoseconds
-            elif len(self._returned) >= before:
-                stamp_ns = self._returned[before - 1] + 1
+            elif matched is not None:
+                stamp_ns = matched
             elif now.nanoseconds - since_ns > MARKER_WAIT_S * 1e9:
                 stamp_ns = now.nanoseconds
                 if not self._said_unmatched:

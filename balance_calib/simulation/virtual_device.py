@@ -12,6 +12,7 @@ balance_daq binds. No rclpy here: the device is tested without DDS.
 
 from __future__ import annotations
 
+import bisect
 import errno
 import fcntl
 import os
@@ -448,3 +449,53 @@ class VirtualDevice:
 
     def close(self) -> None:
         self.link.close()
+
+
+class ReturnedSamples:
+    """Which written sample each /balance/raw sample that comes back from balance_daq is, and so
+    the stamp balance_daq gave the last sample before any point of the run.
+
+    Written samples are numbered in order; a returned one is matched by its values (the bridge
+    outputs in mV, within the device's resolution: half a count, or 1e-6 relative for text and
+    floats -- far below the noise between two samples) against the next `lookahead` written
+    ones, so a sample lost on the way (a UDP datagram, the line balance_daq drops after opening
+    a port) is skipped instead of shifting every later match. A written sample is resolved once
+    it or a later one came back (then a lost one is known lost).
+    """
+
+    def __init__(self, device: DaqSettings, lookahead: int = 200):
+        counts = device.units == 'counts'
+        self._absolute = 0.5 * np.abs(np.asarray(device.counts_to_mv)) if counts else np.zeros(6)
+        self._lookahead = lookahead
+        self._pending: list[np.ndarray] = []  # written, not yet resolved (from _first)
+        self._first = 0  # index of _pending[0]
+        self._matched: list[tuple[int, int]] = []  # (index, stamp ns), increasing
+        self.lost = 0
+
+    def written(self, raw_mv) -> None:
+        self._pending.append(np.asarray(raw_mv, dtype=float))
+
+    def returned(self, raw_mv, stamp_ns: int) -> bool:
+        """Match one returned sample; False if it matches none of the next written ones."""
+        values = np.asarray(raw_mv, dtype=float)
+        for offset, expected in enumerate(self._pending[: self._lookahead]):
+            tolerance = self._absolute + 1e-6 * np.abs(expected) + 1e-12
+            if np.all(np.abs(values - expected) <= tolerance):
+                self.lost += offset
+                self._matched.append((self._first + offset, stamp_ns))
+                del self._pending[: offset + 1]
+                self._first += offset + 1
+                return True
+        return False
+
+    def marker_stamp(self, k: int) -> int | None:
+        """The stamp of a message that came after the first k written samples: 1 ns after the
+        last of them that came back (1 ns before the next that did, when none of them did);
+        None until all k are resolved.
+        """
+        if k > self._first:
+            return None
+        at = bisect.bisect_left(self._matched, (k, -1))  # matched indices < k end here
+        if at:
+            return self._matched[at - 1][1] + 1
+        return self._matched[at][1] - 1 if at < len(self._matched) else None
