@@ -15,6 +15,8 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.csv')),
         ('share/' + package_name + '/config/models', glob('config/models/*.yaml')),
+        ('share/' + package_name + '/config/plotjuggler', glob('config/plotjuggler/*.xml')),
+        ('share/' + package_name + '/config/foxglove', glob('config/foxglove/*.json')),
         ('share/' + package_name + '/config/daq', glob('config/daq/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.yaml')),
     ],

@@ -22,6 +22,7 @@ COMMAND_MODULES = (
     'balance_calib.commands.design',
     'balance_calib.commands.check',
     'balance_calib.commands.compare',
+    'balance_calib.commands.virtual_daq',
 )
 
 

@@ -108,7 +108,11 @@ def graph_nodes() -> list[str]:
     """The executables launchless_scripts/graph starts (its `nodes` list and what it appends)."""
     text = GRAPH.read_text()
     listed = re.search(r'^nodes = \[([^\]]*)\]', text, re.M).group(1)
-    return re.findall(r'"(\w+)"', listed) + re.findall(r'nodes\.append\("(\w+)"\)', text)
+    return (
+        re.findall(r'"(\w+)"', listed)
+        + re.findall(r'nodes\.append\("(\w+)"\)', text)
+        + re.findall(r'nodes\[0\] = "(\w+)"', text)  # --daq: in place of bridge_publisher
+    )
 
 
 def declared_parameters(executable: str) -> set[str]:
@@ -125,7 +129,7 @@ def test_launch_file_starts_the_graphs_nodes_with_parameters_they_declare():
     assert (
         set(executables)
         == set(graph_nodes())
-        == {'bridge_publisher', 'balance_calibrator', 'balance_recorder'}
+        == {'bridge_publisher', 'balance_calibrator', 'balance_recorder', 'balance_daq'}
     )
     for node in nodes:
         assert node['pkg'] == 'balance_calib' and node['exec'] in scripts, node
@@ -134,7 +138,9 @@ def test_launch_file_starts_the_graphs_nodes_with_parameters_they_declare():
             'remap' not in node and 'ros_args' not in node and 'args' not in node
         )  # the graph has none
         files = [p['from'] for p in node['param'] if 'from' in p]
-        assert files == ['$(var params_file)'], node
+        # balance_daq reads its device's preset (config/daq), the others the graph's file
+        wanted = '$(var daq_params)' if node['exec'] == 'balance_daq' else '$(var params_file)'
+        assert files == [wanted], node
         inline = {p['name'] for p in node['param'] if 'name' in p}
         assert inline <= declared_parameters(node['exec']), (node['exec'], inline)
         used = set(re.findall(r'\$\(var (\w+)\)', yaml.safe_dump(node)))
@@ -149,13 +155,17 @@ def test_launch_file_starts_the_graphs_nodes_with_parameters_they_declare():
             'unless',
             'on_exit',
         }, node
-    # a bridge_publisher for either value of stop_with_campaign, exactly one of them shutting down
+    # a bridge_publisher for either value of stop_with_campaign, exactly one of them shutting
+    # down, both only without daq_params; balance_daq only with it
     publishers = [n for n in nodes if n['exec'] == 'bridge_publisher']
-    assert sorted((('if' in n), n.get('on_exit')) for n in publishers) == [
-        (False, None),
-        (True, 'shutdown'),
+    no_daq = "'$(var daq_params)' == ''"
+    assert sorted((n['if'], n.get('on_exit')) for n in publishers) == [
+        (f"""$(eval "'$(var stop_with_campaign)' != 'true' and {no_daq}")""", None),
+        (f"""$(eval "'$(var stop_with_campaign)' == 'true' and {no_daq}")""", 'shutdown'),
     ]
-    assert {n.get('if', n.get('unless')) for n in publishers} == {'$(var stop_with_campaign)'}
+    (daq,) = [n for n in nodes if n['exec'] == 'balance_daq']
+    assert daq['unless'] == f'$(eval "{no_daq}")' and 'if' not in daq
+    assert args['daq_params']['default'] == ''
     # the same parameters file as the graph's default, from where setup.py installs it
     assert (
         args['params_file']['default']

@@ -120,6 +120,35 @@ def test_graph_runs_the_nodes_and_ends_with_the_publisher_closing_the_bag(tmp_pa
     assert counts['/balance/raw'] == 50 + 3 * 20 and counts['/balance/wrench'] > 0, counts
 
 
+def test_graph_on_a_virtual_serial_device_records_the_campaign_through_balance_daq(tmp_path):
+    """--daq serial_counts --virtual: the params file's campaign (ten points) played as a
+    microcontroller printing counts on a pty, read by balance_daq; its end ends the graph.
+    """
+    params = yaml.safe_load((SCRIPTS.parent / 'config' / 'graph_params.yaml').read_text())
+    params['bridge_publisher']['ros__parameters'].update(points='1-10')
+    path = tmp_path / 'params.yaml'
+    path.write_text(yaml.safe_dump(params))
+    graph = start_graph(
+        tmp_path, path, '--daq', 'serial_counts', '--virtual', '--stop-with-campaign'
+    )
+    try:
+        assert graph.wait(90) == 0
+    finally:
+        output = stop_graph(graph)
+    assert 'virtual-daq exited with status 0 (campaign done)' in output, output
+    assert re.search(r'started balance_daq', output) and 'bridge_publisher' not in output
+    metadata = yaml.safe_load((tmp_path / 'bag' / 'metadata.yaml').read_text())[
+        'rosbag2_bagfile_information'
+    ]
+    counts = {
+        t['topic_metadata']['name']: t['message_count']
+        for t in metadata['topics_with_message_count']
+    }
+    # 200 Hz, 0.1 s a point + 0.03 s of weights changing: 26 samples a point, every one through
+    # the pty; each point's applied load and the all-NaN one before it
+    assert counts['/balance/raw'] == 10 * 26 and counts['/calibration/applied_load'] == 20, counts
+
+
 def test_graph_forwards_sigterm_and_stops_every_node(tmp_path):
     params = graph_params(tmp_path)
     data = yaml.safe_load(params.read_text())

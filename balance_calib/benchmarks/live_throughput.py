@@ -146,13 +146,16 @@ class Harness:
     process competed with the node for them).
     """
 
-    def __init__(self, node, sink_topic: str, uncertainty: bool = True):
+    def __init__(self, node, sink_topic: str, uncertainty: bool = True, dds_source: bool = True):
         from geometry_msgs.msg import WrenchStamped
         from rclpy.qos import QoSProfile, ReliabilityPolicy
 
         qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
         self.node = node
-        self.publisher = node.create_publisher(WrenchStamped, '/balance/raw', qos)
+        # without: a subclass feeds the node another way (benchmarks/daq_throughput.py: a device)
+        self.publisher = (
+            node.create_publisher(WrenchStamped, '/balance/raw', qos) if dds_source else None
+        )
         topics = [sink_topic] + (
             [UNCERTAINTY_TOPIC] if sink_topic != '/balance/raw' and uncertainty else []
         )
@@ -185,10 +188,13 @@ class Harness:
         ):
             time.sleep(0.05)
 
+    def source_connected(self) -> bool:
+        return self.publisher.get_subscription_count() > 0
+
     def wait_connected(self, timeout_s: float = 30.0) -> None:
         deadline = time.monotonic() + timeout_s
         while (
-            self.publisher.get_subscription_count() == 0 or int(self.ask('publishers')) == 0
+            not self.source_connected() or int(self.ask('publishers')) == 0
         ) and time.monotonic() < deadline:
             time.sleep(0.05)
         # warm-up: discovery on the writer side and first allocations, not measured

@@ -85,8 +85,8 @@ class StartupError(ValueError):
 
 
 class BridgePublisher(Node):
-    def __init__(self, **kwargs):
-        super().__init__('bridge_publisher', **kwargs)
+    def __init__(self, node_name: str = 'bridge_publisher', **kwargs):
+        super().__init__(node_name, **kwargs)
         try:  # every parameter read once, here (read-only); mode, rate_hz, speed... checked
             self._settings = declare_table(self, TABLE)
         except ValueError as err:
@@ -449,6 +449,10 @@ class BridgePublisher(Node):
             return
         values = self._timeline.values[index]
         stamp = self._stamp(float(self._timeline.times_s[index]), now)
+        self._outputs[kind].publish(self._message(kind, values, stamp))
+
+    def _message(self, kind: int, values, stamp):
+        """The message of one timeline event (kind, its six values) with this header stamp."""
         if kind in (tl.RAW, tl.APPLIED_LOAD, tl.TRUTH, AERO_TRUTH, AERO_TRUTH_WIND):
             msg = WrenchStamped()
             msg.header.frame_id = {
@@ -476,7 +480,7 @@ class BridgePublisher(Node):
             msg = FluidPressure(fluid_pressure=float(values[0]), variance=0.0)
             msg.header.frame_id = self._frame_id
         msg.header.stamp = stamp
-        self._outputs[kind].publish(msg)
+        return msg
 
     def _finish(self, now: Time):
         self.get_logger().info(
