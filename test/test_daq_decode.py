@@ -327,6 +327,21 @@ def test_without_device_time_stamps_are_the_arrival_strictly_increasing():
     assert daq.take(rows([5] * 6), 9_000).stamps_ns.tolist() == [9_000]
 
 
+def test_device_time_is_carried_alike_one_record_a_read_or_all_in_one_chunk():
+    # device times with a step back and a step forward over 1 s (two jumps), all arriving at once
+    # or one per read at the same host time: the one-record path gives the chunk's stamps
+    times = [5.0, 5.001, 5.002, 4.0, 4.001, 6.5, 6.501]
+    records = rows(*[[0] * 6 + [t] for t in times])
+    whole = stream(columns=BRIDGES + ['time'])
+    expected = whole.take(records, 7_000_000_000).stamps_ns.tolist()
+    single = stream(columns=BRIDGES + ['time'])
+    stamps = [single.take(records[i : i + 1], 7_000_000_000).stamps_ns[0] for i in range(7)]
+    assert stamps == expected and single.counts.time_jumps == whole.counts.time_jumps == 2
+    ms = 1_000_000  # by hand: offset fixed at 5.0 s, again at 4.0 s and at 6.5 s
+    assert expected[:3] == [7_000 * ms, 7_001 * ms, 7_002 * ms]
+    assert expected[3:] == [7_002 * ms + 1, 7_002 * ms + 2, 7_002 * ms + 3, 7_002 * ms + 4]
+
+
 def test_device_time_keeps_its_spacing_on_the_host_clock_and_is_refixed_after_a_jump():
     daq = stream(columns=BRIDGES + ['time'])
     s = 1_000_000_000

@@ -240,6 +240,8 @@ class SampleStream:
 
     def _device_time(self, time_s: np.ndarray, arrival_ns: int) -> np.ndarray:
         """Device time (s) of each record carried onto the host clock, ns."""
+        if len(time_s) == 1:  # one record a read, the usual case of a line device: no arrays
+            return np.array([self._one_device_time(float(time_s[0]), arrival_ns)], np.int64)
         previous = np.nan if self._last_time_s is None else self._last_time_s
         steps = np.diff(time_s, prepend=previous)
         refix = ~((steps >= 0) & (steps <= JUMP_S))  # NaN (first sample) included
@@ -254,12 +256,25 @@ class SampleStream:
         self._last_time_s = float(time_s[-1])
         return device_ns + offsets
 
+    def _one_device_time(self, time_s: float, arrival_ns: int) -> int:
+        """_device_time of a single record, in scalars (same rule: re-fixed at the first record,
+        a step back or forward by more than JUMP_S).
+        """
+        last = self._last_time_s
+        device_ns = round(time_s * 1e9)
+        if last is None or not 0.0 <= time_s - last <= JUMP_S:
+            self.counts.time_jumps += int(last is not None)
+            self._offset_ns = arrival_ns - device_ns
+        self._last_time_s = time_s
+        return device_ns + self._offset_ns
+
     def _stamps(self, time_ns: np.ndarray | None, arrival_ns: int, count: int) -> np.ndarray:
         """Strictly increasing stamps: the device's carried time, or the arrival time."""
         if count == 0:
             return np.zeros(0, np.int64)
-        if count == 1 and time_ns is None:  # one sample a read: the usual case at high rates
-            self._last_stamp_ns = max(arrival_ns, self._last_stamp_ns + 1)
+        if count == 1:  # one sample a read: the usual case at high rates
+            one = arrival_ns if time_ns is None else int(time_ns[0])
+            self._last_stamp_ns = max(one, self._last_stamp_ns + 1)
             return np.array([self._last_stamp_ns], np.int64)
         index = np.arange(count, dtype=np.int64)
         wanted = np.full(count, arrival_ns, np.int64) if time_ns is None else time_ns
