@@ -8,10 +8,11 @@ calibration.yaml is written or swapped in:
     sigma              σ of the base model per component (TM-663 eqs. (44)-(49)) within its limit
     outliers           no load point whose loads disagree with its outputs (leave-one-out residual
                        beyond k robust σ): a weight typo, a misplaced marker, a clipped point;
-                       after the diagnosis, against the adopted model, and a point that the
-                       campaign's structure predicts from the other points on a component where
-                       the diagnosis found something is explained, not refused
-                       (diagnosis/coherence.py)
+                       after the diagnosis, against the adopted model; on a component where
+                       the diagnosis found something, a point within the threshold after the
+                       effect named there (adopted, or named as fitting part of the structure),
+                       or that the campaign's structure predicts from the other points, is
+                       explained, not refused (diagnosis/coherence.py)
     sensitivity        fitted linear sensitivities (N per mV) near the balance's nominal ones
                        (config Table 10/14 linear matrix, else capacity / rated output): loads
                        recorded in kgf or the wrong --balance cannot pass
