@@ -15,6 +15,7 @@ import pytest
 from balance_calib.config import load_balance_config
 from balance_calib.diagnosis import diagnose
 from balance_calib.diagnosis.loop_or_sign import (
+    beside_its_partner,
     components_to_drop,
     direction_pairs,
     LOOP_RATIO,
@@ -82,3 +83,44 @@ def test_the_schedule_pairs_are_equal_loads_on_opposite_branches():
     # the sign step leaves no direction contrast on M_Y against its own residual's variance
     variance = float(np.mean(diagnosis.residuals_after[:, k] ** 2))
     assert shows_loop(diagnosis.residuals_before[:, k], pairs[k], variance) is False
+
+
+# Issue 36 (5): a loop and a sign step on one bridge (LMC6522 M_Y, one floor each). The direction
+# contrast shows the loop, which is adopted first; what is left of the step (|x| beside the loop,
+# p ~1e-11, 0.0092 % FS removed) fell under the search's 0.01 % FS size gate, and the leftovers,
+# finding M_Y still lacking fit with the loop 62 % of it, named nothing (seeds 3000 and 3002:
+# `unexplained` alone). Beside its partner on a component still lacking fit, a family is judged
+# without the size gate: both named, nothing unexplained.
+@pytest.mark.parametrize('seed', [3000, 3002])
+def test_a_loop_and_a_sign_step_on_one_bridge_are_both_named(seed):
+    config = load_balance_config('lmc6522')
+    effects = [physics.scaled('lmc6522', s, 'MY') for s in ('preisach', 'sign_step')]
+    reduction, scatter = simulate_reduction(
+        config, effects, seed=seed, samples_per_point=8, with_scatter=True
+    )
+    diagnosis = diagnose(reduction, config, **scatter)
+    assert set(diagnosis.effect_names) == {'hysteresis', 'bidirectional'}, diagnosis.effect_names
+    for effect in diagnosis.effects:
+        assert effect.components == ('MY',)
+    assert not diagnosis.unexplained
+
+
+def test_only_the_partner_of_an_adopted_family_waives_the_size_gate():
+    from types import SimpleNamespace
+
+    def entry(family, components):
+        return {'candidate': SimpleNamespace(family=family, components=dict.fromkeys(components))}
+
+    effects = [entry('hysteresis', [1, 4]), entry('temperature', [0])]
+    fits = ['fit0', 'fit1', 'fit2', 'fit3', 'fit4', 'fit5']
+    lacking = {4}  # component 1 fits within its repeatability: nothing left to explain there
+
+    def fitted_well(k, fit):
+        assert fit == fits[k]
+        return k not in lacking
+
+    assert beside_its_partner('bidirectional', effects, fits, fitted_well) == {4}
+    assert beside_its_partner('hysteresis', effects, fits, fitted_well) == set()
+    assert beside_its_partner('creep', effects, fits, fitted_well) == set()
+    effects = [entry('bidirectional', [0, 4])]
+    assert beside_its_partner('hysteresis', effects, fits, lambda k, f: False) == {0, 4}

@@ -80,7 +80,7 @@ from .leftovers import (
     repeatability_variance,
     zero_point_pairs,
 )
-from .loop_or_sign import components_to_drop, direction_pairs
+from .loop_or_sign import beside_its_partner, components_to_drop, direction_pairs
 from .statistics import ComponentFit, fit_columns, forward_select, partial_f, ZeroPointWhitening
 from .tare_refit import BodyRefit, refit_body
 
@@ -229,6 +229,12 @@ class Diagnosis:
     # the tare outputs were re-read through the adopted model after the search (_retare): σ after
     # includes it, the effects' own σ before/after (taken when each was adopted) do not
     tare_reread: bool = False
+    # (N, 6) residuals and leave-one-out residuals after the effects *named* on each component:
+    # the adopted model plus the terms of the families the leftovers found only partly fitting
+    # its structure (named in `unexplained`, not adopted); residuals_after where none was dropped
+    # (the outliers gate judges a flagged point on them, refit/gates.py)
+    residuals_named: np.ndarray | None = None
+    press_residuals_named: np.ndarray | None = None
 
     @property
     def points(self) -> int:
@@ -530,7 +536,14 @@ def diagnose(
                 )
             else:
                 candidate = _examine_family(
-                    family, fits, comp_terms, problem, capacity, settings, 1
+                    family,
+                    fits,
+                    comp_terms,
+                    problem,
+                    capacity,
+                    settings,
+                    1,
+                    beside_its_partner(family.name, effects, fits, fitted_well),
                 )
             if candidate:
                 candidates.append(candidate)
@@ -627,6 +640,9 @@ def diagnose(
         problem.set_corrected(reduced)
         fits = [problem.fit(k, comp_terms[k]) for k in range(len(components))]
         fits, tare_reread = _retare_passes(problem, fits, comp_terms, points, effects)
+    named = list(fits)
+    for k, dropped in leftovers.dropped.items():
+        named[k] = problem.fit(k, comp_terms[k] + sorted(dropped))
 
     # --- assemble -----------------------------------------------------------------------------
     all_terms = list(base_terms)
@@ -691,6 +707,8 @@ def diagnose(
         warnings=tuple(dict.fromkeys(warnings)),
         leftovers=leftovers,
         tare_reread=tare_reread,
+        residuals_named=np.column_stack([f.ols.residuals for f in named]),
+        press_residuals_named=np.column_stack([f.ols.press_residuals for f in named]),
     )
 
 
@@ -715,14 +733,21 @@ def _component_statistics(before: _Fit, after: _Fit, capacity: float, n_tests: i
     }
 
 
-def _passes(stats: dict, settings: DiagnosisSettings) -> bool:
-    return (
-        stats['removed'] >= settings.min_effect_pct_fs
-        and stats['press_after'] < stats['press_before']
-    )
+def _passes(stats: dict, settings: DiagnosisSettings, any_size: bool = False) -> bool:
+    """The size gate (min_effect_pct_fs, unless any_size: see beside_its_partner) and a lower
+    cross-validated σ.
+    """
+    return (any_size or stats['removed'] >= settings.min_effect_pct_fs) and stats[
+        'press_after'
+    ] < stats['press_before']
 
 
-def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_searches):
+def _examine_family(
+    family, fits, comp_terms, problem, capacity, settings, n_searches, any_size=frozenset()
+):
+    """The family's candidate: the components where its terms pass (any_size: components where
+    the size gate is waived, beside_its_partner).
+    """
     accepted = {}
     n_components = len(fits)
     for k, fit in enumerate(fits):
@@ -787,7 +812,7 @@ def _examine_family(family, fits, comp_terms, problem, capacity, settings, n_sea
         if family.name == 'zero_drift':
             label = f'the time drift between zero points (periods {label.replace(" + ", ", ")})'
         stats.update(added=tuple(added), groups=tuple(chosen), label=label)
-        if _passes(stats, settings) and not _changes_over_campaign(
+        if _passes(stats, settings, k in any_size) and not _changes_over_campaign(
             problem, k, comp_terms[k], added, fit, settings.alpha_constancy, family.name
         ):
             accepted[k] = stats

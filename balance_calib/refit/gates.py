@@ -8,10 +8,11 @@ calibration.yaml is written or swapped in:
     sigma              σ of the base model per component (TM-663 eqs. (44)-(49)) within its limit
     outliers           no load point whose loads disagree with its outputs (leave-one-out residual
                        beyond k robust σ): a weight typo, a misplaced marker, a clipped point;
-                       after the diagnosis, against the adopted model, and a point that the
-                       campaign's structure predicts from the other points on a component where
-                       the diagnosis found something is explained, not refused
-                       (diagnosis/coherence.py)
+                       after the diagnosis, against the adopted model; on a component where
+                       the diagnosis found something, a point within the threshold after the
+                       effect named there (adopted, or named as fitting part of the structure),
+                       or that the campaign's structure predicts from the other points, is
+                       explained, not refused (diagnosis/coherence.py)
     sensitivity        fitted linear sensitivities (N per mV) near the balance's nominal ones
                        (config Table 10/14 linear matrix, else capacity / rated output): loads
                        recorded in kgf or the wrong --balance cannot pass
@@ -430,21 +431,43 @@ def _outlier_gate(
 
 
 def _explained_by_structure(config, standardized, flagged, threshold, structure) -> np.ndarray:
-    """(P, 6) flagged residuals that the campaign's structure predicts from the other points, on
-    components where the diagnosis adopted an effect or left structure unexplained.
+    """(P, 6) flagged residuals explained on components where the diagnosis adopted an effect
+    or left structure unexplained: within the threshold once judged after the effect named there
+    (its leave-one-out residual with the named family's terms, diagnosis/coherence.py), or
+    predicted within it by the campaign's structure from the other points.
     """
     explained = np.zeros_like(flagged)
     if structure is None:
         return explained
     from ..diagnosis.coherence import fit_structure
 
+    named = _after_named(config, structure, standardized)
     for k, component in enumerate(config.components):
         if component not in structure.covered or not np.any(flagged[:, k]):
             continue
+        within = np.abs(named[:, k]) <= threshold[k]
         fit = fit_structure(standardized[:, k], structure.basis, k, flagged[:, k])
         if fit.explains:
-            explained[:, k] = flagged[:, k] & (np.abs(fit.out_of_sample) <= threshold[k])
+            within |= np.abs(fit.out_of_sample) <= threshold[k]
+        explained[:, k] = flagged[:, k] & within
     return explained
+
+
+def _after_named(config, structure, standardized) -> np.ndarray:
+    """(P, 6) standardised leave-one-out residuals after the effects named on each component
+    (structure.residuals_named), NaN where there are none or on a component with nothing named.
+    """
+    named = np.full_like(standardized, np.nan)
+    residuals, press = structure.residuals_named, structure.press_named
+    if residuals is None or press is None or np.shape(residuals) != np.shape(standardized):
+        return named
+    _, after = standardized_press(
+        np.asarray(residuals, float), np.asarray(press, float), config.capacity
+    )
+    for k, component in enumerate(config.components):
+        if component in structure.named:
+            named[:, k] = after[:, k]
+    return named
 
 
 def _explained_text(config, points, explained, structure):
@@ -458,10 +481,13 @@ def _explained_text(config, points, explained, structure):
             labels = [int(points.label[i]) for i in rows]
             details[component] = {'points': labels, 'structure': structure.covered[component]}
             listed = ', '.join(str(x) for x in labels[:5]) + ('…' if len(labels) > 5 else '')
+            named = structure.named.get(component)
+            if named:
+                details[component]['named'] = named
             parts.append(
                 f'{len(rows)} point(s) beyond the threshold on {component} '
                 f'(points {listed}) follow {structure.covered[component]}, which the '
-                f'other points share'
+                f'other points share' + (f' and {named} fitted in part' if named else '')
             )
     return '; '.join(parts) + ' (an effect the model lacks, not a weight or marker error)', details
 
