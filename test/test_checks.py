@@ -205,6 +205,9 @@ def test_check_table_of_the_changed_balance_exits_3_naming_fx(calibrations, lmc6
     assert 'verdict: fail' in done.stdout
     summary = json.loads((tmp_path / 'out' / 'check.json').read_text())
     assert CHECK_KEYS <= set(summary) and summary['verdict'] == 'fail'
+    # the record's file: report.json of check carries `record` (interfaces.md)
+    report = json.loads((tmp_path / 'out' / 'report.json').read_text())
+    assert report == summary and report['record']['balance']
     # the F_X series' tare is its mean error, 0 for a symmetric sweep: the F_X reading is off by
     # 1 % of the F_X load (slope 1 % FS per FS; 11 points of σ 0.08 % FS give it to ±0.04)
     readings = table_readings(calibrations['a'], _read(table))

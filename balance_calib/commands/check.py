@@ -24,7 +24,8 @@ def register(subparsers) -> None:
         "gives it, with the point's own scatter). Verdict pass (all pass), marginal (at most 5 "
         '%% fail, each within 1.5·k·u) or fail; check points outside the calibrated range are '
         'named. Prints one line per failed component and the verdict; with --out writes '
-        'check.json, check.md and check.png. Exit 0 pass or marginal, 3 fail, 2 bad input.',
+        "check.json (also as report.json, the record's file), check.md and check.png. Exit 0 "
+        'pass or marginal, 3 fail, 2 bad input.',
     )
     parser.add_argument('calibration', help='calibration.yaml written by refit or fit')
     parser.add_argument(
@@ -33,7 +34,9 @@ def register(subparsers) -> None:
         help='one check table (.csv, BALFIT-style) or campaign bags (rosbag2 directories or '
         '.mcap files)',
     )
-    parser.add_argument('--out', help='directory for check.json, check.md and check.png')
+    parser.add_argument(
+        '--out', help='directory for check.json (report.json: the same), check.md, check.png'
+    )
     parser.add_argument(
         '--k', type=float, default=2.0, help='coverage factor of the limit k·u (default 2)'
     )
@@ -91,9 +94,11 @@ def run(args) -> int:
             out.mkdir(parents=True, exist_ok=True)
             check_figure(result, out / 'check.png')
             write_text_atomically(out / 'check.md', check_markdown(summary, summary['record']))
-            write_text_atomically(
-                out / 'check.json', json.dumps(summary, indent=2, allow_nan=False) + '\n'
-            )
+            text = json.dumps(summary, indent=2, allow_nan=False) + '\n'
+            write_text_atomically(out / 'check.json', text)
+            # interfaces.md, "A record a laboratory signs": report.json of refit, fit and check
+            # carries `record`; check's report.json is its check.json, record included
+            write_text_atomically(out / 'report.json', text)
         except OSError as err:
             raise CommandError(f'{err.filename or out}: {err.strerror or err}') from None
         print(f'check: {out / "check.md"}')
