@@ -20,8 +20,13 @@ import numpy as np
 
 from ..model.calibration import Calibration
 from ..model.inverse import outputs_for_loads
-from ..model.uncertainty import covariance_and_sigma, load_standard_uncertainty, require_covariance
-from .support import leverage, outside_support, ScheduleSupport
+from ..model.uncertainty import (
+    covariance_and_sigma,
+    leverage_of_rows,
+    load_standard_uncertainty,
+    require_covariance,
+)
+from .support import outside_support, ScheduleSupport
 
 LOADS_BEYOND_CAPACITY = 2.0  # loads beyond this x capacity are not inverted (u is NaN there)
 
@@ -119,7 +124,7 @@ def _outside(
         return None
     finite = np.all(np.isfinite(outputs_mv), axis=1)
     load_leverage = np.full(len(loads), np.nan)
-    load_leverage[finite] = leverage(base.design(outputs_mv[finite]), pieces[0])
+    load_leverage[finite] = leverage_of_rows(base.design(outputs_mv[finite]), pieces[0])
     return outside_support(support, loads, load_leverage)
 
 

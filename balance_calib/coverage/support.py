@@ -22,6 +22,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from ..model.uncertainty import leverage_of_rows
+
 RANGE_TOLERANCE_FS = 0.02  # 2 % FS beyond the calibrated range still counts as inside
 LEVERAGE_TOLERANCE = 1.1  # and 10 % beyond the largest leverage of a calibration point
 
@@ -65,12 +67,6 @@ class ScheduleSupport:
         )
 
 
-def leverage(design_rows, covariance_unscaled) -> np.ndarray:
-    """(N,) h = x (XᵀX)⁻¹ xᵀ of design rows (N, p) with the unscaled covariance (p, p)."""
-    rows = np.atleast_2d(np.asarray(design_rows, dtype=float))
-    return np.einsum('ij,jk,ik->i', rows, np.asarray(covariance_unscaled, float), rows)
-
-
 def support_of_points(
     total_loads, design_rows, covariance_unscaled, capacity, components: Sequence[str], model: str
 ) -> ScheduleSupport:
@@ -83,7 +79,7 @@ def support_of_points(
         np.asarray(capacity, float),
         loads.min(axis=0),
         loads.max(axis=0),
-        float(np.max(leverage(design_rows, covariance_unscaled))),
+        float(np.max(leverage_of_rows(design_rows, covariance_unscaled))),
         str(model),
     )
 

@@ -1,25 +1,26 @@
 """Cross-validated residuals of a linear-in-coefficients fit: PRESS, leave-one-point-out.
 
 For least squares the residual of point i when it is left out of the fit is e_i / (1 - h_ii),
-h_ii the leverage (diagonal of the hat matrix); no refits needed.
+h_ii the leverage (diagonal of the hat matrix, fit/least_squares.ScaledSolution.leverage); no
+refits needed.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .least_squares import scaled_least_squares
 
-def leverages(design: np.ndarray) -> np.ndarray:
-    """Diagonal of the hat matrix X (X^T X)^-1 X^T, through an orthonormal basis of X's columns."""
-    scaled = design / np.maximum(np.linalg.norm(design, axis=0), 1e-300)
-    u, singular, _ = np.linalg.svd(scaled, full_matrices=False)
-    rank = int(np.sum(singular > singular[0] * 1e-12)) if singular.size else 0
-    return np.sum(u[:, :rank] ** 2, axis=1)
+# A unit-norm column whose part not explained by the others is below this fraction counts as
+# dependent (left out of the hat matrix), as the SVD rank cut this module used before did.
+RANK_TOLERANCE = 1e-12
 
 
 def press_residuals(design: np.ndarray, residuals: np.ndarray) -> np.ndarray:
     """Leave-one-out residuals (N, k) from in-sample residuals (N, k) of a fit on `design` (N,
     p).
     """
-    h = np.minimum(leverages(design), 1.0 - 1e-12)
+    design = np.asarray(design, dtype=float)
+    h = scaled_least_squares(design, np.zeros(len(design)), tolerance=RANK_TOLERANCE).leverage
+    h = np.minimum(h, 1.0 - 1e-12)
     return residuals / (1.0 - h)[:, None]

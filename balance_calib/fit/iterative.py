@@ -20,6 +20,7 @@ import numpy as np
 
 from ..model.r091 import IterativeModel, TermEvaluator
 from ..model.terms import Term
+from ..model.uncertainty import leverage_of_rows
 from .least_squares import TooFewPointsError
 from .series_tares import series_indicator, series_rows, SeriesTareFit, solve_scaled
 from .term_selection import term_statistics
@@ -188,7 +189,7 @@ def iterative_point_uncertainty(fit: SeriesTareFit, outputs, series) -> np.ndarr
     _, out_jac = model.output_jacobian(totals)
     z = np.hstack([model.design(totals), series_rows(fit, series)])
     # fitted with it
-    h = np.einsum('ij,jk,ik->i', z, cast(np.ndarray, fit.full_covariance_unscaled), z)
+    h = leverage_of_rows(z, cast(np.ndarray, fit.full_covariance_unscaled))
     return _load_sigma(
         np.linalg.inv(out_jac), fit.residual_sigma[None, :] ** 2 * (1.0 + h)[:, None]
     )

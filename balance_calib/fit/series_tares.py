@@ -20,6 +20,7 @@ import numpy as np
 
 from ..model.balance_model import BalanceModel
 from ..model.terms import as_variables, design_matrix, Term
+from ..model.uncertainty import leverage_of_rows
 from .least_squares import (
     scaled_least_squares,
     ScaledSolution,
@@ -187,7 +188,7 @@ def direct_point_uncertainty(fit: SeriesTareFit, outputs, series) -> np.ndarray:
     outputs = np.atleast_2d(np.asarray(outputs, float))
     z = np.hstack([fit.model.design(outputs), -series_rows(fit, series)])
     # fitted with it
-    h = np.einsum('ij,jk,ik->i', z, cast(np.ndarray, fit.full_covariance_unscaled), z)
+    h = leverage_of_rows(z, cast(np.ndarray, fit.full_covariance_unscaled))
     return fit.residual_sigma[None, :] * np.sqrt(1.0 + h)[:, None]
 
 

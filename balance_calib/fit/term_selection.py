@@ -19,6 +19,8 @@ from typing import Sequence
 import numpy as np
 import scipy.stats
 
+from ..model.uncertainty import leverage_of_rows
+
 
 @dataclass(frozen=True)
 class TermStatistics:
@@ -86,8 +88,7 @@ def term_statistics(
 
     pinv_columns = design @ covariance_unscaled[:, :n_terms]  # (N, p): Z (ZᵀZ)⁻¹ e_j
     q_cols = pinv_columns / np.maximum(np.linalg.norm(pinv_columns, axis=0), 1e-300)
-    leverage = np.einsum('ij,jk,ik->i', design, covariance_unscaled, design)
-    h = np.minimum(leverage, 1 - 1e-12)
+    h = np.minimum(leverage_of_rows(design, covariance_unscaled), 1 - 1e-12)
     press_full = ((residuals / (1 - h)[:, None]) ** 2).sum(axis=0)
     projection = q_cols.T @ targets  # (p, k)
     press_without = np.empty((n_terms, targets.shape[1]))

@@ -133,14 +133,19 @@ def _direct_variance(design: np.ndarray, covariance: np.ndarray, sigma: np.ndarr
     """(N, n_components) u² = σ² (1 + x (XᵀX)⁻¹ xᵀ) for design rows x (N, n_terms) of a direct
     model.
     """
-    return np.multiply.outer(1.0 + _leverage(design, covariance), np.square(sigma))
+    return np.multiply.outer(1.0 + leverage_of_rows(design, covariance), np.square(sigma))
 
 
-def _leverage(design: np.ndarray, covariance: np.ndarray) -> np.ndarray:
-    """(N,) x (XᵀX)⁻¹ xᵀ of each design row x (N, n_terms): one matrix product (BLAS), where a
-    three-operand einsum loops over n_terms² products per row in C (3.5 µs a row at 34 terms).
+def leverage_of_rows(design_rows, covariance_unscaled) -> np.ndarray:
+    """(N,) leverage h = x (XᵀX)⁻¹ xᵀ of design rows x (N, p), (XᵀX)⁻¹ the fit's unscaled
+    covariance (p, p): the one definition for rows given a covariance (a calibration point's own
+    h_ii from the factorisation is fit/least_squares.ScaledSolution.leverage). Here, below fit/,
+    because the runtime's uncertainty needs it without the fitting code. One matrix product
+    (BLAS), where a three-operand einsum loops over p² products per row in C (3.5 µs a row at 34
+    terms).
     """
-    return np.add.reduce((design @ covariance) * design, axis=1)
+    rows = np.atleast_2d(np.asarray(design_rows, dtype=float))
+    return np.add.reduce((rows @ np.asarray(covariance_unscaled, dtype=float)) * rows, axis=1)
 
 
 def with_fitted_covariance(

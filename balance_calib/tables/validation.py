@@ -25,6 +25,7 @@ from ..fit.series_tares import (
     tares_with_model_fixed,
 )
 from ..model.inverse import InverseDidNotConverge
+from ..model.uncertainty import leverage_of_rows
 from .errors import TableCalibrationError
 
 COVERAGE_WARNING = 0.90
@@ -86,12 +87,12 @@ def _model_only_uncertainty(method: str, fit: SeriesTareFit, outputs: np.ndarray
     covariance = cast(np.ndarray, fit.full_covariance_unscaled)[:p, :p]  # a table fit has it
     if method == 'direct':
         z = fit.model.design(outputs)
-        h = np.einsum('ij,jk,ik->i', z, covariance, z)
+        h = leverage_of_rows(z, covariance)
         return fit.residual_sigma[None, :] * np.sqrt(1.0 + h)[:, None]
     totals = fit.model.loads(outputs)
     _, jacobian = fit.model.output_jacobian(totals)
     z = fit.model.design(totals)
-    h = np.einsum('ij,jk,ik->i', z, covariance, z)
+    h = leverage_of_rows(z, covariance)
     inverse = np.linalg.inv(jacobian)
     variance = fit.residual_sigma[None, :] ** 2 * (1.0 + h)[:, None]
     return np.sqrt(np.einsum('nmk,nk->nm', inverse**2, variance))
