@@ -106,6 +106,34 @@ def term_statistics(
     )
 
 
+def elimination_step(
+    design: np.ndarray,
+    targets: np.ndarray,
+    n_terms: int,
+    term_names: Sequence[str],
+    target_names: Sequence[str],
+    *,
+    full_rank_only: bool = False,
+) -> TermStatistics | None:
+    """One step of backward elimination: the least-squares fit of targets (N, k) on design (N, q)
+    by SVD of the norm-scaled columns (an all-zero column keeps scale 1), and the statistics of
+    its first `n_terms` columns (`term_statistics`). With `full_rank_only`, None when the scaled
+    design is rank deficient (smallest singular value ≤ 1e-12 of the largest): no term's PRESS
+    is then defined.
+    """
+    scales = np.linalg.norm(design, axis=0)
+    scales[scales == 0] = 1.0
+    u, singular, vt = np.linalg.svd(design / scales, full_matrices=False)
+    if full_rank_only and singular[-1] <= singular[0] * 1e-12:
+        return None
+    v_scaled = vt.T / singular
+    covariance = (v_scaled @ v_scaled.T) / np.outer(scales, scales)
+    coefficients = (v_scaled @ (u.T @ targets)) / scales[:, None]
+    return term_statistics(
+        design, targets, coefficients, covariance, n_terms, term_names, target_names
+    )
+
+
 @dataclass(frozen=True)
 class Selection:
     kept: tuple[str, ...]
@@ -133,22 +161,10 @@ def backward_elimination(
     nuisance = design[:, n_terms:]
     while len(columns) > 1:
         current = np.hstack([design[:, columns], nuisance])
-        u, singular, vt = np.linalg.svd(
-            current / np.linalg.norm(current, axis=0), full_matrices=False
+        stats = elimination_step(
+            current, targets, len(columns), [names[c] for c in columns], target_names
         )
-        scales = np.linalg.norm(current, axis=0)
-        v_scaled = vt.T / singular
-        covariance = (v_scaled @ v_scaled.T) / np.outer(scales, scales)
-        coefficients = (v_scaled @ (u.T @ targets)) / scales[:, None]
-        stats = term_statistics(
-            current,
-            targets,
-            coefficients,
-            covariance,
-            len(columns),
-            [names[c] for c in columns],
-            target_names,
-        )
+        assert stats is not None  # only full_rank_only returns None
         score = np.mean(np.log(np.maximum(stats.press_ratio, 1e-300)), axis=1)
         candidates = [
             i

@@ -24,7 +24,7 @@ from ..accuracy.sigma import sigma_pct_fs
 from ..fit.iterative import fit_iterative, IterationDidNotConverge
 from ..fit.least_squares import TooFewPointsError, UnexcitedTermsError
 from ..fit.series_tares import fit_direct, series_indicator, SeriesTareFit
-from ..fit.term_selection import term_statistics
+from ..fit.term_selection import elimination_step, term_statistics
 from ..model.inverse import InverseDidNotConverge
 from ..model.r091 import term_set, TermEvaluator
 from ..model.terms import Term
@@ -198,7 +198,7 @@ def prune_by_press(
     method: str, fit: SeriesTareFit, terms: Sequence[Term], table, outputs: np.ndarray
 ) -> tuple[tuple[Term, ...], tuple[tuple[str, str], ...]]:
     """Backward elimination on the form's linear problem by the closed-form PRESS of each term
-    (term_selection.term_statistics), hierarchy kept; returns (terms kept, [(term, why)]).
+    (fit/term_selection.elimination_step), hierarchy kept; returns (terms kept, [(term, why)]).
     """
     terms = list(terms)
     design, targets = _linear_problem(method, fit, terms, table, outputs)
@@ -207,24 +207,16 @@ def prune_by_press(
     removed: list[tuple[str, str]] = []
     n = len(targets)
     while len(removed) < MAX_REMOVALS and len(terms) > 1:
-        current = np.hstack([columns, nuisance])
-        scales = np.linalg.norm(current, axis=0)
-        scales[scales == 0] = 1.0
-        u, singular, vt = np.linalg.svd(current / scales, full_matrices=False)
-        if singular[-1] <= singular[0] * 1e-12:
-            break
-        v_scaled = vt.T / singular
-        covariance = (v_scaled @ v_scaled.T) / np.outer(scales, scales)
-        coefficients = (v_scaled @ (u.T @ targets)) / scales[:, None]
-        stats = term_statistics(
-            current,
+        stats = elimination_step(
+            np.hstack([columns, nuisance]),
             targets,
-            coefficients,
-            covariance,
             len(terms),
             [t.name for t in terms],
             ['t'] * targets.shape[1],
+            full_rank_only=True,
         )
+        if stats is None:
+            break
         score = np.mean(np.log(np.maximum(stats.press_ratio, 1e-300)), axis=1)
         allowed = [j for j in range(len(terms)) if _removable(terms, j) and score[j] < 0]
         if not allowed:
