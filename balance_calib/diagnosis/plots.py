@@ -16,10 +16,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 import numpy as np
 
+from ..figure_png import save_png
 from .diagnose import Diagnosis, EffectFound
 
 CLIP_PCT_FS = 0.5  # the memo's vertical range of Figs. 4-9
@@ -28,9 +28,7 @@ CLIP_PCT_FS = 0.5  # the memo's vertical range of Figs. 4-9
 def _save(figure: Figure, path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    FigureCanvasAgg(figure)
-    figure.savefig(path, dpi=110)
-    return path
+    return save_png(figure, path, 110)
 
 
 def _clipped_scatter(axes, x, y, clip, **style):
@@ -198,11 +196,17 @@ def plot_unexplained(diagnosis: Diagnosis, entry, path) -> Path:
 
 def unexplained_figures(diagnosis: Diagnosis | None, directory) -> list[Path]:
     """One figure per unexplained entry (none without a diagnosis)."""
+    return [draw(Path(directory) / name) for name, draw in unexplained_plan(diagnosis)]
+
+
+def unexplained_plan(diagnosis: Diagnosis | None) -> list:
+    """unexplained_figures as (file name, draw(path) -> path), nothing drawn yet."""
     if diagnosis is None:
         return []
     return [
-        plot_unexplained(
-            diagnosis, entry, Path(directory) / f'unexplained_{entry.components[0]}.png'
+        (
+            f'unexplained_{entry.components[0]}.png',
+            lambda path, entry=entry: plot_unexplained(diagnosis, entry, path),
         )
         for entry in diagnosis.unexplained
     ]
@@ -267,7 +271,25 @@ def plot_contrasts(diagnosis: Diagnosis, path, contrasts=None) -> Path | None:
 
 def contrast_figures(diagnosis: Diagnosis | None, directory) -> list[Path]:
     """contrasts.png (none without a diagnosis or without pairs)."""
+    return [draw(Path(directory) / name) for name, draw in contrast_plan(diagnosis)]
+
+
+def contrast_plan(diagnosis: Diagnosis | None) -> list:
+    """contrast_figures as (file name, draw(path) -> path): the contrasts are computed here (to
+    know whether the schedule offers pairs), the figure is drawn later.
+    """
     if diagnosis is None:
         return []
-    path = plot_contrasts(diagnosis, Path(directory) / 'contrasts.png')
-    return [path] if path is not None else []
+    from .contrasts import schedule_contrasts
+
+    contrasts = schedule_contrasts(diagnosis)
+    if not any(c.count for pair in contrasts.values() for c in pair):
+        return []
+
+    def draw(path: Path) -> Path:
+        drawn = plot_contrasts(diagnosis, path, contrasts)
+        if drawn is None:  # cannot happen: pairs were found above
+            raise ValueError('the schedule offers no pairs to draw')
+        return drawn
+
+    return [('contrasts.png', draw)]
