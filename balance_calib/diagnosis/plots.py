@@ -19,7 +19,7 @@ from pathlib import Path
 from matplotlib.figure import Figure
 import numpy as np
 
-from ..figure_png import save_png
+from ..figure_png import fixed_margins, save_png
 from .diagnose import Diagnosis, EffectFound
 
 CLIP_PCT_FS = 0.5  # the memo's vertical range of Figs. 4-9
@@ -265,7 +265,17 @@ def plot_contrasts(diagnosis: Diagnosis, path, contrasts=None) -> Path | None:
         axes.set_xlabel(f'|{component}| / capacity of {component} (–)', fontsize=7)
         axes.set_ylabel(f'{what}, % FS', fontsize=7)
         axes.tick_params(labelsize=7)
-    figure.tight_layout()
+    fixed_margins(
+        figure,
+        rows,
+        2,
+        left=0.65,
+        right=0.15,
+        bottom=0.45,
+        top=0.4 + 0.17 * (2 if missing else 1),
+        row_gap=0.7,
+        column_gap=0.75,
+    )
     return _save(figure, path)
 
 

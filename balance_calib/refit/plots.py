@@ -53,19 +53,24 @@ class ResidualFigure:
         from matplotlib.figure import Figure
         from matplotlib.lines import Line2D
 
+        from ..figure_png import Backdrop, fixed_margins
+
         self.components = list(components)
         rows = rows or int(np.ceil(len(self.components) / 2))
         self.rows = rows
         figure = Figure(figsize=(10.0, 2.75 * rows + 1.2))
         height = figure.get_figheight()
         # the layout tight_layout found for these labels, as fixed margins (inches)
-        figure.subplots_adjust(
-            left=0.75 / 10.0,
-            right=1.0 - 0.15 / 10.0,
-            bottom=0.55 / height,
-            top=1.0 - 1.05 / height,
-            wspace=0.22,
-            hspace=0.45,
+        fixed_margins(
+            figure,
+            rows,
+            2,
+            left=0.75,
+            right=0.15,
+            bottom=0.55,
+            top=1.05,
+            row_gap=0.75,
+            column_gap=0.95,
         )
         self.figure = figure
         self.panels = []
@@ -139,6 +144,14 @@ class ResidualFigure:
             bbox_to_anchor=(0.5, 1.0 - 0.45 / height),
         )
         self.title = figure.suptitle('', fontsize=12)
+        moving = [self.title] + [axes.title for axes, _ in self.panels]
+        moving += [
+            line
+            for _, series in self.panels
+            for inside, edges in series.values()
+            for line in (inside, *edges)
+        ]
+        self.backdrop = Backdrop(figure, moving, DPI)
 
     def draw(self, residuals_pct: np.ndarray, labels, categories: np.ndarray, title: str, path):
         """residuals_pct (N, n_components); categories (N,) of 'single', 'combined', 'zero'."""
@@ -168,7 +181,8 @@ class ResidualFigure:
                 fontsize=10,
             )
         self.title.set_text(title)
-        return _save(self.figure, Path(path))
+        limits = tuple(axes.get_xlim() for axes, _ in self.panels)
+        return self.backdrop.save(Path(path), limits)
 
 
 def residual_figure(
