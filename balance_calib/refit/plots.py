@@ -144,7 +144,7 @@ class ResidualFigure:
             bbox_to_anchor=(0.5, 1.0 - 0.45 / height),
         )
         self.title = figure.suptitle('', fontsize=12)
-        moving = [self.title] + [axes.title for axes, _ in self.panels]
+        moving: list = [self.title] + [axes.title for axes, _ in self.panels]
         moving += [
             line
             for _, series in self.panels
