@@ -122,3 +122,54 @@ def fixed_margins(
         wspace=column_gap / panel_width if columns > 1 else 0.2,
         hspace=row_gap / panel_height if rows > 1 else 0.2,
     )
+
+
+def _why(err: BaseException) -> str:
+    return f'{type(err).__name__}: {" ".join(str(err).split())}'.rstrip(': ')
+
+
+def _draw_each(figures, directory: Path) -> dict[str, str]:
+    """Draw each (name, draw) as directory/name; name -> why for those that failed."""
+    failed = {}
+    for name, draw in figures:
+        try:
+            draw(directory / name)
+        except Exception as err:  # one figure is not worth the others
+            failed[name] = _why(err)
+    return failed
+
+
+def draw_figures(figures, directory, *, beside=lambda name: False) -> dict[str, str]:
+    """Draw (name, draw(path)) into `directory`; returns name -> why for each that failed.
+
+    The figures for which `beside(name)` is true are drawn in a forked child at the same time
+    as the others (matplotlib holds the GIL: a thread would not overlap), when the process is
+    single-threaded (a fork beside other threads could inherit a held lock) and both shares are
+    non-empty; the child reports its failures in `.NAME.error` files and leaves with os._exit.
+    """
+    import os
+    import threading
+
+    directory = Path(directory)
+    mine = [f for f in figures if not beside(f[0])]
+    theirs = [f for f in figures if beside(f[0])]
+    if not mine or not theirs or not hasattr(os, 'fork') or threading.active_count() > 1:
+        return _draw_each(figures, directory)
+    pid = os.fork()
+    if pid == 0:  # the child: draw its share, say what failed, never return into the caller
+        status = 1
+        try:
+            for name, why in _draw_each(theirs, directory).items():
+                (directory / f'.{name}.error').write_text(why)
+            status = 0
+        finally:
+            os._exit(status)
+    failed = _draw_each(mine, directory)
+    _, status = os.waitpid(pid, 0)
+    for name, _ in theirs:
+        error = directory / f'.{name}.error'
+        if error.exists():
+            failed[name] = error.read_text()
+        elif not (directory / name).exists():
+            failed[name] = f'the drawing process ended with status {status} before drawing it'
+    return failed

@@ -8,7 +8,7 @@ import json
 import numpy as np
 
 from balance_calib.calibration_file import load_calibration
-from balance_calib.figure_png import decimated
+from balance_calib.figure_png import decimated, draw_figures
 from balance_calib.refit import plots
 from balance_calib.refit.pipeline import calibrate_points, write_outputs
 
@@ -79,3 +79,17 @@ def test_long_series_keep_each_columns_lowest_and_highest_point():
     y[3] = np.nan  # never drawn, never chosen
     kept = decimated(x, y, limit=999, columns=20)
     assert np.array_equal(kept, np.sort(np.r_[low, high]))
+
+
+def test_figures_drawn_beside_are_drawn_and_their_failures_told(tmp_path):
+    def good(path):
+        path.write_bytes(b'png')
+        return path
+
+    def bad(path):
+        raise RuntimeError('beside')
+
+    figures = [('a.png', good), ('b.png', good), ('c.png', bad), ('d.png', bad)]
+    failed = draw_figures(figures, tmp_path, beside=lambda name: name in ('b.png', 'c.png'))
+    assert failed == {'c.png': 'RuntimeError: beside', 'd.png': 'RuntimeError: beside'}
+    assert sorted(p.name for p in tmp_path.glob('*.png')) == ['a.png', 'b.png']

@@ -587,19 +587,20 @@ def _draw_figures(result: CalibrationResult, figures, out_dir: Path, say: Progre
     failure is told and taken out of the report (report.json, report.md rewritten atomically).
     """
     from ..calibration_file import write_text_atomically
+    from ..figure_png import draw_figures
     from ..output_dir import FILE_MODE, make_staging
     from .report import report_markdown
 
     staging = make_staging(out_dir, out_dir, 'refit')
-    failed: dict[str, str] = {}
     try:
-        for name, draw in figures:
-            try:
-                path = draw(staging / name)
-                os.chmod(path, FILE_MODE)
-                os.replace(path, out_dir / name)
-            except Exception as err:  # a figure is not worth the calibration
-                failed[name] = f'{type(err).__name__}: {" ".join(str(err).split())}'.rstrip(': ')
+        # the residual figures share one figure (refit/plots.py); the others are drawn beside
+        failed = draw_figures(
+            figures, staging, beside=lambda name: not name.startswith('residuals_')
+        )
+        for name in dict.fromkeys(name for name, _ in figures):  # a name drawn twice: once
+            if name not in failed:
+                os.chmod(staging / name, FILE_MODE)
+                os.replace(staging / name, out_dir / name)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     if not failed:
