@@ -15,12 +15,15 @@ is safe inside a node's callback thread.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from matplotlib.figure import Figure
 import numpy as np
 
 from ..figure_png import fixed_margins, save_png
 from .diagnose import Diagnosis, EffectFound
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 CLIP_PCT_FS = 0.5  # the memo's vertical range of Figs. 4-9
 
@@ -60,6 +63,8 @@ def plot_residuals(
     sigma = diagnosis.sigma_pct_fs[which]
     model = diagnosis.base_fit.name if which == 'before' else diagnosis.adopted.name
     labels = np.asarray(diagnosis.point_labels, dtype=float)
+    from matplotlib.figure import Figure  # imported on drawing: a plan costs no matplotlib
+
     figure = Figure(figsize=(12, 6.5))
     figure.suptitle(
         f'{diagnosis.balance} — residuals of the {model} model '
@@ -85,6 +90,8 @@ def plot_effect(diagnosis: Diagnosis, effect: EffectFound, path) -> Path:
     variable.
     """
     components = list(effect.components)
+    from matplotlib.figure import Figure
+
     figure = Figure(figsize=(max(6.0, 4.2 * len(components) + 0.5), 4.2))
     figure.suptitle(f'{diagnosis.balance} — {effect.name}: residual with the effect put back')
     for i, component in enumerate(components):
@@ -154,6 +161,8 @@ def plot_unexplained(diagnosis: Diagnosis, entry, path) -> Path:
         / diagnosis.capacity[k]
         * 100.0
     )
+    from matplotlib.figure import Figure
+
     figure = Figure(figsize=(10, 4.2))
     figure.suptitle(
         f'{diagnosis.balance} — {component}: left over and not explained '
@@ -237,6 +246,8 @@ def plot_contrasts(diagnosis: Diagnosis, path, contrasts=None) -> Path | None:
         if not contrast.count
     ]
     rows = (len(shown) + 1) // 2
+    from matplotlib.figure import Figure
+
     figure = Figure(figsize=(9, 1.2 + 1.9 * rows))  # two panels wide
     figure.suptitle(
         f'{diagnosis.balance} — what the schedule tells: loop (direction) vs sign '
