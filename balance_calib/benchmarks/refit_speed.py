@@ -6,7 +6,10 @@ Writes one simulated LMC6522 campaign (328 points) as an MCAP bag, then measures
   read_raw     rosbags AnyReader iterating every message (bytes only)
   read_decode  the same plus rosbags deserialize_cdr of every message (what a user script does)
   refit        run_refit: read + cut + zero/tare + 3 fits + diagnosis + report + plots
-and prints the ratios. Target (issue 3): refit within 3x the bag-read time.
+  written      the same run until calibration.yaml, report.json and report.md are in place (what
+               ~/refit's reply waits for; the figures are drawn after)
+and prints the ratios. Targets (issue 36): the whole refit with its figures within 2x
+read+deserialize, without figures within 1x.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import os
 from pathlib import Path
 import platform
 import tempfile
+import time
 
 from .timing import best_of as _best_of
 
@@ -70,7 +74,19 @@ def main(argv=None) -> None:
         messages = read_raw()
         t_raw = _best_of(read_raw, args.repeat)
         t_decode = _best_of(read_decode, args.repeat)
-        t_refit = _best_of(lambda: run_refit([bag], 'lmc6522', Path(tmp) / 'out'), args.repeat)
+        written: list[float] = []
+
+        def refit_with_figures():
+            start = time.perf_counter()
+            run_refit(
+                [bag],
+                'lmc6522',
+                Path(tmp) / 'out',
+                written=lambda _: written.append(time.perf_counter() - start),
+            )
+
+        t_refit = _best_of(refit_with_figures, args.repeat)
+        t_written = min(written)
         t_refit_noplots = _best_of(
             lambda: run_refit([bag], 'lmc6522', Path(tmp) / 'out2', plots=False), args.repeat
         )
@@ -90,11 +106,16 @@ def main(argv=None) -> None:
         f'read+deserialize, {t_refit / t_raw:.2f} x bytes-only read'
     )
     print(
+        f'  of which until the record is written {t_written:7.2f} s   = '
+        f'{t_written / t_decode:.2f} x read+deserialize (calibration, report.json, report.md; '
+        'figures after)'
+    )
+    print(
         f'refit without plots                 {t_refit_noplots:7.2f} s   = '
         f'{t_refit_noplots / t_decode:.2f} x read+deserialize, {t_refit_noplots / t_raw:.2f} x '
         'bytes-only read'
     )
-    print('target: refit within 3x the bag-read time')
+    print('targets: refit with its figures within 2x read+deserialize, without within 1x')
 
 
 if __name__ == '__main__':

@@ -49,13 +49,6 @@ class Contrast:
         return len(self.value_pct_fs)
 
 
-def _equal(a: np.ndarray, b: np.ndarray, capacity: np.ndarray, skip: int | None = None) -> bool:
-    close = np.abs(a - b) <= EQUAL_LOAD * capacity
-    if skip is not None:
-        close[skip] = True
-    return bool(np.all(close))
-
-
 def pairs_of(
     applied: np.ndarray,
     orientation: np.ndarray,
@@ -69,32 +62,46 @@ def pairs_of(
     applied (N, 6) applied loads N, N·m; orientation (N,); direction (N, 6) ±1 raw load history;
     is_zero_point (N,); capacity (6,).
     """
-    not_zero = ~np.asarray(is_zero_point, bool)
+    applied = np.asarray(applied, dtype=float)
+    orientation = np.asarray(orientation)
+    direction = np.asarray(direction)
+    capacity = np.asarray(capacity, dtype=float)
+    candidates = np.flatnonzero(~np.asarray(is_zero_point, bool))
     strong = np.abs(applied[:, k]) >= MIN_SIGN_LOAD * capacity[k]
-    candidates = np.flatnonzero(not_zero)
+    sign = np.sign(applied[:, k])
+    # every pair (i, j) of candidates with i before j, a block of rows i at a time, in the order
+    # of the loop over i then j the rule reads as (np.nonzero is row-major)
     direction_pairs, sign_pairs = [], []
-    for a_index, i in enumerate(candidates):
-        for j in candidates[a_index + 1 :]:
-            if orientation[i] != orientation[j]:
-                continue
-            # equal load, any size on k itself (the loop is widest at zero): opposite history
-            if direction[i, k] != direction[j, k] and _equal(applied[i], applied[j], capacity):
-                falling, rising = (i, j) if direction[i, k] < 0 else (j, i)
-                direction_pairs.append((int(falling), int(rising)))
-            elif (
-                strong[i]
-                and strong[j]
-                and np.sign(applied[i, k]) == -np.sign(applied[j, k])
-                and abs(abs(applied[i, k]) - abs(applied[j, k])) <= EQUAL_LOAD * capacity[k]
-                and _equal(applied[i], applied[j], capacity, skip=k)
-                # both moving away from zero: a loop's offset is then odd in the sign
-                and (
-                    direction[i, k] * np.sign(applied[i, k])
-                    == direction[j, k] * np.sign(applied[j, k])
-                )
-            ):
-                plus, minus = (i, j) if applied[i, k] > 0 else (j, i)
-                sign_pairs.append((int(plus), int(minus)))
+    n = len(candidates)
+    rows = max(1, 200_000 // max(n, 1))
+    for first in range(0, n, rows):
+        i = candidates[first : first + rows][:, None]  # (r, 1)
+        j = candidates[None, :]  # (1, n)
+        later = np.arange(first, min(first + rows, n))[:, None] < np.arange(n)[None, :]
+        same = later & (orientation[i] == orientation[j])
+        close = np.abs(applied[i] - applied[j]) <= EQUAL_LOAD * capacity  # (r, n, 6)
+        equal = close.all(axis=2)
+        close[:, :, k] = True
+        equal_but_k = close.all(axis=2)
+        # equal load, any size on k itself (the loop is widest at zero): opposite history
+        opposite_history = same & (direction[i, k] != direction[j, k]) & equal
+        opposite_sign = (
+            same
+            & ~opposite_history
+            & strong[i]
+            & strong[j]
+            & (sign[i] == -sign[j])
+            & (np.abs(np.abs(applied[i, k]) - np.abs(applied[j, k])) <= EQUAL_LOAD * capacity[k])
+            & equal_but_k
+            # both moving away from zero: a loop's offset is then odd in the sign
+            & (direction[i, k] * sign[i] == direction[j, k] * sign[j])
+        )
+        for a, b in zip(*np.nonzero(opposite_history)):
+            p, q = int(i[a, 0]), int(j[0, b])
+            direction_pairs.append((p, q) if direction[p, k] < 0 else (q, p))
+        for a, b in zip(*np.nonzero(opposite_sign)):
+            p, q = int(i[a, 0]), int(j[0, b])
+            sign_pairs.append((p, q) if applied[p, k] > 0 else (q, p))
     return direction_pairs, sign_pairs
 
 

@@ -15,12 +15,15 @@ is safe inside a node's callback thread.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 import numpy as np
 
+from ..figure_png import fixed_margins, save_png
 from .diagnose import Diagnosis, EffectFound
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 CLIP_PCT_FS = 0.5  # the memo's vertical range of Figs. 4-9
 
@@ -28,9 +31,7 @@ CLIP_PCT_FS = 0.5  # the memo's vertical range of Figs. 4-9
 def _save(figure: Figure, path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    FigureCanvasAgg(figure)
-    figure.savefig(path, dpi=110)
-    return path
+    return save_png(figure, path, 110)
 
 
 def _clipped_scatter(axes, x, y, clip, **style):
@@ -62,6 +63,8 @@ def plot_residuals(
     sigma = diagnosis.sigma_pct_fs[which]
     model = diagnosis.base_fit.name if which == 'before' else diagnosis.adopted.name
     labels = np.asarray(diagnosis.point_labels, dtype=float)
+    from matplotlib.figure import Figure  # imported on drawing: a plan costs no matplotlib
+
     figure = Figure(figsize=(12, 6.5))
     figure.suptitle(
         f'{diagnosis.balance} — residuals of the {model} model '
@@ -87,6 +90,8 @@ def plot_effect(diagnosis: Diagnosis, effect: EffectFound, path) -> Path:
     variable.
     """
     components = list(effect.components)
+    from matplotlib.figure import Figure
+
     figure = Figure(figsize=(max(6.0, 4.2 * len(components) + 0.5), 4.2))
     figure.suptitle(f'{diagnosis.balance} — {effect.name}: residual with the effect put back')
     for i, component in enumerate(components):
@@ -156,6 +161,8 @@ def plot_unexplained(diagnosis: Diagnosis, entry, path) -> Path:
         / diagnosis.capacity[k]
         * 100.0
     )
+    from matplotlib.figure import Figure
+
     figure = Figure(figsize=(10, 4.2))
     figure.suptitle(
         f'{diagnosis.balance} — {component}: left over and not explained '
@@ -198,11 +205,17 @@ def plot_unexplained(diagnosis: Diagnosis, entry, path) -> Path:
 
 def unexplained_figures(diagnosis: Diagnosis | None, directory) -> list[Path]:
     """One figure per unexplained entry (none without a diagnosis)."""
+    return [draw(Path(directory) / name) for name, draw in unexplained_plan(diagnosis)]
+
+
+def unexplained_plan(diagnosis: Diagnosis | None) -> list:
+    """unexplained_figures as (file name, draw(path) -> path), nothing drawn yet."""
     if diagnosis is None:
         return []
     return [
-        plot_unexplained(
-            diagnosis, entry, Path(directory) / f'unexplained_{entry.components[0]}.png'
+        (
+            f'unexplained_{entry.components[0]}.png',
+            lambda path, entry=entry: plot_unexplained(diagnosis, entry, path),
         )
         for entry in diagnosis.unexplained
     ]
@@ -233,6 +246,8 @@ def plot_contrasts(diagnosis: Diagnosis, path, contrasts=None) -> Path | None:
         if not contrast.count
     ]
     rows = (len(shown) + 1) // 2
+    from matplotlib.figure import Figure
+
     figure = Figure(figsize=(9, 1.2 + 1.9 * rows))  # two panels wide
     figure.suptitle(
         f'{diagnosis.balance} — what the schedule tells: loop (direction) vs sign '
@@ -261,13 +276,41 @@ def plot_contrasts(diagnosis: Diagnosis, path, contrasts=None) -> Path | None:
         axes.set_xlabel(f'|{component}| / capacity of {component} (–)', fontsize=7)
         axes.set_ylabel(f'{what}, % FS', fontsize=7)
         axes.tick_params(labelsize=7)
-    figure.tight_layout()
+    fixed_margins(
+        figure,
+        rows,
+        2,
+        left=0.65,
+        right=0.15,
+        bottom=0.45,
+        top=0.4 + 0.17 * (2 if missing else 1),
+        row_gap=0.7,
+        column_gap=0.75,
+    )
     return _save(figure, path)
 
 
 def contrast_figures(diagnosis: Diagnosis | None, directory) -> list[Path]:
     """contrasts.png (none without a diagnosis or without pairs)."""
+    return [draw(Path(directory) / name) for name, draw in contrast_plan(diagnosis)]
+
+
+def contrast_plan(diagnosis: Diagnosis | None) -> list:
+    """contrast_figures as (file name, draw(path) -> path): the contrasts are computed here (to
+    know whether the schedule offers pairs), the figure is drawn later.
+    """
     if diagnosis is None:
         return []
-    path = plot_contrasts(diagnosis, Path(directory) / 'contrasts.png')
-    return [path] if path is not None else []
+    from .contrasts import schedule_contrasts
+
+    contrasts = schedule_contrasts(diagnosis)
+    if not any(c.count for pair in contrasts.values() for c in pair):
+        return []
+
+    def draw(path: Path) -> Path:
+        drawn = plot_contrasts(diagnosis, path, contrasts)
+        if drawn is None:  # cannot happen: pairs were found above
+            raise ValueError('the schedule offers no pairs to draw')
+        return drawn
+
+    return [('contrasts.png', draw)]

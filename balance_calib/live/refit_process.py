@@ -4,7 +4,9 @@ A refit is seconds of numpy, plotting and bag reading; in the node's interpreter
 stream (p99 latency 0.4 ms -> 200-300 ms measured). Here the same `run_refit` runs in a process
 started with multiprocessing's spawn method (a fresh interpreter: no forked rclpy state), at a
 lower CPU priority, killed by the kernel if the node dies (PR_SET_PDEATHSIG); progress lines and
-the result (the calibration as a plain dict) come back over a pipe. A failure of any kind -- the
+the result (the calibration as a plain dict) come back over a pipe. The result is sent as soon as
+calibration.yaml and the report are written: the process draws the figures after it, unwaited
+for (reaped, or killed at the timeout, by a background thread). A failure of any kind -- the
 pipeline's RefitError, a crash, a kill, a timeout -- is a RefitFailed with one line saying why; the
 caller keeps its calibration.
 """
@@ -59,8 +61,22 @@ def _child(connection, bags, balance, out_dir, model, parent_pid, active=None) -
         os.nice(10)  # the stream's process comes first on a shared machine
     except OSError:
         pass
+    replied: list[bool] = []  # after the reply the caller reads no more from the pipe
     try:
         from balance_calib.refit.pipeline import run_refit
+
+        def reply(result) -> None:
+            # calibration.yaml and the report are in place: the figures follow without the caller
+            path = getattr(result, 'calibration_path', None)
+            connection.send(
+                (
+                    'ok',
+                    result.calibration.to_dict(),
+                    str(getattr(result, 'summary', '') or 'done'),
+                    None if path is None else str(path),
+                )
+            )
+            replied.append(True)
 
         result = run_refit(
             list(bags),
@@ -69,23 +85,19 @@ def _child(connection, bags, balance, out_dir, model, parent_pid, active=None) -
             model=model,
             diagnose=True,
             active_calibration=active,
-            progress=lambda line: connection.send(('progress', str(line))),
+            progress=lambda line: replied or connection.send(('progress', str(line))),
+            written=reply,
         )
-        path = getattr(result, 'calibration_path', None)
-        connection.send(
-            (
-                'ok',
-                result.calibration.to_dict(),
-                str(getattr(result, 'summary', '') or 'done'),
-                None if path is None else str(path),
-            )
-        )
+        if not replied:
+            reply(result)
     except ValueError as err:  # RefitError, BagError, ConfigError: the message names the file
-        connection.send(('error', ' '.join(str(err).split('\n')[:1]) or type(err).__name__))
+        if not replied:
+            connection.send(('error', ' '.join(str(err).split('\n')[:1]) or type(err).__name__))
     except BaseException as err:  # a bug rather than bad input: say what kind
-        connection.send(
-            ('error', f'{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ""}')
-        )
+        if not replied:
+            connection.send(
+                ('error', f'{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ""}')
+            )
     finally:
         connection.close()
 
@@ -147,7 +159,10 @@ def run_refit_in_process(
     finally:
         if outcome is None and process.is_alive():
             process.kill()
-        process.join(5.0)
+            process.join(5.0)
+        elif outcome is not None:
+            # the reply comes before the figures: the process draws them on, within the timeout
+            _finish_in_background(process, deadline)
         receiver.close()
     if outcome is None:
         code = process.exitcode
@@ -168,6 +183,19 @@ def run_refit_in_process(
         )
     except ValueError as err:
         raise RefitFailed(str(err)) from None
+
+
+def _finish_in_background(process, deadline: float) -> None:
+    """Reap the refit process once it has drawn its figures; kill it at the deadline."""
+    import threading
+
+    def wait() -> None:
+        process.join(max(0.0, deadline - time.monotonic()))
+        if process.is_alive():
+            process.kill()
+            process.join(5.0)
+
+    threading.Thread(target=wait, name='refit figures', daemon=True).start()
 
 
 # --- ~/refit as a job: what the node fixes when it is called, and what comes back

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 import json
+import os
 from pathlib import Path
 import shutil
 import time
@@ -362,6 +363,7 @@ def run_refit(
     schedule: str | Path | None = None,
     serial: str | None = None,
     operator: str | None = None,
+    written: Callable[[RefitResult], None] | None = None,
 ) -> RefitResult:
     """Refit from bags and write calibration.yaml, report.json, report.md and plots into out_dir.
 
@@ -375,6 +377,8 @@ def run_refit(
     schedule the campaign ran when it is not the balance config's own; it replaces
     config.schedule, which the gates (the schedule gate among them) judge the campaign against.
     serial (default the balance config's) and operator: the signed record's (record.py).
+    written(result): called once calibration.yaml, report.json and report.md are in out_dir,
+    before the figures are drawn (~/refit replies then); run_refit returns after the figures.
     """
     from ..bags.errors import BagError
     from ..bags.messages import SIMULATION_TOPIC
@@ -472,15 +476,23 @@ def run_refit(
         f'writing calibration.yaml, report.json, report.md{" and plots" if plots else ""} into '
         f'{out_dir}'
     )
-    out = write_outputs(result, out_dir, plots=plots, overwrite=overwrite)
-    say(f'wrote {out}')
-    return RefitResult(
+    refit = RefitResult(
         result.calibration,
         out_dir / 'calibration.yaml',
         result.report,
         summary_line(result.report),
         out_dir,
     )
+    out = write_outputs(
+        result,
+        out_dir,
+        plots=plots,
+        overwrite=overwrite,
+        written=None if written is None else (lambda _: written(refit)),
+        progress=say,
+    )
+    say(f'wrote {out}')
+    return refit
 
 
 def summary_line(report: Mapping) -> str:
@@ -522,32 +534,39 @@ def _require_regular_file(path: str | Path, what: str) -> None:
 
 
 def write_outputs(
-    result: CalibrationResult, out_dir: Path, *, plots: bool = True, overwrite: bool = True
+    result: CalibrationResult,
+    out_dir: Path,
+    *,
+    plots: bool = True,
+    overwrite: bool = True,
+    written: Callable[[Path], None] | None = None,
+    progress: Progress | None = None,
 ) -> Path:
     """Write the files into a staging directory, then move them in (nothing half-written).
 
     output_dir.py says how: a new out_dir appears whole with one rename; into an existing one
     (allowed with overwrite) the earlier run's outputs not written again are removed and each
     file is replaced by a rename. Files are readable by others (0644, directory 0755).
+
+    The figures come last, off the critical path: calibration.yaml, report.json and report.md
+    (which already names every figure) are installed first and `written(out_dir)` is called;
+    then each figure is drawn into a staging directory and renamed into out_dir. A figure that
+    cannot be drawn is said (progress, report's `warnings`) and left out of report.md's links;
+    the calibration stays.
     """
     from ..output_dir import install_outputs, make_staging
     from .report import report_markdown
 
     out_dir = Path(out_dir)
+    figures = []
+    if plots:
+        from .plots import figure_plan
+
+        figures = figure_plan(result)
+    result.report.setdefault('plots', [name for name, _ in figures])
     staging = make_staging(out_dir, check_out_dir(out_dir, overwrite), 'refit')
     try:
         save_calibration(staging / 'calibration.yaml', result.calibration)
-        figures = []
-        if plots:
-            from ..diagnosis.plots import contrast_figures, unexplained_figures
-            from .plots import residual_figures
-
-            figures = (
-                residual_figures(result, staging)
-                + unexplained_figures(result.diagnosis, staging)
-                + contrast_figures(result.diagnosis, staging)
-            )
-        result.report.setdefault('plots', [f.name for f in figures])
         (staging / 'report.json').write_text(
             json.dumps(result.report, indent=2, allow_nan=False) + '\n'
         )
@@ -555,7 +574,49 @@ def write_outputs(
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    return install_outputs(staging, out_dir, overwrite=overwrite)
+    out = install_outputs(staging, out_dir, overwrite=overwrite)
+    if written is not None:
+        written(out)
+    if figures:
+        _draw_figures(result, figures, out, progress or (lambda message: None))
+    return out
+
+
+def _draw_figures(result: CalibrationResult, figures, out_dir: Path, say: Progress) -> None:
+    """Draw (name, draw) into a staging directory in out_dir and rename each into place; a
+    failure is told and taken out of the report (report.json, report.md rewritten atomically).
+    """
+    from ..calibration_file import write_text_atomically
+    from ..figure_png import draw_figures
+    from ..output_dir import FILE_MODE, make_staging
+    from .report import report_markdown
+
+    staging = make_staging(out_dir, out_dir, 'refit')
+    try:
+        # the residual figures share one figure (refit/plots.py); the others are drawn beside
+        failed = draw_figures(
+            figures, staging, beside=lambda name: not name.startswith('residuals_')
+        )
+        for name in dict.fromkeys(name for name, _ in figures):  # a name drawn twice: once
+            if name not in failed:
+                os.chmod(staging / name, FILE_MODE)
+                os.replace(staging / name, out_dir / name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    if not failed:
+        return
+    report = result.report
+    report['plots'] = [name for name in report.get('plots', []) if name not in failed]
+    report['warnings'] = list(report.get('warnings', [])) + [
+        f'figure {name} could not be drawn ({why}); the calibration is not affected'
+        for name, why in failed.items()
+    ]
+    for line in report['warnings'][-len(failed) :]:
+        say(line)
+    write_text_atomically(
+        out_dir / 'report.json', json.dumps(report, indent=2, allow_nan=False) + '\n'
+    )
+    write_text_atomically(out_dir / 'report.md', report_markdown(report, result))
 
 
 def campaign_points(campaign) -> LoadPoints:

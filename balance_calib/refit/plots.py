@@ -36,11 +36,153 @@ def _nice(name: str) -> str:
 
 
 def _save(figure, path: Path) -> Path:
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from ..figure_png import save_png
 
-    FigureCanvasAgg(figure)
-    figure.savefig(path, dpi=DPI)
-    return Path(path)
+    return save_png(figure, path, DPI)
+
+
+class ResidualFigure:
+    """The six-panel residual figure, built once and redrawn for each model.
+
+    Axes, labels, legend and layout are made once (fixed margins in inches, no tight_layout pass);
+    `draw` only replaces the points and the titles, so a refit's 3-4 residual figures cost one
+    build and one Agg draw each.
+    """
+
+    def __init__(self, components, rows: int | None = None) -> None:
+        from matplotlib.figure import Figure
+        from matplotlib.lines import Line2D
+
+        from ..figure_png import Backdrop, fixed_margins
+
+        self.components = list(components)
+        rows = rows or int(np.ceil(len(self.components) / 2))
+        self.rows = rows
+        figure = Figure(figsize=(10.0, 2.75 * rows + 1.2))
+        height = figure.get_figheight()
+        # the layout tight_layout found for these labels, as fixed margins (inches)
+        fixed_margins(
+            figure,
+            rows,
+            2,
+            left=0.75,
+            right=0.15,
+            bottom=0.55,
+            top=1.05,
+            row_gap=0.75,
+            column_gap=0.95,
+        )
+        self.figure = figure
+        self.panels = []
+        for k, component in enumerate(self.components):
+            # forces in the left column, moments in the right, as the memo's figures pair them
+            column, row = divmod(k, rows)
+            axes = figure.add_subplot(rows, 2, 2 * row + column + 1)
+            axes.axhline(0.0, color='0.6', linewidth=0.8)
+            series = {}
+            for key, _, marker, colour in _CATEGORIES:
+                inside = axes.plot(
+                    [],
+                    [],
+                    linestyle='none',
+                    marker=marker,
+                    markersize=3.5,
+                    markerfacecolor=colour if marker != 'x' else None,
+                    markeredgewidth=0.8,
+                    color=colour,
+                )[0]
+                edges = [
+                    axes.plot(
+                        [],
+                        [],
+                        linestyle='none',
+                        marker=edge_marker,
+                        markersize=6,
+                        markerfacecolor='none',
+                        markeredgewidth=1.0,
+                        color=colour,
+                    )[0]
+                    for edge_marker in ('^', 'v')
+                ]
+                series[key] = (inside, edges)
+            axes.set_ylim(-CLIP_PCT * 1.04, CLIP_PCT * 1.04)
+            axes.grid(True, linewidth=0.3)
+            axes.set_ylabel(f'residual {_nice(component)} (% FS)', fontsize=9)
+            if row == rows - 1:
+                axes.set_xlabel('load point number', fontsize=9)
+            axes.tick_params(labelsize=8)
+            self.panels.append((axes, series))
+        handles = [
+            Line2D(
+                [],
+                [],
+                linestyle='none',
+                marker=m,
+                color=c,
+                markerfacecolor=c if m != 'x' else None,
+                label=name,
+            )
+            for _, name, m, c in _CATEGORIES
+        ]
+        handles.append(
+            Line2D(
+                [],
+                [],
+                linestyle='none',
+                marker='^',
+                markerfacecolor='none',
+                color='k',
+                label=f'beyond ±{CLIP_PCT:g} % FS, drawn on the edge',
+            )
+        )
+        figure.legend(
+            handles=handles,
+            loc='upper center',
+            ncol=4,
+            fontsize=9,
+            frameon=False,
+            bbox_to_anchor=(0.5, 1.0 - 0.45 / height),
+        )
+        self.title = figure.suptitle('', fontsize=12)
+        moving: list = [self.title] + [axes.title for axes, _ in self.panels]
+        moving += [
+            line
+            for _, series in self.panels
+            for inside, edges in series.values()
+            for line in (inside, *edges)
+        ]
+        self.backdrop = Backdrop(figure, moving, DPI)
+
+    def draw(self, residuals_pct: np.ndarray, labels, categories: np.ndarray, title: str, path):
+        """residuals_pct (N, n_components); categories (N,) of 'single', 'combined', 'zero'."""
+        from ..figure_png import decimated
+
+        labels = np.asarray(labels, dtype=float)
+        categories = np.asarray(categories, dtype=object)
+        for k, (component, (axes, series)) in enumerate(zip(self.components, self.panels)):
+            values = np.asarray(residuals_pct[:, k], dtype=float)
+            sigma = float(np.sqrt(np.mean(values**2)))
+            beyond = int(np.sum(np.abs(values) > CLIP_PCT))
+            for key, _, _, _ in _CATEGORIES:
+                chosen = np.flatnonzero(categories == key)
+                chosen = chosen[decimated(labels[chosen], values[chosen])]
+                x, y = labels[chosen], values[chosen]
+                inside, (up, down) = series[key]
+                keep = np.abs(y) <= CLIP_PCT
+                inside.set_data(x[keep], y[keep])
+                for sign, edge in ((1, up), (-1, down)):
+                    out = sign * y > CLIP_PCT
+                    edge.set_data(x[out], np.full(int(out.sum()), sign * CLIP_PCT * 0.96))
+            axes.relim()
+            axes.autoscale_view(scalex=True, scaley=False)
+            clipped = f'; {beyond} beyond ±{CLIP_PCT:g} %' if beyond else ''
+            axes.set_title(
+                f'{_nice(component)}: σ = {sigma:.3f} %, 2σ = {2 * sigma:.3f} %{clipped}',
+                fontsize=10,
+            )
+        self.title.set_text(title)
+        limits = tuple(axes.get_xlim() for axes, _ in self.panels)
+        return self.backdrop.save(Path(path), limits)
 
 
 def residual_figure(
@@ -50,90 +192,7 @@ def residual_figure(
 
     residuals_pct (N, n_components); categories (N,) of 'single', 'combined', 'zero'.
     """
-    from matplotlib.figure import Figure
-    from matplotlib.lines import Line2D
-
-    labels = np.asarray(labels, dtype=float)
-    rows = int(np.ceil(len(components) / 2))
-    figure = Figure(figsize=(10.0, 2.75 * rows + 1.2))
-    for k, component in enumerate(components):
-        # forces in the left column, moments in the right, as the memo's figures pair them
-        column, row = divmod(k, rows)
-        axes = figure.add_subplot(rows, 2, 2 * row + column + 1)
-        values = residuals_pct[:, k]
-        sigma = float(np.sqrt(np.mean(values**2)))
-        beyond = int(np.sum(np.abs(values) > CLIP_PCT))
-        axes.axhline(0.0, color='0.6', linewidth=0.8)
-        for key, _, marker, colour in _CATEGORIES:
-            chosen = categories == key
-            inside = chosen & (np.abs(values) <= CLIP_PCT)
-            axes.plot(
-                labels[inside],
-                values[inside],
-                linestyle='none',
-                marker=marker,
-                markersize=3.5,
-                markerfacecolor=colour if marker != 'x' else None,
-                markeredgewidth=0.8,
-                color=colour,
-            )
-            for sign, edge_marker in ((1, '^'), (-1, 'v')):
-                out = chosen & (sign * values > CLIP_PCT)
-                if out.any():
-                    axes.plot(
-                        labels[out],
-                        np.full(out.sum(), sign * CLIP_PCT * 0.96),
-                        linestyle='none',
-                        marker=edge_marker,
-                        markersize=6,
-                        markerfacecolor='none',
-                        markeredgewidth=1.0,
-                        color=colour,
-                    )
-        axes.set_ylim(-CLIP_PCT * 1.04, CLIP_PCT * 1.04)
-        axes.grid(True, linewidth=0.3)
-        clipped = f'; {beyond} beyond ±{CLIP_PCT:g} %' if beyond else ''
-        axes.set_title(
-            f'{_nice(component)}: σ = {sigma:.3f} %, 2σ = {2 * sigma:.3f} %{clipped}', fontsize=10
-        )
-        axes.set_ylabel(f'residual {_nice(component)} (% FS)', fontsize=9)
-        if row == rows - 1:
-            axes.set_xlabel('load point number', fontsize=9)
-        axes.tick_params(labelsize=8)
-    handles = [
-        Line2D(
-            [],
-            [],
-            linestyle='none',
-            marker=m,
-            color=c,
-            markerfacecolor=c if m != 'x' else None,
-            label=name,
-        )
-        for _, name, m, c in _CATEGORIES
-    ]
-    handles.append(
-        Line2D(
-            [],
-            [],
-            linestyle='none',
-            marker='^',
-            markerfacecolor='none',
-            color='k',
-            label=f'beyond ±{CLIP_PCT:g} % FS, drawn on the edge',
-        )
-    )
-    figure.legend(
-        handles=handles,
-        loc='upper center',
-        ncol=4,
-        fontsize=9,
-        frameon=False,
-        bbox_to_anchor=(0.5, 1.0 - 0.45 / figure.get_figheight()),
-    )
-    figure.suptitle(title, fontsize=12)
-    figure.tight_layout(rect=(0, 0, 1, 1.0 - 0.75 / figure.get_figheight()))
-    return _save(figure, path)
+    return ResidualFigure(components).draw(residuals_pct, labels, categories, title, path)
 
 
 def point_categories(points, config) -> np.ndarray:
@@ -261,23 +320,38 @@ def residual_figures(result, directory: Path) -> list[Path]:
     """One figure per model (linear, quadratic, cubic, and the adopted one when the diagnosis
     adopted effects), then one per effect.
     """
+    directory = Path(directory)
+    return [draw(directory / name) for name, draw in _residual_plan(result)]
+
+
+def _residual_plan(result) -> list:
+    """(file name, draw(path) -> path) of residual_figures, in its order; nothing drawn yet."""
     config = result.config
     labels = result.points.label
     capacity = np.asarray(config.capacity, dtype=float)
     categories = point_categories(result.points, config)
-    figures = []
-    for order, model_fit in result.fits.items():
-        pct = model_fit.fit.residuals / capacity * 100.0
-        figures.append(
-            residual_figure(
-                pct,
+    shared: list[ResidualFigure] = []  # one figure, built at the first draw, reused
+
+    def residuals(pct, point_labels, point_categories_, title):
+        def draw(path: Path) -> Path:
+            if not shared:
+                shared.append(ResidualFigure(config.components))
+            return shared[0].draw(pct, point_labels, point_categories_, title, path)
+
+        return draw
+
+    plan = [
+        (
+            f'residuals_{order}.png',
+            residuals(
+                model_fit.fit.residuals / capacity * 100.0,
                 labels,
                 categories,
-                config.components,
                 f'{config.name}: residuals of the {order} model (cf. TM-663 Figs. 4-9)',
-                directory / f'residuals_{order}.png',
-            )
+            ),
         )
+        for order, model_fit in result.fits.items()
+    ]
     diagnosis = result.diagnosis
     if diagnosis is not None and diagnosis.effects:
         adopted_labels = np.asarray(diagnosis.point_labels)
@@ -287,26 +361,42 @@ def residual_figures(result, directory: Path) -> list[Path]:
             adopted_categories = np.array(
                 [lookup.get(label, 'single') for label in adopted_labels.tolist()], object
             )
-        pct = diagnosis.residuals_after / capacity * 100.0
-        figures.append(
-            residual_figure(
-                pct,
-                adopted_labels,
-                adopted_categories,
-                config.components,
-                f'{config.name}: residuals of the adopted model {diagnosis.adopted.name}',
-                directory / 'residuals_adopted.png',
+        plan.append(
+            (
+                'residuals_adopted.png',
+                residuals(
+                    diagnosis.residuals_after / capacity * 100.0,
+                    adopted_labels,
+                    adopted_categories,
+                    f'{config.name}: residuals of the adopted model {diagnosis.adopted.name}',
+                ),
             )
         )
-        figures.extend(
-            effect_figure(
-                config.name,
-                effect,
-                diagnosis.residuals_after,
-                capacity,
-                config.components,
-                directory / f'effect_{effect.name}.png',
-            )
-            for effect in diagnosis.effects
-        )
-    return figures
+        for effect in diagnosis.effects:
+
+            def draw_effect(path: Path, effect=effect) -> Path:
+                return effect_figure(
+                    config.name,
+                    effect,
+                    diagnosis.residuals_after,
+                    capacity,
+                    config.components,
+                    path,
+                )
+
+            plan.append((f'effect_{effect.name}.png', draw_effect))
+    return plan
+
+
+def figure_plan(result) -> list:
+    """Every figure of a refit as (file name, draw(path) -> path), in report.md's order: the
+    residual figures, one per unexplained leftover, the contrasts when the schedule offers pairs.
+    The names are known before anything is drawn, so the report can be written first.
+    """
+    from ..diagnosis.plots import contrast_plan, unexplained_plan
+
+    return (
+        _residual_plan(result)
+        + unexplained_plan(result.diagnosis)
+        + contrast_plan(result.diagnosis)
+    )
