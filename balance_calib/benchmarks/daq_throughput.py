@@ -77,6 +77,42 @@ class DeviceHarness(Harness):
         self.device.close()
 
 
+def decode_cost_us(preset: Path, records: int = 20_000) -> float:
+    """balance_daq's own work on one record as the device thread meets it, in this process:
+    µs per record of framing, parsing and SampleStream.take, one record a read (a datagram, or
+    one line written), records encoded by the virtual device's Encoder. No DDS: what the CPU
+    figures at 1 kHz spend in the node's Python besides rclpy's publish.
+    """
+    from ..daq.framing import LineFramer, LineParser, RecordParser
+    from ..daq.samples import SampleStream
+    from ..simulation.virtual_device import Encoder, read_format
+
+    settings = read_format(preset)
+    encoder = Encoder(settings)
+    chunks = [encoder.encode(SAMPLE_MV, 1e-3 * i) for i in range(records)]
+    stream = SampleStream(settings)
+    if settings.framing == 'binary':
+        parser = RecordParser(settings.record_format, settings.columns)
+        begin = time.perf_counter()
+        for i, datagram in enumerate(chunks):
+            parsed = parser.parse([datagram])
+            stream.take(parsed.fields, i * 1_000_000, parsed.malformed)
+    else:
+        framer, line_parser = LineFramer(), LineParser(settings.columns, settings.line_prefix)
+        framer.restart(False)
+        begin = time.perf_counter()
+        for i, line in enumerate(chunks):
+            lines, overlong = framer.feed(line)
+            parsed = line_parser.parse(lines)
+            stream.take(parsed.fields, i * 1_000_000, parsed.malformed + overlong)
+    elapsed = time.perf_counter() - begin
+    if stream.counts.samples_published != records:
+        raise RuntimeError(
+            f'{preset.name}: {stream.counts.samples_published} of {records} decoded'
+        )
+    return elapsed / records * 1e6
+
+
 def source_ceiling(transport: str, preset: Path, seconds: float = 1.0) -> float:
     """Records a second the device source sends, unpaced, to a reader that drains them."""
     from ..simulation.virtual_device import read_format, VirtualDevice
@@ -227,6 +263,13 @@ def report(summary: dict, ceilings: dict, seconds: float, trials: int) -> None:
             f'{one.get("cpu_us_per_sample", float("nan")):18.1f} '
             f'{one.get("p50_ms", float("nan")):11.3f} {one.get("p99_ms", float("nan")):11.3f}'
         )
+    print(
+        'decode in this process (framing, parsing, take; one record a read): '
+        + ', '.join(
+            f'{label.split(", ")[1]} {decode_cost_us(_preset(name)):.1f} µs/record'
+            for label, (_, name) in SOURCES.items()
+        )
+    )
     relay = medians_at_1k(summary.get('raw relay', [])) if summary.get('raw relay') else None
     for label, target in ((UDP_RDT, 7000.0), (TCP_LINES, 2000.0)):
         results = summary.get(label)
