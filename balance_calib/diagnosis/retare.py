@@ -192,8 +192,9 @@ def _loaded_press(fits, zero, scale) -> float:
 
 
 def _examine_tare(state: SearchState, body, n_searches):
-    """The calibration body refitted (weight, then CG) as a candidate effect: a _Candidate, or
-    None where the refit does not pass; the problem's data are left as they were.
+    """The calibration body refitted as a candidate effect (a forward selection over
+    settings.tare_parameters): a _Candidate, or None where no refit passes; the problem's data
+    are left as they were.
     """
     fits, comp_terms, problem = state.fits, state.comp_terms, state.problem
     gravity, settings, capacity = state.points.gravity, state.settings, state.capacity
