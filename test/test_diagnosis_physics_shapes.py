@@ -8,19 +8,19 @@ the issue's ≥ 9/10.
 Only the cells that meet the target are here (all cells: tools/physics_cells.py, its table in
 docs/results.md). Masing and re-seating on every bridge of LMC6522 (σ 1.17x / 1.18x before), the
 Bouc-Wen loop and the re-seating joint on B660H's F_Z (1.20x, 1.18x) came in once the tare was
-re-read through the adopted model (diagnose._retare). Negative curvature on every bridge of
+re-read through the adopted model (retare._retare). Negative curvature on every bridge of
 LMC6522 (9/10 and cross-validated σ up to 1.21x before) came in with the one-sided curvature
-offered as a pair and its shape settled (diagnose._settle_sign_shape,
+offered as a pair and its shape settled (families._settle_sign_shape,
 test_diagnosis_sign_shape.py). Masing on B660H's F_Z (one seed of ten at a cross-validated σ of
 1.16x before) came in with the widest play's loop alone, without its first-loading curve
 (candidates.play_loop). Masing, Bouc-Wen and re-seating on every bridge of B660H (8, 8 and 7/10
 before) came in once the leftovers judged the tare re-read through the adopted model and a loop's
-shape was settled at the lack-of-fit level (diagnose._retare_passes, _completed_at_lack_of_fit).
+shape was settled at the lack-of-fit level (retare._retare_passes, _completed_at_lack_of_fit).
 Negative curvature on every bridge of B660H (8/10 before) came in once the cross terms were no
 longer offered where a specific family left no lack of fit (seed 3004: MYV*MZV² on M_X,
-diagnose._cross_terms_only_where_lacking) and a curvature pair reduced for leverage was completed
+search._cross_terms_only_where_lacking) and a curvature pair reduced for leverage was completed
 after the tare's re-read where that lowers PRESS (F_Z cross-validated 1.18x -> 1.04x,
-diagnose._pairs_restored).
+retare._pairs_restored).
 The measured misses: load-path friction 0-5/10 (on this schedule every
 loaded point is reached rising, so it is mostly a sign step plus a sensitivity, which no family
 holds with the stick band); Preisach on every bridge of LMC6522 7/10 (M_X's play terms fit 70-72 %
@@ -121,7 +121,7 @@ def test_a_physical_loop_or_sign_asymmetry_is_named_alone_in_nine_of_ten(balance
 def test_a_loop_term_that_moves_over_the_campaign_is_completed_by_a_second_play():
     """B660H, a Masing loop on every bridge, seed 3005: F_Y's own loop term alone is rejected by
     the Chow test (its coefficient differs between the campaign's halves); a second play keeps it
-    (diagnose._completed_while_moving). Without that step F_Y is left `unexplained` at 1.45x.
+    (families._completed_while_moving). Without that step F_Y is left `unexplained` at 1.45x.
     """
     config = load_balance_config('b660h')
     effect = physics.scaled('b660h', 'masing', 'all')

@@ -1,4 +1,4 @@
-"""The tare outputs re-read through the adopted model (diagnose._retare, issue 24).
+"""The tare outputs re-read through the adopted model (retare._retare, issue 24).
 
 A hand-made linear balance L = A V whose corrected data carry tare outputs off by a known
 ±δ per orientation (as a first fit bent by an unmodelled loop leaves them): re-reading through
@@ -14,7 +14,8 @@ from balance_calib.diagnosis.statistics import ZeroPointWhitening
 from balance_calib.model.tm663 import tm663_terms
 from balance_calib.tare.calibration_body import CorrectedData
 
-diagnose_module = importlib.import_module('balance_calib.diagnosis.diagnose')
+retare_module = importlib.import_module('balance_calib.diagnosis.retare')
+state_module = importlib.import_module('balance_calib.diagnosis.search_state')
 
 OUTPUTS = ('FXV', 'FYV', 'FZV', 'MXV', 'MYV', 'MZV')
 COMPONENTS = ('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ')
@@ -47,9 +48,7 @@ def _campaign():
         true_tare_outputs + delta,
     )
     whitening = ZeroPointWhitening.for_points(times, np.all(applied == 0, axis=1), orientation)
-    problem = diagnose_module._Problem(
-        OUTPUTS, corrected, {}, whitening, COMPONENTS, times, gravity
-    )
+    problem = state_module._Problem(OUTPUTS, corrected, {}, whitening, COMPONENTS, times, gravity)
     return problem, gravity, np.all(applied == 0, axis=1), true_tare_outputs
 
 
@@ -62,7 +61,7 @@ def test_the_tare_outputs_move_to_the_inverse_of_the_true_model():
     residuals = [max(np.abs(f.ols.residuals).max() for f in fits)]
     for _ in range(60):
         before = problem.corrected
-        fits, reread = diagnose_module._retare(
+        fits, reread = retare_module._retare(
             problem, fits, terms, gravity, zero, COMPONENTS, OUTPUTS
         )
         assert reread
@@ -91,5 +90,5 @@ def test_correct_tare_outputs_stay_where_they_are():
     )
     terms = [[t.name for t in tm663_terms('linear', OUTPUTS)] for _ in COMPONENTS]
     fits = [problem.fit(k, terms[k]) for k in range(6)]
-    diagnose_module._retare(problem, fits, terms, gravity, zero, COMPONENTS, OUTPUTS)
+    retare_module._retare(problem, fits, terms, gravity, zero, COMPONENTS, OUTPUTS)
     np.testing.assert_allclose(problem.corrected.tare_outputs_mv, truth, atol=1e-10)

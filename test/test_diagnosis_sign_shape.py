@@ -1,6 +1,6 @@
 """The shape of a sign asymmetry (issue 24): the bidirectional family offers a one-sided curvature
 as a pair (x|x| with x²|x|, V|V| with V²|V|), drops the pair's term the points do not resolve,
-and completes a shape whose fit moves with the gravity direction (diagnose._settle_sign_shape).
+and completes a shape whose fit moves with the gravity direction (families._settle_sign_shape).
 
 The campaigns are the physics generator's (test/diagnosis_physics.py: a curvature |x|^2.5 on
 negative loads, not a term of the family), one noise floor in size, on seeds where each step

@@ -23,7 +23,7 @@ from balance_calib.simulation.diagnosis_rates import (
 
 
 class _Plain:
-    """The few members of diagnose._Problem the directed test uses, without whitening (iid
+    """The few members of search_state._Problem the directed test uses, without whitening (iid
     noise).
     """
 

@@ -148,9 +148,10 @@ def test_temperature_levels_favour_the_own_bridge_and_keep_the_family_level(monk
     bridges), summing to the flat Bonferroni total; zero drift's levels sum to it too.
     """
     diagnose_module = importlib.import_module('balance_calib.diagnosis.diagnose')
+    families_module = importlib.import_module('balance_calib.diagnosis.families')
 
     seen = []
-    original = diagnose_module.forward_select
+    original = families_module.forward_select
 
     def spy(fit, candidates, groups, *, alpha_per_test, max_groups, **kw):
         seen.append((len(groups), np.broadcast_to(alpha_per_test, (len(groups),)).copy()))
@@ -167,7 +168,7 @@ def test_temperature_levels_favour_the_own_bridge_and_keep_the_family_level(monk
         family_of.extend([family.name] * (len(seen) - start))
         return out
 
-    monkeypatch.setattr(diagnose_module, 'forward_select', spy)
+    monkeypatch.setattr(families_module, 'forward_select', spy)
     monkeypatch.setattr(diagnose_module, '_examine_family', examine)
     reduction, scatter = simulate_reduction(b660h, seed=7, samples_per_point=8, with_scatter=True)
     diagnose_module.diagnose(reduction, b660h, **scatter)

@@ -7,7 +7,7 @@ both components within 15 % of the clean campaign of the same seed.
 Measured over seeds 3000-3009 on both balances (the cases here, and B660H's temperature + Preisach
 loop): 60/60 named right; σ ratios ≤ 1.11 (the five cases here: tools/two_effects_cells.py).
 B660H's sign step + creep reached 1.17 before the tare was re-read through the adopted model
-(diagnose._retare); 1.05 since.
+(retare._retare); 1.05 since.
 """
 
 import diagnosis_physics as physics

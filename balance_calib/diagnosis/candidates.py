@@ -162,7 +162,7 @@ def bidirectional_family(
     The load-keyed terms (x = L_X / capacity) do the same on the side of the component's load:
     on a coupled bridge the output's sign is not the load's (B660H M_Z: a curvature on negative
     M_Z loads on every bridge left 1.89 floors with the output terms and |x|, 0.41 with x|x| and
-    x²|x| too; noise-free). Once a group is found on a component, diagnose._settle_sign_shape
+    x²|x| too; noise-free). Once a group is found on a component, families._settle_sign_shape
     drops a pair's term the points do not resolve and completes a shape that one pair fits only
     with moving coefficients by the other key's pair (LMC6522, curvature on every bridge: 10/10
     right, σ ≤ 1.12x and cross-validated ≤ 1.14x the clean floor; 9/10 and 1.21x before).

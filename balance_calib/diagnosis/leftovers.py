@@ -36,6 +36,7 @@ import scipy.stats
 
 from ..accuracy.sigma import sigma_pct_fs
 from .candidates import STATIC_FAMILIES
+from .search_state import SearchState
 from .statistics import fit_columns, partial_f
 
 # A component whose repeatability is this many times the median of the others is warned about.
@@ -351,25 +352,15 @@ def _unstable(problem, k, terms, fit, found, late, alpha) -> list[tuple[str, flo
     return out
 
 
-def examine_leftovers(
-    points,
-    problem,
-    fits,
-    comp_terms,
-    base_fits,
-    base_terms,
-    effects,
-    settings,
-    components,
-    outputs_names,
-    capacity,
-    variables,
-    direction,
-    times,
-    temps,
-    point_variance_mv2=None,
-    point_samples=None,
-) -> Leftovers:
+def examine_leftovers(state: SearchState, effects) -> Leftovers:
+    """What is left after the search (state: its fits, terms and data; effects: the adopted
+    candidates): repeatability, lack of fit, unexplained structure, warnings.
+    """
+    points, problem, fits, comp_terms = state.points, state.problem, state.fits, state.comp_terms
+    base_fits, base_terms, settings = state.base_fits, state.base_terms, state.settings
+    components, outputs_names, capacity = state.components, state.outputs_names, state.capacity
+    variables, direction, times, temps = state.variables, state.direction, state.times, state.temps
+    point_variance_mv2, point_samples = state.point_variance_mv2, state.point_samples
     n_components = len(components)
     linear = linear_part(fits, comp_terms, outputs_names)
     pairs = zero_point_pairs(points)

@@ -120,7 +120,7 @@ def beside_its_partner(family: str, effects, fits, fitted_well) -> frozenset[int
 
     effects: the search's adopted entries ({'candidate': _Candidate, ...}); fits: per component
     the current fit; fitted_well(k, fit): False where component k lacks fit
-    (diagnose._fitted_well).
+    (search._fitted_well).
     """
     partner = PARTNERS.get(family)
     if partner is None:
