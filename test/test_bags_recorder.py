@@ -251,7 +251,9 @@ def test_a_recorder_stalled_1_5_s_keeps_a_1_khz_stream_and_says_what_a_shallow_w
             shallow.publish(vector)
             time.sleep(max(0.0, start + (index + 1) * 1e-3 - time.monotonic()))
         stalled_s = (stall[1] - stall[0]) * 1e-3
-        assert time.monotonic() - start < count * 1e-3 + 1.0, 'the publisher itself was late'
+        # the stall is counted in samples (1500), so a publisher slowed by a busy machine makes
+        # it longer, not shorter: only a harness stuck for seconds would void the run
+        assert time.monotonic() - start < 2 * count * 1e-3 + 1.0, 'the publisher itself was late'
         assert raw_publisher.wait_for_all_acked(Duration(seconds=30))
         shallow.wait_for_all_acked(Duration(seconds=10))
         recorder.send_signal(signal.SIGINT)
