@@ -200,3 +200,17 @@ def test_a_campaign_command_line_becomes_its_story():
         'lmc6522', '', 1
     )
     assert plain.installations == ('upright', 'inverted') and plain.compare_base is False
+
+
+def test_every_parameter_windon_gives_a_node_is_one_the_node_declares():
+    from balance_calib.live.parameters import PARAMETERS as CALIBRATOR
+    from balance_calib.simulation.publisher_parameters import PARAMETERS as PUBLISHER
+
+    run = windon.RunDescription(SimulatedBalance('lmc6522', 'temperature:sensitivity_per_k=1e-4'))
+    for parameters in (
+        windon.publisher_parameters(run),
+        windon.empty_balance_parameters(run, Path('e.csv')),
+    ):
+        assert set(parameters) <= set(PUBLISHER), sorted(set(parameters) - set(PUBLISHER))
+    calibrator = windon.calibrator_parameters(run, Path('z.yaml'))
+    assert set(calibrator) <= set(CALIBRATOR), sorted(set(calibrator) - set(CALIBRATOR))

@@ -251,7 +251,7 @@ def record_wind_on_run(
     """Run balance_recorder and bridge_publisher (wind-on) until the run is over; the bag is out.
 
     The nodes print on this process's stdout and stderr. Raises WindOnError (the bag removed) when
-    a node fails or the run outlasts run_timeout_s, FileExistsError when out exists already.
+    a node fails or the run outlasts run.run_timeout_s, FileExistsError when out exists already.
     """
     out = Path(out).absolute()
     if out.exists():
