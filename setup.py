@@ -9,7 +9,9 @@ package_name = 'balance_calib'
 setup(
     name=package_name,
     version='0.1.0',
-    packages=find_packages(exclude=['test', 'test.*']),
+    # balance_calib and its sub-packages only: tools/ (ros_cli, the development stand-in for the
+    # ros2 CLI, and the scripts that regenerate data) is not installed
+    packages=find_packages(include=['balance_calib', 'balance_calib.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

@@ -206,7 +206,9 @@ def test_vectorised_cdr_decoding_equals_rosbags_deserialisation(
 
 
 def test_missing_path_names_it(tmp_path):
-    with pytest.raises(BagError, match=f'{tmp_path / "nowhere"}: no such file'):
+    with pytest.raises(
+        BagError, match=f'{tmp_path / "nowhere"}: no such bag directory or .mcap file'
+    ):
         read_bags([tmp_path / 'nowhere'])
 
 

@@ -257,6 +257,18 @@ def _third_party_imports(directory: Path, local: set[str]) -> dict[str, str]:
     return found
 
 
+def test_setup_installs_balance_calib_and_not_the_development_tools(monkeypatch):
+    packages = setup_keywords(monkeypatch)['packages']
+    on_disk = {
+        '.'.join(p.parent.relative_to(ROOT).parts)
+        for p in (ROOT / 'balance_calib').rglob('__init__.py')
+    }
+    assert set(packages) == on_disk and 'balance_calib.launchless' in packages
+    # tools/ros_cli (launchless_scripts/ros, the stand-in for ros2cli) is a package, not shipped
+    assert (ROOT / 'tools' / 'ros_cli' / '__init__.py').exists()
+    assert not [p for p in packages if not p.startswith('balance_calib')], packages
+
+
 def test_package_xml_names_a_checked_key_for_every_import():
     package = ElementTree.parse(ROOT / 'package.xml').getroot()
     run = {
@@ -268,8 +280,12 @@ def test_package_xml_names_a_checked_key_for_every_import():
     )
     # the old, unverified keys are gone
     assert not {'python3-rosbags', 'python3-mcap', 'python3-mcap-ros2-support'} & (run | test)
-    for directory, keys in ((ROOT / 'balance_calib', run), (ROOT / 'test', run | test)):
-        local = {'balance_calib'} | {p.stem for p in (ROOT / 'test').glob('*.py')}
+    for directory, keys in (
+        (ROOT / 'balance_calib', run),
+        (ROOT / 'tools' / 'ros_cli', run),  # launchless_scripts/ros runs in the package's venv
+        (ROOT / 'test', run | test),
+    ):
+        local = {'balance_calib', 'ros_cli'} | {p.stem for p in (ROOT / 'test').glob('*.py')}
         for name, where in _third_party_imports(directory, local).items():
             assert name in IMPORTS, f'{where} imports {name}: which rosdep key installs it?'
             assert IMPORTS[name] in keys, (

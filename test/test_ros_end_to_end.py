@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from ros_harness import new_domain_id
 
-from balance_calib.launchless.campaign import run_story
+from balance_calib.commands.run_arguments import SimulatedBalance
+from balance_calib.launchless.campaign import CampaignStory, run_story
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -33,8 +34,7 @@ def test_recorded_campaign_refitted_by_the_service_reads_wind_on_within_0_1_pct_
 ):
     result = run_story(
         tmp_path,
-        installations=('upright', 'inverted'),
-        point_duration_s=0.06,
+        CampaignStory(installations=('upright', 'inverted'), point_duration_s=0.06),
         domain_id=new_domain_id(),
         say=lambda line: None,
     )
@@ -52,16 +52,14 @@ def test_an_undeclared_temperature_effect_is_found_adopted_and_applied_live(tmp_
     """2x the FX noise floor of temperature sensitivity on the F_X bridge, not declared; wind-on
     at 26 °C.
     """
-    result = run_story(
-        tmp_path,
+    story = CampaignStory(
+        SimulatedBalance(effects='temperature:sensitivity_per_k=0.0045|0|0|0|0|0'),
         installations=('upright',),
         point_duration_s=0.06,
-        domain_id=new_domain_id(),
-        effects='temperature:sensitivity_per_k=0.0045|0|0|0|0|0',
         wind_on_temperature_c=26.0,
         compare_base=True,
-        say=lambda line: None,
     )
+    result = run_story(tmp_path, story, domain_id=new_domain_id(), say=lambda line: None)
     assert result.refit_success, result.refit_message
     report = result.report
     assert [e['name'] for e in report['effects']][:1] == ['temperature'] and report[

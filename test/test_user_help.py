@@ -12,8 +12,8 @@ import subprocess
 import pytest
 
 from balance_calib.cli import build_parser
-from balance_calib.launchless.ros_tools import build_parser as ros_parser
 from balance_calib.nodes import _help
+from ros_cli.cli import build_parser as ros_parser
 
 ROOT = Path(__file__).resolve().parent.parent
 SCRIPTS = ROOT / 'launchless_scripts'

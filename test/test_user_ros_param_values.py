@@ -9,8 +9,9 @@ import pytest
 from rcl_interfaces.msg import ParameterType
 from ros_harness import new_domain_id, NodeProcess, ros
 
-from balance_calib.launchless.ros_tools import python_to_parameter_value, ToolError
 from balance_calib.live.parameters import PARAMETERS
+from ros_cli.errors import ToolError
+from ros_cli.values import python_to_parameter_value
 
 DOUBLE = ParameterType.PARAMETER_DOUBLE
 

@@ -13,9 +13,9 @@ import yaml
 
 from balance_calib.bags.reader import read_bags
 from balance_calib.config import load_balance_config
-from balance_calib.launchless.ros_tools import format_bag_info
 from balance_calib.simulation.balance_sim import simulate_campaign, SimulationSettings
 from balance_calib.simulation.campaign_bag import write_campaign_bag
+from ros_cli.bag import format_bag_info
 
 
 @pytest.mark.ros

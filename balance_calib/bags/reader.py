@@ -23,21 +23,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 import os
 from pathlib import Path
-import stat
 from typing import Any, Callable, Collection, Iterable, Mapping, Sequence
 
 import numpy as np
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
-import yaml
 
 from balance_calib.bags.errors import BagError
-from balance_calib.bags.mcap_scan import (
-    check_regular_file,
-    McapDamage,
-    Scan,
-    scan_mcap,
-    STILL_RECORDING,
-)
+from balance_calib.bags.mcap_scan import McapDamage, Scan, scan_mcap, STILL_RECORDING
+from balance_calib.bags.opening import open_bag
 
 ProgressCallback = Callable[[int, int], None]
 BagPath = str | os.PathLike
@@ -179,15 +172,13 @@ def read_bags(
     by_topic = {getattr(topics, name): name for name in _LAYOUTS}
     wanted = set(by_topic) | set(extra_topics)
 
-    files = [(source, _mcap_files(source)) for source in sources]
+    bags = [open_bag(source) for source in sources]
     scans: list[tuple[Path, Scan]] = []
     losses: list[str] = []
-    for source, mcap_files in files:
-        # a bag directory without metadata.yaml yet: its recorder is still at work (or was killed)
-        unfinished = source.is_dir() and not (source / 'metadata.yaml').exists()
-        for mcap_file in mcap_files:
+    for bag in bags:
+        for mcap_file in bag.files:
             try:
-                scan = scan_mcap(mcap_file, wanted, salvage=salvage, unfinished=unfinished)
+                scan = scan_mcap(mcap_file, wanted, salvage=salvage, unfinished=bag.unfinished)
             except McapDamage as error:
                 raise BagError(str(error)) from None
             _check_types(mcap_file, scan, topics)
@@ -263,70 +254,7 @@ def read_bags(
     )
 
 
-# -- opening and checking -------------------------------------------------------------------------
-
-_METADATA_MAX_BYTES = 16 * 1024 * 1024
-
-
-def _mcap_files(source: Path) -> list[Path]:
-    """The MCAP files of a bag: a bare .mcap, those metadata.yaml lists in a rosbag2 directory, or
-    (a bag still being recorded: no metadata.yaml yet) the directory's .mcap files.
-    """
-    if not source.exists() and not source.is_symlink():
-        raise BagError(f'{source}: no such file or directory')
-    try:
-        mode = source.stat().st_mode
-    except OSError as error:
-        raise BagError(f'{source}: cannot read ({error.strerror})') from None
-    if stat.S_ISDIR(mode):
-        metadata = source / 'metadata.yaml'
-        if not metadata.exists():
-            # rosbag2 (and balance_recorder) write metadata.yaml when the recording stops: until
-            # then the directory's .mcap files are the bag, read up to what is on disk
-            inside = sorted(source.glob('*.mcap'))
-            if not inside:
-                raise BagError(f'{source}: not a rosbag2 bag (no metadata.yaml and no .mcap file)')
-            return inside
-        try:
-            check_regular_file(metadata)
-        except McapDamage as error:
-            raise BagError(str(error)) from None
-        if metadata.stat().st_size > _METADATA_MAX_BYTES:
-            raise BagError(
-                f'{metadata}: {metadata.stat().st_size} bytes, too large for bag metadata'
-            )
-        try:
-            info = yaml.safe_load(metadata.read_text(encoding='utf-8'))[
-                'rosbag2_bagfile_information'
-            ]
-            storage = info.get('storage_identifier', 'mcap')
-            names = [str(p) for p in (info.get('relative_file_paths') or [])]
-        except (
-            yaml.YAMLError,
-            UnicodeDecodeError,
-            KeyError,
-            TypeError,
-            AttributeError,
-            OSError,
-        ) as error:
-            raise BagError(
-                f'{metadata}: not rosbag2 metadata ({type(error).__name__}: '
-                f'{str(error).splitlines()[0] if str(error) else ""})'
-            ) from None
-        if storage != 'mcap':
-            raise BagError(f'{metadata}: storage {storage!r}; only MCAP bags are read')
-        if not names:
-            names = sorted(p.name for p in source.glob('*.mcap'))
-        if not names:
-            raise BagError(f'{source}: its metadata.yaml lists no files')
-        files = [source / name for name in names]
-        for path in files:
-            if not path.exists():
-                raise BagError(f'{path}: listed in {metadata} but missing')
-        return files
-    if source.suffix != '.mcap':
-        raise BagError(f'{source}: not a bag (expected a rosbag2 directory or an .mcap file)')
-    return [source]
+# -- checking -------------------------------------------------------------------------------------
 
 
 def _check_types(source: Path, scan: Scan, topics: TopicNames) -> None:

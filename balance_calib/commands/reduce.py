@@ -7,6 +7,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from .run_arguments import add_model_arguments
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -27,9 +29,7 @@ def register(subparsers) -> None:
         required=True,
         help='calibration.yaml, or a balance config (lmc6522, b660h)',
     )
-    parser.add_argument(
-        '--model', required=True, help='model file (config/models/NAME.yaml) or its name'
-    )
+    add_model_arguments(parser, model_default=None, permutations=True)
     parser.add_argument('--out', required=True, help='output directory')
     parser.add_argument(
         '--compare',
@@ -41,12 +41,6 @@ def register(subparsers) -> None:
         '--calibration-model',
         default='adopted',
         help="the model of the main columns (default: the calibration's adopted model)",
-    )
-    parser.add_argument(
-        '--installation',
-        default='upright',
-        help='upright (§10.2.1), inverted (§10.2.2) or a '
-        'signed permutation like -FX,FY,-FZ,MX,MY,MZ',
     )
     parser.add_argument(
         '--estimate-weight',

@@ -9,6 +9,8 @@ import os
 from pathlib import Path
 import sys
 
+from .run_arguments import add_simulated_balance_arguments, SimulatedBalance
+
 TRANSITION_SAMPLES = 2  # per load change, as a recorded campaign has them
 
 
@@ -23,24 +25,7 @@ def register(subparsers) -> None:
         'optionally the fitted cubic matrix in the layout of Tables 12/16 '
         'and the campaign as a calibration bag.',
     )
-    parser.add_argument(
-        '--balance',
-        action='append',
-        help='lmc6522, b660h or a config path (repeatable; default both)',
-    )
-    parser.add_argument(
-        '--seed',
-        type=int,
-        default=1,
-        help=(
-            'random seed of the simulated noise (default 1; the same seed gives the same numbers)'
-        ),
-    )
-    parser.add_argument(
-        '--effects',
-        default='',
-        help='effects the base model lacks, e.g. "temperature:sensitivity_per_k=2e-4"',
-    )
+    add_simulated_balance_arguments(parser, SimulatedBalance(seed=1), repeatable=True)
     parser.add_argument(
         '--bag', help='also write the campaign as a calibration bag (directory, must not exist)'
     )

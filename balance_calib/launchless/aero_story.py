@@ -26,10 +26,20 @@ import threading
 
 import numpy as np
 
+from ..commands.run_arguments import (
+    add_model_arguments,
+    add_wind_on_conditions_arguments,
+    DEFAULT_AERO_MODEL,
+    wind_on_conditions,
+    WindOnConditions,
+)
 from .processes import close_graph, NodeProcess, story_domain_id
 from .processes import wait_until as _wait
 
-MODEL = 'euler_replica_lmc6522'
+MODEL = DEFAULT_AERO_MODEL
+# what the story flies: its noise is a long average per point, so that what separates the three
+# calibrations is their model, not the scatter (Table 17's σ: -1)
+FLIGHT = WindOnConditions(MODEL, 'upright', 50000.0, 0.005)
 COEFFICIENTS = ('CAF', 'CY', 'CN', 'Cl', 'Cm', 'Cn', 'CD', 'CL')
 
 
@@ -56,18 +66,13 @@ def _six(msg):
 
 
 def run_story(
-    out_dir: Path,
-    *,
-    q_pa: float = 50000.0,
-    installation: str = 'upright',
-    seed: int = 3,
-    noise_sigma_pct_fs: float = 0.005,
-    say=print,
+    out_dir: Path, flight: WindOnConditions = FLIGHT, *, seed: int = 3, say=print
 ) -> dict:
-    """noise_sigma_pct_fs: σ of a held point's mean load; the default is a long average per point,
-    so that what separates the three calibrations is their model, not the scatter (Table 17's σ:
-    -1).
+    """The story into out_dir: flight.model on the LMC6522 at flight's installation, q∞ and
+    point noise; the noise of the simulation from seed.
     """
+    model, installation, q_pa = flight.model, flight.installation, flight.q_pa
+    noise_sigma_pct_fs = flight.noise_sigma_pct_fs
     from geometry_msgs.msg import WrenchStamped
     import rclpy
     from rclpy.context import Context
@@ -114,7 +119,7 @@ def run_story(
                 domain,
                 logs,
                 {
-                    'model': MODEL,
+                    'model': model,
                     'estimate_weight': True,
                     'calibration_file': 'lmc6522',
                     'installation': installation,
@@ -146,7 +151,7 @@ def run_story(
             'aero_coefficients and balance_calibrator',
         )
         say(
-            f'[aero] ROS_DOMAIN_ID={domain}: {MODEL} on the LMC6522 ({installation}), wind-off '
+            f'[aero] ROS_DOMAIN_ID={domain}: {model} on the LMC6522 ({installation}), wind-off '
             f'α/φ sweep, then α = -2 … 22° at q∞ = {q_pa / 1000:g} kPa (point noise '
             f'{noise_sigma_pct_fs:g} % FS); recording to {bag}'
         )
@@ -156,7 +161,7 @@ def run_story(
             logs,
             {
                 'mode': 'wind_on',
-                'aero_model': MODEL,
+                'aero_model': model,
                 'installation': installation,
                 'dynamic_pressure_pa': q_pa,
                 'rate_hz': 100.0,
@@ -188,7 +193,7 @@ def run_story(
     reduction = reduce_bags(
         [bag],
         'lmc6522',
-        MODEL,
+        model,
         compare=['linear', 'quadratic', 'cubic'],
         estimate_weight=True,
         installation=installation,
@@ -257,31 +262,22 @@ def run_story(
     }
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog='aero_story', description=__doc__.split('\n')[0])
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog='aero_story', description=' '.join(__doc__.split('\n\n')[0].split())
+    )
     parser.add_argument(
         'out', nargs='?', default='demo_out/aero', help='output directory (default demo_out/aero)'
     )
-    parser.add_argument(
-        '--q-pa', type=float, default=50000.0, help='dynamic pressure of the wind-on holds, Pa'
-    )
-    parser.add_argument(
-        '--installation', default='upright', help='upright or inverted (TM-663 §10.2)'
-    )
-    parser.add_argument(
-        '--noise-pct-fs',
-        type=float,
-        default=0.005,
-        help="σ of a held point's mean load, %% FS (default 0.005; -1: Table 17's cubic row)",
-    )
-    args = parser.parse_args(argv)
+    add_model_arguments(parser, model=False)
+    add_wind_on_conditions_arguments(parser, FLIGHT)
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
     try:
-        run_story(
-            Path(args.out),
-            q_pa=args.q_pa,
-            installation=args.installation,
-            noise_sigma_pct_fs=args.noise_pct_fs,
-        )
+        run_story(Path(args.out), wind_on_conditions(args, model=MODEL))
     except (FileExistsError, RuntimeError, TimeoutError, ValueError) as err:
         print(f'aero_story: {err}', file=sys.stderr)
         return 1

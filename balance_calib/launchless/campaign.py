@@ -27,8 +27,30 @@ import time
 
 import numpy as np
 
+from ..commands.run_arguments import (
+    add_simulated_balance_arguments,
+    simulated_balance,
+    SimulatedBalance,
+)
 from .processes import close_graph, NodeProcess, story_domain_id
 from .processes import wait_until as _wait
+
+
+@dataclass(frozen=True)
+class CampaignStory:
+    """What the story runs: the simulated balance (its effects undeclared to the refit), the
+    wind-on installations, the campaign's timing as played (bridge samples per second, seconds per
+    point and per transition), the balance temperature of the wind-on runs, and whether the first
+    installation is flown once more through the base model (when an effect was adopted).
+    """
+
+    balance: SimulatedBalance = SimulatedBalance(seed=1)
+    installations: tuple[str, ...] = ('upright', 'inverted')
+    rate_hz: float = 200.0
+    point_duration_s: float = 0.1
+    transition_s: float = 0.03
+    wind_on_temperature_c: float = 20.0
+    compare_base: bool = False
 
 
 @dataclass
@@ -54,19 +76,12 @@ def graph_parameter(node: str, name: str):
 
 def run_story(
     out_dir: Path,
+    story: CampaignStory = CampaignStory(),
     *,
-    balance: str = 'lmc6522',
-    effects: str = '',
-    installations=('upright', 'inverted'),
-    rate_hz: float = 200.0,
-    point_duration_s: float = 0.1,
-    transition_s: float = 0.03,
-    seed: int = 1,
     domain_id: int | None = None,
-    wind_on_temperature_c: float = 20.0,
-    compare_base: bool = False,
     say=print,
 ) -> StoryResult:
+    """The story on domain_id (default: a free one, story_domain_id) into out_dir."""
     from geometry_msgs.msg import WrenchStamped
     from rcl_interfaces.srv import SetParameters
     import rclpy
@@ -77,6 +92,9 @@ def run_story(
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from std_srvs.srv import Trigger
 
+    balance, effects, seed = story.balance.name, story.balance.effects, story.balance.seed
+    rate_hz, installations = story.rate_hz, story.installations
+    wind_on_temperature_c = story.wind_on_temperature_c
     out_dir = Path(out_dir).resolve()
     out_dir.mkdir(parents=True, exist_ok=True)
     bag = out_dir / 'bag'
@@ -123,7 +141,7 @@ def run_story(
         processes.append(recorder)
         say(
             f'[campaign] ROS_DOMAIN_ID={domain}: calibration campaign of {balance} over DDS '
-            f'({rate_hz:g} Hz, {point_duration_s:g} s per point), recording to {bag}'
+            f'({rate_hz:g} Hz, {story.point_duration_s:g} s per point), recording to {bag}'
             + (f'; undeclared effects: {effects}' if effects else '')
         )
         publisher = NodeProcess(
@@ -134,8 +152,8 @@ def run_story(
                 'mode': 'calibration',
                 'balance': balance,
                 'rate_hz': rate_hz,
-                'point_duration_s': point_duration_s,
-                'transition_s': transition_s,
+                'point_duration_s': story.point_duration_s,
+                'transition_s': story.transition_s,
                 'effects': effects,
                 'seed': seed,
                 'exit_when_done': True,
@@ -177,7 +195,7 @@ def run_story(
 
         capacity = load_balance_config(balance).capacity
         runs = [(installation, 'adopted') for installation in installations]
-        if compare_base and report.get('adopted'):
+        if story.compare_base and report.get('adopted'):
             # the same wind-on without the effect's terms
             runs.append((installations[0], report['base_model']))
         for installation, model in runs:
@@ -274,7 +292,7 @@ def _held_point_errors(truths, wrenches, capacity) -> np.ndarray:
     )
 
 
-def main(argv=None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog='campaign', description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -284,15 +302,7 @@ def main(argv=None) -> int:
         default='demo_out',
         help='directory for the run (a new campaign_<time> inside it; default demo_out)',
     )
-    parser.add_argument(
-        '--balance', default='lmc6522', help='balance config: lmc6522 (default), b660h or a path'
-    )
-    parser.add_argument(
-        '--effects',
-        default='',
-        help='effects the simulated balance has and the refit is not told about, e.g. '
-        '"temperature:sensitivity_per_k=0.0045|0|0|0|0|0" (default none)',
-    )
+    add_simulated_balance_arguments(parser, CampaignStory().balance)
     parser.add_argument(
         '--installations',
         default='upright,inverted',
@@ -320,24 +330,36 @@ def main(argv=None) -> int:
         default=20.0,
         help='balance temperature during the wind-on runs, °C',
     )
-    args = parser.parse_args(argv)
+    return parser
+
+
+def campaign_story(args: argparse.Namespace) -> CampaignStory:
+    """The story the parsed command line asks for (the base model flown too when effects are
+    given).
+    """
+    return CampaignStory(
+        simulated_balance(args),
+        tuple(i for i in args.installations.split(',') if i),
+        rate_hz=args.rate,
+        point_duration_s=args.point_duration,
+        wind_on_temperature_c=args.wind_on_temperature,
+        compare_base=bool(args.effects),
+    )
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    if args.seed < 0:
+        print(f'campaign: --seed {args.seed}: a seed is not negative', file=sys.stderr)
+        return 2
     out = Path(args.out) / time.strftime('campaign_%Y%m%dT%H%M%S')
     try:
         domain_id = story_domain_id()
     except ValueError as err:
         print(f'campaign: {err}', file=sys.stderr)
         return 2
-    result = run_story(
-        out,
-        domain_id=domain_id,
-        balance=args.balance,
-        effects=args.effects,
-        rate_hz=args.rate,
-        point_duration_s=args.point_duration,
-        wind_on_temperature_c=args.wind_on_temperature,
-        compare_base=bool(args.effects),
-        installations=[i for i in args.installations.split(',') if i],
-    )
+    story = campaign_story(args)
+    result = run_story(out, story, domain_id=domain_id)
     if result.report:
         report = result.report
         print(f'[campaign] report: {result.report_dir / "report.md"}')

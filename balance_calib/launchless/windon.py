@@ -40,9 +40,20 @@ from ..aero.bag_io import (
     TRUTH_TOPIC,
     TRUTH_WIND_TOPIC,
 )
+from ..commands.run_arguments import (
+    add_model_arguments,
+    add_simulated_balance_arguments,
+    add_wind_on_conditions_arguments,
+    DEFAULT_AERO_MODEL,
+    positive_number,
+    simulated_balance,
+    SimulatedBalance,
+    wind_on_conditions,
+    WindOnConditions,
+)
 from .processes import ros_args
 
-DEFAULT_MODEL = 'euler_replica_lmc6522'
+DEFAULT_MODEL = DEFAULT_AERO_MODEL
 TRUTH_TOPICS = (TRUTH_TOPIC, TRUTH_WIND_TOPIC)  # simulation only, what `reduce` compares with
 REDUCE_TOPICS = (RAW_TOPIC, ATTITUDE_TOPIC, DYNAMIC_PRESSURE_TOPIC)  # what `reduce` reads
 STOP_TIMEOUT_S = 10.0
@@ -53,6 +64,23 @@ ZERO_SAMPLES = 100  # averaged by ~/zero
 
 class WindOnError(RuntimeError):
     """One line for stderr: what failed, and where its node said why."""
+
+
+@dataclass(frozen=True)
+class RunDescription:
+    """A simulated wind-on run as windon records it: the balance (its seed: the noise's), what is
+    flown (model, installation, q∞, point noise), the sweep's α and hold times, bridge samples
+    per second, and how long the nodes are waited for.
+    """
+
+    balance: SimulatedBalance = SimulatedBalance(seed=0)
+    flight: WindOnConditions = WindOnConditions()
+    alpha_deg: tuple[float, float, float] = (-2.0, 22.0, 2.0)
+    hold_s: float = 0.5
+    wind_off_hold_s: float = 0.3
+    rate_hz: float = 200.0
+    subscriber_timeout_s: float = 30.0
+    run_timeout_s: float = 600.0
 
 
 @dataclass(frozen=True)
@@ -71,77 +99,57 @@ def recorder_topics() -> list[str]:
     return list(DEFAULT_TOPICS) + [t for t in TRUTH_TOPICS if t not in DEFAULT_TOPICS]
 
 
-def publisher_parameters(
-    *,
-    model: str,
-    balance: str,
-    q_pa: float,
-    installation: str,
-    alpha_deg: Sequence[float],
-    hold_s: float,
-    wind_off_hold_s: float,
-    rate_hz: float,
-    seed: int,
-    noise_sigma_pct_fs: float,
-    subscriber_timeout_s: float,
-) -> dict:
+def publisher_parameters(run: RunDescription) -> dict:
     """bridge_publisher's parameters for a physical wind-on run (nodes/bridge_publisher.py)."""
-    start, end, step = (float(v) for v in alpha_deg)
+    start, end, step = (float(v) for v in run.alpha_deg)
     return {
         'mode': 'wind_on',
-        'aero_model': model,
-        'balance': balance,
-        'dynamic_pressure_pa': q_pa,
-        'installation': installation,
+        'aero_model': run.flight.model,
+        'balance': run.balance.name,
+        'effects': run.balance.effects,
+        'dynamic_pressure_pa': run.flight.q_pa,
+        'installation': run.flight.installation,
         'alpha_start_deg': start,
         'alpha_end_deg': end,
         'alpha_step_deg': step,
-        'hold_s': hold_s,
-        'wind_off_hold_s': wind_off_hold_s,
-        'rate_hz': rate_hz,
-        'seed': seed,
-        'noise_sigma_pct_fs': noise_sigma_pct_fs,
+        'hold_s': run.hold_s,
+        'wind_off_hold_s': run.wind_off_hold_s,
+        'rate_hz': run.rate_hz,
+        'seed': run.balance.seed,
+        'noise_sigma_pct_fs': run.flight.noise_sigma_pct_fs,
         'exit_when_done': True,
         'wait_for_subscribers': 1,
-        'wait_for_subscribers_timeout_s': subscriber_timeout_s,
+        'wait_for_subscribers_timeout_s': run.subscriber_timeout_s,
     }
 
 
-def calibrator_parameters(
-    *, balance: str, installation: str, timeout_s: float, tare_file: Path
-) -> dict:
-    """balance_calibrator's: the balance's shipped calibration, ~/zero over ZERO_SAMPLES, its
-    zero kept in a scratch tare_file (not beside the user's files, not restored by the next run).
+def calibrator_parameters(run: RunDescription, tare_file: Path) -> dict:
+    """balance_calibrator's: the balance's shipped calibration, ~/zero over ZERO_SAMPLES (given
+    subscriber_timeout_s for its samples), its zero kept in a scratch tare_file (not beside the
+    user's files, not restored by the next run).
     """
     return {
-        'calibration_file': balance,
-        'installation': installation,
+        'calibration_file': run.balance.name,
+        'installation': run.flight.installation,
         'tare_samples': ZERO_SAMPLES,
-        'tare_timeout_s': timeout_s,
+        'tare_timeout_s': run.subscriber_timeout_s,
         'tare_file': str(tare_file),
     }
 
 
-def empty_balance_parameters(
-    *,
-    balance: str,
-    profile_csv: Path,
-    rate_hz: float,
-    seed: int,
-    noise_sigma_pct_fs: float,
-    subscriber_timeout_s: float,
-) -> dict:
+def empty_balance_parameters(run: RunDescription, profile_csv: Path) -> dict:
     """bridge_publisher's for the empty balance (zero loads, the electrical zero and noise)."""
     return {
         'mode': 'wind_on',
-        'balance': balance,
+        'balance': run.balance.name,
+        'effects': run.balance.effects,
         'profile_csv': str(profile_csv),
         'loop': True,
-        'rate_hz': rate_hz,
-        'seed': seed,
-        'noise_sigma_pct_fs': noise_sigma_pct_fs,
+        'rate_hz': run.rate_hz,
+        'seed': run.balance.seed,
+        'noise_sigma_pct_fs': run.flight.noise_sigma_pct_fs,
         'wait_for_subscribers': 1,
-        'wait_for_subscribers_timeout_s': subscriber_timeout_s,
+        'wait_for_subscribers_timeout_s': run.subscriber_timeout_s,
     }
 
 
@@ -205,18 +213,18 @@ def take_electrical_zero(
     return reply.message
 
 
-def reduce_command(bag: Path, *, model: str, balance: str, installation: str) -> list[str]:
+def reduce_command(bag: Path, run: RunDescription) -> list[str]:
     """The `balance-calib reduce` command line for the bag (the balance's shipped matrices)."""
     return [
         'balance-calib',
         'reduce',
         str(bag),
         '--calibration',
-        balance,
+        run.balance.name,
         '--model',
-        model,
+        run.flight.model,
         '--installation',
-        installation,
+        run.flight.installation,
         '--out',
         str(bag.parent / f'{bag.name}_reduce'),
     ]
@@ -235,55 +243,23 @@ def _stop(process: subprocess.Popen, timeout_s: float = STOP_TIMEOUT_S) -> int:
 
 def record_wind_on_run(
     out: Path,
+    run: RunDescription = RunDescription(),
     *,
-    model: str = DEFAULT_MODEL,
-    balance: str = 'lmc6522',
-    q_pa: float = 50000.0,
-    installation: str = 'upright',
-    alpha_deg: Sequence[float] = (-2.0, 22.0, 2.0),
-    hold_s: float = 0.5,
-    wind_off_hold_s: float = 0.3,
-    rate_hz: float = 200.0,
-    seed: int = 0,
-    noise_sigma_pct_fs: float = -1.0,
-    subscriber_timeout_s: float = 30.0,
-    run_timeout_s: float = 600.0,
     say: Callable[[str], None] = print,
     env: dict | None = None,
 ) -> WindOnRun:
     """Run balance_recorder and bridge_publisher (wind-on) until the run is over; the bag is out.
 
     The nodes print on this process's stdout and stderr. Raises WindOnError (the bag removed) when
-    a node fails or the run outlasts run_timeout_s, FileExistsError when out exists already.
+    a node fails or the run outlasts run.run_timeout_s, FileExistsError when out exists already.
     """
     out = Path(out).absolute()
     if out.exists():
         raise FileExistsError(f'{out} exists already; choose a new bag directory')
     recorder_args = ros_args({'output': str(out), 'topics': recorder_topics()})
     scratch = Path(tempfile.mkdtemp(prefix='windon-'))
-    calibrator_args = ros_args(
-        calibrator_parameters(
-            balance=balance,
-            installation=installation,
-            timeout_s=subscriber_timeout_s,
-            tare_file=scratch / 'zero.tare.yaml',
-        )
-    )
-    publisher_args = ros_args(
-        publisher_parameters(
-            model=model,
-            balance=balance,
-            q_pa=q_pa,
-            installation=installation,
-            alpha_deg=alpha_deg,
-            hold_s=hold_s,
-            wind_off_hold_s=wind_off_hold_s,
-            rate_hz=rate_hz,
-            seed=seed,
-            noise_sigma_pct_fs=noise_sigma_pct_fs,
-            subscriber_timeout_s=subscriber_timeout_s,
-        )
-    )
+    calibrator_args = ros_args(calibrator_parameters(run, scratch / 'zero.tare.yaml'))
+    publisher_args = ros_args(publisher_parameters(run))
     env = dict(os.environ if env is None else env)
     processes: dict[str, subprocess.Popen] = {}
     interrupted = False
@@ -298,21 +274,15 @@ def record_wind_on_run(
         calibrator = processes['balance_calibrator'] = subprocess.Popen(
             ['balance_calibrator', *calibrator_args], env=env, start_new_session=True
         )
-        empty_args = ros_args(
-            empty_balance_parameters(
-                balance=balance,
-                profile_csv=write_empty_balance_csv(scratch),
-                rate_hz=rate_hz,
-                seed=seed,
-                noise_sigma_pct_fs=noise_sigma_pct_fs,
-                subscriber_timeout_s=subscriber_timeout_s,
-            )
-        )
+        empty_args = ros_args(empty_balance_parameters(run, write_empty_balance_csv(scratch)))
         processes['empty balance'] = subprocess.Popen(
             ['bridge_publisher', *empty_args], env=env, start_new_session=True
         )
+        balance, flight = run.balance.name, run.flight
         say(f'windon: the {balance} empty: its electrical zero with {ZERO_SERVICE}')
-        reply = take_electrical_zero(env, subscriber_timeout_s, calibrator, lambda: interrupted)
+        reply = take_electrical_zero(
+            env, run.subscriber_timeout_s, calibrator, lambda: interrupted
+        )
         _stop(processes.pop('empty balance'))
         say(f'windon: {reply}')
         processes['balance_recorder'] = subprocess.Popen(
@@ -322,11 +292,11 @@ def record_wind_on_run(
             ['bridge_publisher', *publisher_args], env=env, start_new_session=True
         )
         say(
-            f'windon: recording {model} on the {balance} ({installation}, q∞ {q_pa:g} Pa) '
-            f'into {out}'
+            f'windon: recording {flight.model} on the {balance} ({flight.installation}, '
+            f'q∞ {flight.q_pa:g} Pa) into {out}'
         )
         publisher, recorder = processes['bridge_publisher'], processes['balance_recorder']
-        deadline = time.monotonic() + run_timeout_s
+        deadline = time.monotonic() + run.run_timeout_s
         while publisher.poll() is None and not interrupted:
             if recorder.poll() is not None:
                 _stop(publisher)
@@ -336,7 +306,7 @@ def record_wind_on_run(
                 )
             if time.monotonic() > deadline:
                 _stop(publisher)
-                raise WindOnError(f'the run did not end within {run_timeout_s:g} s')
+                raise WindOnError(f'the run did not end within {run.run_timeout_s:g} s')
             time.sleep(0.1)
         if interrupted:
             _stop(publisher)
@@ -369,8 +339,7 @@ def record_wind_on_run(
     missing = [t for t in REDUCE_TOPICS if not counts.get(t)]
     if missing:
         raise WindOnError(f'bag {out}: no messages on {", ".join(missing)}, which reduce needs')
-    command = reduce_command(out, model=model, balance=balance, installation=installation)
-    return WindOnRun(out, counts, command)
+    return WindOnRun(out, counts, reduce_command(out, run))
 
 
 def recorded_counts(bag: Path) -> dict[str, int]:
@@ -391,17 +360,44 @@ def _alpha(text: str) -> tuple[float, float, float]:
         values = ()
     if len(values) != 3 or not values[2] > 0 or values[1] < values[0]:
         raise argparse.ArgumentTypeError(f'{text!r}: give START,END,STEP in degrees, STEP > 0')
-    return values
+    start, end, step = values
+    return start, end, step
 
 
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float('nan')
-    if not value > 0 or value == float('inf'):
-        raise argparse.ArgumentTypeError(f'{text!r} is not a positive number')
-    return value
+def add_sweep_arguments(parser, defaults: RunDescription) -> None:
+    """The run's own options: its α sweep, hold times, rate and the subscriber wait."""
+    parser.add_argument(
+        '--alpha-deg',
+        type=_alpha,
+        default=defaults.alpha_deg,
+        help='wind-on α sweep START,END,STEP in degrees (default -2,22,2; '
+        'spell a negative START as --alpha-deg=-4,20,4)',
+    )
+    parser.add_argument(
+        '--hold-s',
+        type=positive_number,
+        default=defaults.hold_s,
+        help=f'seconds at each wind-on α (default {defaults.hold_s:g})',
+    )
+    parser.add_argument(
+        '--wind-off-hold-s',
+        type=positive_number,
+        default=defaults.wind_off_hold_s,
+        help=f'seconds at each wind-off attitude (default {defaults.wind_off_hold_s:g})',
+    )
+    parser.add_argument(
+        '--rate-hz',
+        type=positive_number,
+        default=defaults.rate_hz,
+        help=f'bridge samples per second (default {defaults.rate_hz:g})',
+    )
+    parser.add_argument(
+        '--subscriber-timeout-s',
+        type=positive_number,
+        default=defaults.subscriber_timeout_s,
+        help='bridge_publisher gives up when the recorder has not subscribed '
+        f'within this time, s (default {defaults.subscriber_timeout_s:g})',
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -413,61 +409,25 @@ def build_parser() -> argparse.ArgumentParser:
         '--calibration lmc6522 --model euler_replica_lmc6522 --out OUT_reduce).',
     )
     parser.add_argument('out', help='bag directory to create (it must not exist)')
-    parser.add_argument(
-        '--model',
-        default=DEFAULT_MODEL,
-        help=f'model file, config/models/NAME.yaml or a path (default {DEFAULT_MODEL})',
-    )
-    parser.add_argument(
-        '--balance',
-        default='lmc6522',
-        help='balance config the simulated balance follows (default lmc6522)',
-    )
-    parser.add_argument(
-        '--q-pa',
-        type=_positive,
-        default=50000.0,
-        help='dynamic pressure of the wind-on holds, Pa (default 50000)',
-    )
-    parser.add_argument(
-        '--installation', default='upright', help='upright or inverted (TM-663 §10.2)'
-    )
-    parser.add_argument(
-        '--alpha-deg',
-        type=_alpha,
-        default=(-2.0, 22.0, 2.0),
-        help='wind-on α sweep START,END,STEP in degrees (default -2,22,2; '
-        'spell a negative START as --alpha-deg=-4,20,4)',
-    )
-    parser.add_argument(
-        '--hold-s', type=_positive, default=0.5, help='seconds at each wind-on α (default 0.5)'
-    )
-    parser.add_argument(
-        '--wind-off-hold-s',
-        type=_positive,
-        default=0.3,
-        help='seconds at each wind-off attitude (default 0.3)',
-    )
-    parser.add_argument(
-        '--rate-hz', type=_positive, default=200.0, help='bridge samples per second (default 200)'
-    )
-    parser.add_argument(
-        '--seed', type=int, default=0, help='random seed of the simulated noise (default 0)'
-    )
-    parser.add_argument(
-        '--noise-pct-fs',
-        type=float,
-        default=-1.0,
-        help="σ of a held point's mean load, %% FS (default -1: Table 17's cubic row)",
-    )
-    parser.add_argument(
-        '--subscriber-timeout-s',
-        type=_positive,
-        default=30.0,
-        help='bridge_publisher gives up when the recorder has not subscribed '
-        'within this time, s (default 30)',
-    )
+    defaults = RunDescription()
+    add_model_arguments(parser, model_default=defaults.flight.model)
+    add_simulated_balance_arguments(parser, defaults.balance)
+    add_wind_on_conditions_arguments(parser, defaults.flight)
+    add_sweep_arguments(parser, defaults)
     return parser
+
+
+def run_description(args: argparse.Namespace) -> RunDescription:
+    """The run the parsed command line describes."""
+    return RunDescription(
+        simulated_balance(args),
+        wind_on_conditions(args),
+        args.alpha_deg,
+        args.hold_s,
+        args.wind_off_hold_s,
+        args.rate_hz,
+        args.subscriber_timeout_s,
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -476,20 +436,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f'windon: --seed {args.seed}: a seed is not negative', file=sys.stderr)
         return 2
     try:
-        run = record_wind_on_run(
-            Path(args.out),
-            model=args.model,
-            balance=args.balance,
-            q_pa=args.q_pa,
-            installation=args.installation,
-            alpha_deg=args.alpha_deg,
-            hold_s=args.hold_s,
-            wind_off_hold_s=args.wind_off_hold_s,
-            rate_hz=args.rate_hz,
-            seed=args.seed,
-            noise_sigma_pct_fs=args.noise_pct_fs,
-            subscriber_timeout_s=args.subscriber_timeout_s,
-        )
+        run = record_wind_on_run(Path(args.out), run_description(args))
     except (FileExistsError, WindOnError) as error:
         print(f'windon: {error}', file=sys.stderr)
         return 1

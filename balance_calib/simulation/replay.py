@@ -1,7 +1,9 @@
 """Messages of bags for `bridge_publisher`'s replay mode, as `ros2 bag play` would send them.
 
 Every topic of the bags, serialized CDR untouched (so header stamps stay as recorded), in
-receive-time order. Bags are rosbag2 MCAP directories or bare .mcap files, any number of them.
+receive-time order. Bags are rosbag2 MCAP directories or bare .mcap files, any number of them,
+opened by bags/opening.py and read by the package's checked MCAP scanner (bags/mcap_scan.py), as
+`read_bags` reads them.
 """
 
 from __future__ import annotations
@@ -12,9 +14,10 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-from rosbags.rosbag2 import Reader, ReaderError
 
 from ..bags.errors import BagError
+from ..bags.mcap_scan import McapDamage, scan_mcap
+from ..bags.opening import open_bag
 
 
 @dataclass(frozen=True)
@@ -28,56 +31,36 @@ class RecordedMessages:
         return len(self.times_s)
 
 
-def _open(source: Path) -> Reader:
-    if not source.exists():
-        raise BagError(f'{source}: no such file or directory')
-    if source.is_dir() and not (source / 'metadata.yaml').is_file():
-        raise BagError(f'{source}: not a rosbag2 bag (no metadata.yaml)')
-    if not source.is_dir() and source.suffix != '.mcap':
-        raise BagError(f'{source}: not a bag (expected a rosbag2 directory or an .mcap file)')
-    try:
-        reader = Reader(source)
-        reader.open()
-    except (ReaderError, OSError, ValueError, KeyError, EOFError) as error:
-        raise BagError(
-            f'{source}: cannot open bag, the file is truncated or corrupt ({error})'
-        ) from None
-    return reader
-
-
 def read_recorded_messages(
     paths: Sequence[str | os.PathLike], topics: Sequence[str] = ()
 ) -> RecordedMessages:
-    """All messages (or those of `topics`) of the bags, merged by receive time. BagError names
-    the file.
+    """All messages (or those of `topics`) of the bags, merged by receive time (a stable sort:
+    messages of one time stay in topic order). BagError names the file.
     """
     sources = [Path(p) for p in paths]
     if not sources:
         raise BagError('no bag given')
     times, names, payloads, msgtypes = [], [], [], {}
     for source in sources:
-        reader = _open(source)
-        try:
-            connections = [c for c in reader.connections if not topics or c.topic in topics]
-            for connection in connections:
-                known = msgtypes.setdefault(connection.topic, connection.msgtype)
-                if known != connection.msgtype:
+        bag = open_bag(source)
+        for path in bag.files:
+            try:
+                scan = scan_mcap(path, set(topics) or None, unfinished=bag.unfinished)
+            except McapDamage as error:
+                raise BagError(str(error)) from None
+            for channel in scan.channels.values():
+                if topics and channel.topic not in topics:
+                    continue
+                known = msgtypes.setdefault(channel.topic, channel.schema_name)
+                if known != channel.schema_name:
                     raise BagError(
-                        f'{source}: topic {connection.topic} is {connection.msgtype} here '
+                        f'{source}: topic {channel.topic} is {channel.schema_name} here '
                         f'but {known} in another bag'
                     )
-            try:
-                for connection, timestamp, data in reader.messages(connections):
-                    times.append(timestamp)
-                    names.append(connection.topic)
-                    payloads.append(bytes(data))
-            except Exception as error:  # a damaged chunk fails in the decompressor or parser
-                raise BagError(
-                    f'{source}: cannot read messages, the file is corrupt '
-                    f'({type(error).__name__}: {error})'
-                ) from None
-        finally:
-            reader.close()
+            for topic, (stamps, data) in scan.messages.items():
+                times += stamps
+                names += [topic] * len(stamps)
+                payloads += data
     if not times:
         raise BagError(
             f'{", ".join(map(str, sources))}: no messages'
