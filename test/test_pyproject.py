@@ -85,3 +85,29 @@ def test_colcon_reads_setup_py_with_this_pyproject_toml():
     name, scripts = json.loads(done.stdout.splitlines()[-1])
     assert name == 'balance_calib'
     assert 'balance_calibrator = balance_calib.nodes.balance_calibrator:main' in scripts
+
+
+def test_the_strict_core_gets_every_flag_of_mypy_strict():
+    """The [[tool.mypy.overrides]] block of the strict core sets what `mypy --strict` sets.
+
+    launchless_scripts/lint runs mypy once; the strict core is strict through that block, so a
+    flag a newer mypy adds to --strict must be added there too (or to [tool.mypy] when it is not
+    a per-module flag), and every module it names must exist.
+    """
+    from mypy.main import define_options
+    from mypy.options import PER_MODULE_OPTIONS
+
+    strict_assignments = define_options()[2]  # (option, value) pairs that --strict sets
+    assert strict_assignments, 'mypy no longer lists what --strict sets'
+    mypy = _pyproject()['tool']['mypy']
+    blocks = [o for o in mypy['overrides'] if o.get('disallow_untyped_defs') is True]
+    assert len(blocks) == 1, 'one block lists the strict core'
+    strict = blocks[0]
+    for option, value in strict_assignments:
+        where = strict if option in PER_MODULE_OPTIONS else mypy
+        assert where.get(option, mypy.get(option)) == value, option
+    for module in strict['module']:
+        parts = module.removesuffix('.*').split('.')
+        path = ROOT.joinpath(*parts)
+        found = path.is_dir() if module.endswith('.*') else path.with_suffix('.py').is_file()
+        assert found, module
