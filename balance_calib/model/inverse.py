@@ -19,7 +19,7 @@ class InverseDidNotConverge(ArithmeticError):
     """Newton's method did not reach the requested tolerance for some samples."""
 
 
-def linear_part(model: BalanceModel) -> FloatArray:
+def linear_part(model: BalanceModel) -> np.ndarray:
     """(n_components, n_inputs) matrix of the first-order coefficients."""
     matrix = np.zeros((len(model.components), len(model.inputs)))
     for j, term in enumerate(model.terms):

@@ -32,7 +32,10 @@ def body_loads_from_rotation(
     Eqs. (29)-(31) are the F_Z, M_X and M_Y rows of this product (C16-C21, C23-C28, C30-C35 of
     Table 10 / 14); the other rows are returned too. ΔV = V(orientation) - V(opposite), mV.
     """
-    return 0.5 * linear_part(linear_model) @ np.asarray(output_difference_mv, dtype=np.float64)
+    half_c_dv: np.ndarray = (
+        0.5 * linear_part(linear_model) @ np.asarray(output_difference_mv, dtype=float)
+    )
+    return half_c_dv
 
 
 def tare_loads(
