@@ -14,7 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 import threading
 import time
-from typing import Any, Callable
+from typing import Any, Callable, TYPE_CHECKING
 
 import numpy as np
 
@@ -31,7 +31,7 @@ from .parameters import (
 )
 from .raw_codec import decode_wrenches, WrenchEncoder
 from .refit_process import is_balance_config, make_refit_job, RefitJob, run_refit_job
-from .stream import LiveCalibrator, LiveSettings, Output, StatusReport
+from .stream import LiveCalibrator, LiveSettings, Output
 from .tare_store import (
     calibration_sha256,
     load_tare,
@@ -40,6 +40,9 @@ from .tare_store import (
     tare_file_for,
     TareOwner,
 )
+
+if TYPE_CHECKING:  # the type of LiveCalibrator.report's reports
+    from .stream import StatusReport
 
 CALIBRATION_PARAMETERS = {
     'calibration_file',
