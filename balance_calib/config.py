@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import yaml
 
-from .errors import ConfigError
+from .array_types import FloatArray
+from .errors import ConfigError as ConfigError  # re-exported: readers import it from here
 from .model.balance_model import BalanceModel
 from .units import BRIDGE_OUTPUTS, COMPONENTS, STANDARD_GRAVITY_M_S2
 
@@ -34,12 +35,13 @@ class LoadSchedule:
     loads: np.ndarray  # (N, 6) N and N·m, balance axes, excluding the body's weight
     byproduct: tuple[str, ...]  # columns printed in parentheses, per row ('' if none)
 
-    def __len__(self):
+    def __len__(self) -> int:
         return len(self.point)
 
     @property
     def is_zero_point(self) -> np.ndarray:
-        return np.all(self.loads == 0.0, axis=1)
+        zero_point: np.ndarray = np.all(self.loads == 0.0, axis=1)
+        return zero_point
 
 
 @dataclass(frozen=True)
@@ -118,7 +120,7 @@ def load_balance_config(name_or_path: str | Path) -> BalanceConfig:
     return balance_config_from_dict(data, path)
 
 
-def _vector(data: Mapping, names, where: str) -> np.ndarray:
+def _vector(data: Mapping[str, Any], names: Sequence[str], where: str) -> FloatArray:
     try:
         return np.array([float(data[n]) for n in names])
     except KeyError as err:
@@ -190,7 +192,9 @@ def balance_config_from_dict(data: Mapping[str, Any], path: Path | None = None) 
     )
 
 
-def _schedule(data: Mapping, components, kgf_to_n: float, where: str) -> LoadSchedule:
+def _schedule(
+    data: Mapping[str, Any], components: Sequence[str], kgf_to_n: float, where: str
+) -> LoadSchedule:
     columns = list(data['columns'])
     rows = data['rows']
     load_cols = columns[2 : 2 + len(components)]

@@ -7,7 +7,7 @@ from typing import Mapping
 import numpy as np
 
 
-def plain_data(value):
+def plain_data(value: object) -> object:
     """Mappings, sequences and numpy arrays/scalars as plain Python, recursively; keys as str."""
     if isinstance(value, Mapping):
         return {str(k): plain_data(v) for k, v in value.items()}

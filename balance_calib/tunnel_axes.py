@@ -14,7 +14,9 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
+from .array_types import FloatArray
 from .units import COMPONENTS
 
 
@@ -24,7 +26,7 @@ class Installation:
     permutation: tuple[int, ...]  # tunnel component i comes from balance component permutation[i]
     signs: tuple[float, ...]
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if sorted(self.permutation) != list(range(len(self.permutation))) or len(
             self.signs
         ) != len(self.permutation):
@@ -34,17 +36,17 @@ class Installation:
                 f'installation {self.name}: forces must map to forces and moments to moments'
             )
 
-    def to_tunnel(self, balance_values) -> np.ndarray:
+    def to_tunnel(self, balance_values: ArrayLike) -> FloatArray:
         """Balance-axis loads (or outputs) (..., 6) -> tunnel axes."""
-        values = np.asarray(balance_values, dtype=float)
+        values = np.asarray(balance_values, dtype=np.float64)
         permutation, signs = self._arrays
         return values.take(permutation, axis=-1) * signs
 
     @cached_property
-    def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
+    def _arrays(self) -> tuple[NDArray[np.intp], FloatArray]:
         return np.array(self.permutation, dtype=np.intp), np.array(self.signs, dtype=float)
 
-    def from_tunnel(self, tunnel_values) -> np.ndarray:
+    def from_tunnel(self, tunnel_values: ArrayLike) -> FloatArray:
         """Tunnel-axis loads (or outputs) -> balance axes (the inverse map)."""
         values = np.asarray(tunnel_values, dtype=float)
         result = np.empty_like(values)

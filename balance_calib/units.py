@@ -7,7 +7,12 @@ reports on request. Everything inside stays N, N·m, mV.
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
+from numpy.typing import ArrayLike
+
+from .array_types import FloatArray
 
 STANDARD_GRAVITY_M_S2 = 9.80665  # kgf -> N, as interfaces.md prescribes
 
@@ -21,7 +26,7 @@ NEWTON_PER_LBF = 0.45359237 * STANDARD_GRAVITY_M_S2  # 4.4482216152605 N
 NEWTON_METRE_PER_INCH_LBF = NEWTON_PER_LBF * METRE_PER_INCH  # 0.1129848290276167 N·m
 
 # Display systems for loads: (force unit, moment unit, N per force unit, N·m per moment unit).
-LOAD_UNIT_SYSTEMS = {
+LOAD_UNIT_SYSTEMS: dict[str, tuple[str, str, float, float]] = {
     'si': ('N', 'N·m', 1.0, 1.0),
     'lbf': ('lbf', 'in-lbf', NEWTON_PER_LBF, NEWTON_METRE_PER_INCH_LBF),
     'kgf': ('kgf', 'kgf·m', STANDARD_GRAVITY_M_S2, STANDARD_GRAVITY_M_S2),
@@ -31,7 +36,7 @@ LOAD_UNIT_SYSTEMS = {
 _MV_PER_UNIT_PER_VOLT = {'mV/V': 1.0, 'microV/V': 1e-3, 'µV/V': 1e-3, 'uV/V': 1e-3}
 
 
-def kgf_to_newton(value_kgf):
+def kgf_to_newton(value_kgf: FloatArray | float) -> FloatArray | float:
     """Kgf (or kgf·m) to N (or N·m)."""
     return value_kgf * STANDARD_GRAVITY_M_S2
 
@@ -47,14 +52,18 @@ def load_unit(component: str, system: str = 'si') -> str:
     return moment if is_moment(component) else force
 
 
-def loads_to_display(values_si, components, system: str = 'si') -> np.ndarray:
+def loads_to_display(
+    values_si: ArrayLike, components: Sequence[str], system: str = 'si'
+) -> FloatArray:
     """Loads (…, n_components) in N / N·m to the display system (lbf and in-lbf for 'lbf')."""
     _, _, per_force, per_moment = _system(system)
-    factors = np.array([per_moment if is_moment(c) else per_force for c in components])
-    return np.asarray(values_si, dtype=float) / factors
+    factors = np.array(
+        [per_moment if is_moment(c) else per_force for c in components], dtype=np.float64
+    )
+    return np.asarray(values_si, dtype=np.float64) / factors
 
 
-def ratiometric_to_mv(values, unit: str, excitation_v):
+def ratiometric_to_mv(values: ArrayLike, unit: str, excitation_v: ArrayLike) -> FloatArray:
     """Bridge outputs recorded ratiometrically (mV/V or µV/V) to mV at the given excitation.
 
     excitation_v is the bridge supply in volts: a scalar, or an array broadcasting against values
@@ -67,17 +76,17 @@ def ratiometric_to_mv(values, unit: str, excitation_v):
         raise ValueError(
             f'bridge output unit {unit!r}: expected one of {", ".join(_MV_PER_UNIT_PER_VOLT)}'
         ) from None
-    excitation = np.asarray(excitation_v, dtype=float)
+    excitation = np.asarray(excitation_v, dtype=np.float64)
     if excitation.size == 0 or not np.all(np.isfinite(excitation)) or np.any(excitation <= 0.0):
         raise ValueError(
             f'excitation voltage {excitation_v!r}: must be a positive number of volts '
             f'to convert {unit} to mV'
         )
-    return np.asarray(values, dtype=float) * per_volt * excitation
+    return np.asarray(values, dtype=np.float64) * per_volt * excitation
 
 
 def implied_excitation_v(
-    rated_output_mv, rated_output_microstrain, gauge_factor: float = 2.0
+    rated_output_mv: ArrayLike, rated_output_microstrain: ArrayLike, gauge_factor: float = 2.0
 ) -> float | None:
     """Excitation implied by a table giving rated outputs both in mV and in µst (TM-663 Tables 3,
     6).
@@ -95,7 +104,7 @@ def implied_excitation_v(
     return float(np.median(4.0 * mv * 1e-3 / (gauge_factor * strain)))
 
 
-def _system(system: str):
+def _system(system: str) -> tuple[str, str, float, float]:
     try:
         return LOAD_UNIT_SYSTEMS[str(system).lower()]
     except KeyError:

@@ -7,8 +7,10 @@ block the zero is taken to move linearly in time between its two brackets, and i
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 
 class ZeroPointError(ValueError):
@@ -24,7 +26,11 @@ class ZeroCorrection:
 
 
 def subtract_zero_points(
-    times_s, outputs_mv, is_zero_point, orientation, point_labels=None
+    times_s: ArrayLike,
+    outputs_mv: ArrayLike,
+    is_zero_point: ArrayLike,
+    orientation: ArrayLike,
+    point_labels: Sequence[object] | np.ndarray | None = None,
 ) -> ZeroCorrection:
     """Subtract from every point the zero interpolated in time between its bracketing zero points.
 
@@ -74,7 +80,9 @@ def subtract_zero_points(
     return ZeroCorrection(outputs - zero, zero, before, after)
 
 
-def zero_point_noise_factor(times_s, is_zero_point, orientation) -> float:
+def zero_point_noise_factor(
+    times_s: Sequence[float] | np.ndarray, is_zero_point: ArrayLike, orientation: ArrayLike
+) -> float:
     """RMS gain of independent per-point noise through the zero-point subtraction.
 
     The zeroed outputs are (I - W) v for a fixed interpolation matrix W; a loaded point also

@@ -3,6 +3,7 @@ pip reads pyproject.toml: the two must not drift apart), and its lint settings k
 limits.
 """
 
+import importlib.util
 import json
 from pathlib import Path
 import runpy
@@ -10,6 +11,8 @@ import subprocess
 import sys
 import tomllib
 import xml.etree.ElementTree as ElementTree
+
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -85,3 +88,38 @@ def test_colcon_reads_setup_py_with_this_pyproject_toml():
     name, scripts = json.loads(done.stdout.splitlines()[-1])
     assert name == 'balance_calib'
     assert 'balance_calibrator = balance_calib.nodes.balance_calibrator:main' in scripts
+
+
+def test_the_strict_core_gets_every_flag_of_mypy_strict():
+    """The [[tool.mypy.overrides]] block of the strict core sets what `mypy --strict` sets.
+
+    launchless_scripts/lint runs mypy once; the strict core is strict through that block, so a
+    flag a newer mypy adds to --strict must be added there too (or to [tool.mypy] when it is not
+    a per-module flag), and every module it names must exist. mypy is the lint step's tool
+    (requirements-test.txt), not a package.xml dependency: asked in a child interpreter, and the
+    test is skipped where it is not installed.
+    """
+    if importlib.util.find_spec('mypy') is None:
+        pytest.skip('mypy is not installed here (the lint step has it: requirements-test.txt)')
+    code = (
+        'import json\nfrom mypy.main import define_options\n'
+        'from mypy.options import PER_MODULE_OPTIONS\n'
+        'print(json.dumps([[o, v, o in PER_MODULE_OPTIONS] for o, v in define_options()[2]]))\n'
+    )
+    done = subprocess.run(
+        [sys.executable, '-c', code], capture_output=True, text=True, timeout=60, check=True
+    )
+    strict_assignments = json.loads(done.stdout)  # [option, value, per module] that --strict sets
+    assert strict_assignments, 'mypy no longer lists what --strict sets'
+    mypy = _pyproject()['tool']['mypy']
+    blocks = [o for o in mypy['overrides'] if o.get('disallow_untyped_defs') is True]
+    assert len(blocks) == 1, 'one block lists the strict core'
+    strict = blocks[0]
+    for option, value, per_module in strict_assignments:
+        where = strict if per_module else mypy
+        assert where.get(option, mypy.get(option)) == value, option
+    for module in strict['module']:
+        parts = module.removesuffix('.*').split('.')
+        path = ROOT.joinpath(*parts)
+        found = path.is_dir() if module.endswith('.*') else path.with_suffix('.py').is_file()
+        assert found, module

@@ -5,20 +5,24 @@ from __future__ import annotations
 from typing import Mapping, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from ..array_types import FloatArray
 from ..units import COMPONENTS
 
 
-def residuals_pct_fs(loads_measured, loads_fitted, full_scale) -> np.ndarray:
+def residuals_pct_fs(
+    loads_measured: ArrayLike, loads_fitted: ArrayLike, full_scale: ArrayLike
+) -> FloatArray:
     """(exp - th) / F.S. x 100 for every point and component, eqs. (38)-(43). Shape (N, 6)."""
     return (
-        (np.asarray(loads_measured, float) - np.asarray(loads_fitted, float))
-        / np.asarray(full_scale, float)
+        (np.asarray(loads_measured, np.float64) - np.asarray(loads_fitted, np.float64))
+        / np.asarray(full_scale, np.float64)
         * 100.0
     )
 
 
-def sigma_pct_fs(residual_loads, full_scale) -> np.ndarray | float:
+def sigma_pct_fs(residual_loads: ArrayLike, full_scale: ArrayLike) -> FloatArray | float:
     """The memo's σ, TM-663 eqs. (44)-(49): sqrt(Σ residual² / N_max) / F.S. x 100.
 
     The root mean square of the residuals about zero, divided by the number of points N_max
@@ -41,7 +45,7 @@ def sigma_pct_fs(residual_loads, full_scale) -> np.ndarray | float:
     return float(sigma) if residual_loads.ndim == 1 else sigma
 
 
-def sample_std_pct_fs(residual_loads, full_scale) -> np.ndarray:
+def sample_std_pct_fs(residual_loads: ArrayLike, full_scale: ArrayLike) -> FloatArray:
     """Sample standard deviation of the residuals in % of full scale (about their mean, N - 1).
 
     What a table calibration's report.json calls σ (interfaces.md, "Calibration data tables");
@@ -58,11 +62,12 @@ def sample_std_pct_fs(residual_loads, full_scale) -> np.ndarray:
     -------
     ndarray, shape (n_components,)
     """
-    return np.std(residual_loads, axis=0, ddof=1) / np.asarray(full_scale, float) * 100.0
+    std: FloatArray = np.std(np.asarray(residual_loads, np.float64), axis=0, ddof=1)
+    return std / np.asarray(full_scale, np.float64) * 100.0
 
 
 def sigma_by_component(
-    residual_loads, full_scale, components: Sequence[str] = COMPONENTS
+    residual_loads: ArrayLike, full_scale: ArrayLike, components: Sequence[str] = COMPONENTS
 ) -> dict[str, float]:
     return {
         c: float(s)

@@ -11,7 +11,10 @@ marked WEAK_MARK (`weak_coefficients`): the data do not tell its sign.
 
 from __future__ import annotations
 
+from typing import Iterable
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..model.balance_model import BalanceModel
 from ..model.terms import Term
@@ -24,17 +27,18 @@ WEAK_NOTE = (
 )
 
 
-def weak_coefficients(coefficients, standard_errors) -> np.ndarray:
+def weak_coefficients(coefficients: ArrayLike, standard_errors: ArrayLike) -> np.ndarray:
     """(n_components, n_terms) True where a coefficient's standard error exceeds its size; False
     where the error is unknown (NaN) or the coefficient is exactly zero with a zero error.
     """
     values = np.abs(np.asarray(coefficients, dtype=float))
     errors = np.asarray(standard_errors, dtype=float)
     with np.errstate(invalid='ignore'):
-        return np.isfinite(errors) & (errors > values)
+        weak: np.ndarray = np.isfinite(errors) & (errors > values)
+    return weak
 
 
-def _cell(value, weak: bool | None = None) -> str:
+def _cell(value: float | None, weak: bool | None = None) -> str:
     """A coefficient, 11 wide; with marks (weak not None) one more column for WEAK_MARK."""
     mark = '' if weak is None else (WEAK_MARK if weak else ' ')
     return (f'{value:11.4f}' if value is not None else f'{"":11}') + (
@@ -72,7 +76,7 @@ def format_component_table(
     shown: set[str] = set()
     width = 11 if weak is None else 12
 
-    def cell(term_name):
+    def cell(term_name: str) -> str:
         try:
             j = model.term_index(term_name)
         except ValueError:
@@ -107,7 +111,9 @@ def format_component_table(
     return '\n'.join(lines)
 
 
-def format_coefficient_tables(model: BalanceModel, standard_errors=None) -> str:
+def format_coefficient_tables(
+    model: BalanceModel, standard_errors: ArrayLike | None = None
+) -> str:
     """The whole matrix in the memo's layout (linear as Table 10, others as Tables 11-12); with
     standard_errors (n_components, n_terms) the weak coefficients marked WEAK_MARK.
     """
@@ -124,7 +130,7 @@ def format_coefficient_tables(model: BalanceModel, standard_errors=None) -> str:
     return '\n\n'.join(format_component_table(model, c, weak=weak) for c in model.components)
 
 
-def is_memo_term(term: Term, inputs) -> bool:
+def is_memo_term(term: Term, inputs: Iterable[str]) -> bool:
     return (
         set(term.variables) <= set(inputs)
         and not any(f.absolute for f in term.factors)

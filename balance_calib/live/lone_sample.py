@@ -24,9 +24,13 @@ from __future__ import annotations
 import os
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from ..array_types import FloatArray
+from ..model.active_calibration import ActiveCalibration
 from ..model.uncertainty import covariance_and_sigma
 from ..units import COMPONENTS
+from .tare_store import TareState
 
 try:
     from . import _lone_kernel
@@ -39,7 +43,15 @@ if os.environ.get('BALANCE_CALIB_LONE_KERNEL', '1') == '0':
     available, unavailable_reason = False, 'switched off by BALANCE_CALIB_LONE_KERNEL=0'
 
 
-def make_plan(active, tare, input_scale: float, middle: bytes):
+# what `run` returns for a sample the kernel took (see its docstring)
+LoneResult = tuple[
+    int, bytes, tuple[float, float, float, float, float, float], bool, bool, bytes, bytes | None
+]
+
+
+def make_plan(
+    active: ActiveCalibration, tare: TareState, input_scale: float, middle: bytes
+) -> object | None:
     """The kernel's plan for this calibration (ActiveCalibration), zero and tare (TareState), input
     scale and output frame (WrenchEncoder.middle); None where the kernel does not apply.
     """
@@ -63,7 +75,7 @@ def make_plan(active, tare, input_scale: float, middle: bytes):
         tare2[positions] = np.asarray(tare.tare_sigma, dtype=float)[positions] ** 2
     permutation, signs = active.installation.permutation, active.installation.signs
 
-    def six(values):
+    def six(values: ArrayLike | None) -> FloatArray:
         return np.ascontiguousarray(np.zeros(6) if values is None else values, dtype=float)
 
     return _lone_kernel.plan(
@@ -88,8 +100,12 @@ def make_plan(active, tare, input_scale: float, middle: bytes):
 
 
 def run(
-    plan, data: bytes, want_uncertainty: bool, overload_fraction: float, peak_fraction: np.ndarray
-):
+    plan: object,
+    data: bytes,
+    want_uncertainty: bool,
+    overload_fraction: float,
+    peak_fraction: np.ndarray,
+) -> LoneResult | None:
     """One serialized sample -> None (the pure core's turn) or (stamp_ns, frame_id bytes, loads
     (6,) balance axes before the tare, outside the envelope, beyond overload_fraction x capacity,
     wrench bytes, uncertainty bytes or None). peak_fraction (6,) float64, the overload monitor's:

@@ -9,9 +9,14 @@ parameter_table.py, which also refuses NaN and inf) and a FIFO or a device as a 
 from __future__ import annotations
 
 import os
+from pathlib import Path
 import stat
+from typing import TYPE_CHECKING
 
 from ..parameter_table import check_value, Spec, STRING_ARRAY
+
+if TYPE_CHECKING:  # for annotations only: the node's --help need not import numpy
+    from ..model.calibration import Calibration
 
 INPUT_UNITS = ('mV', 'mV/V', 'microV/V')
 
@@ -115,7 +120,7 @@ PARAMETERS: dict[str, Spec] = {
 MAX_CALIBRATION_BYTES = 16 << 20
 
 
-def check_parameter(name: str, value) -> object:
+def check_parameter(name: str, value: object) -> object:
     """The value as the parameter holds it (5 for a double is 5.0); ValueError with one line
     naming the parameter, its range and the value, if `value` is not valid.
     """
@@ -146,7 +151,7 @@ def input_scale_mv(input_units: str, excitation_v: float) -> float:
     return float(ratiometric_to_mv(1.0, input_units, excitation_v))
 
 
-def check_input_units(calibration, input_units: str, where: str) -> None:
+def check_input_units(calibration: Calibration, input_units: str, where: str) -> None:
     """A calibration fitted from a table in counts, dimensionless or mV/V outputs (its
     `extra.output_unit`) takes balance/raw in that unit as it is: a ratiometric input_units would
     multiply the outputs by the excitation first and every load would be off by that factor.
@@ -161,7 +166,7 @@ def check_input_units(calibration, input_units: str, where: str) -> None:
         )
 
 
-def check_regular_file(path, what: str, max_bytes: int = MAX_CALIBRATION_BYTES) -> None:
+def check_regular_file(path: object, what: str, max_bytes: int = MAX_CALIBRATION_BYTES) -> None:
     """A path that names a missing file is left to the loader (which says so); a FIFO, a device or
     a huge file is refused here, before anything opens it (a FIFO would block, /dev/zero never
     ends).
@@ -188,7 +193,7 @@ def check_regular_file(path, what: str, max_bytes: int = MAX_CALIBRATION_BYTES) 
         )
 
 
-def load_calibration_checked(path, timeout_s: float = 10.0):
+def load_calibration_checked(path: str | Path, timeout_s: float = 10.0) -> Calibration:
     """load_calibration bounded in size (a regular file of at most 16 MB) and in time (read in a
     helper thread; a file system that does not answer within timeout_s is an error, not a hung
     node).
@@ -201,9 +206,9 @@ def load_calibration_checked(path, timeout_s: float = 10.0):
         check_regular_file(path, 'calibration_file')
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    result: list = []
+    result: list[Calibration | BaseException] = []
 
-    def read():
+    def read() -> None:
         try:
             result.append(load_calibration(path))
         except BaseException as err:  # handed to the caller below

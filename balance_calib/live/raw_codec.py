@@ -10,6 +10,7 @@ NUL), the characters, padding to 8, six float64 (force x y z, torque x y z).
 from __future__ import annotations
 
 import struct
+from typing import Any, Sequence  # Any: rclpy's WrenchStamped objects, duck-typed
 
 import numpy as np
 
@@ -72,7 +73,7 @@ def decode_wrenches(messages: list[bytes]) -> tuple[np.ndarray, np.ndarray, list
     )
 
 
-def wrench_arrays(messages) -> tuple[np.ndarray, np.ndarray, list[str]]:
+def wrench_arrays(messages: Sequence[Any]) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """decode_wrenches' result from deserialized WrenchStamped messages (rclpy's, for other
     layouts).
     """
@@ -99,7 +100,7 @@ def wrench_arrays(messages) -> tuple[np.ndarray, np.ndarray, list[str]]:
 class WrenchEncoder:
     """Serializes WrenchStamped batches with one frame_id (the node's `frame_id` parameter)."""
 
-    def __init__(self, frame_id: str):
+    def __init__(self, frame_id: str) -> None:
         self.frame_id = frame_id
         encoded = frame_id.encode('utf-8')
         self.offset, self.size = _layout(len(encoded))

@@ -14,7 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 import threading
 import time
-from typing import Callable
+from typing import Any, Callable, TYPE_CHECKING
 
 import numpy as np
 
@@ -40,6 +40,9 @@ from .tare_store import (
     tare_file_for,
     TareOwner,
 )
+
+if TYPE_CHECKING:  # the type of LiveCalibrator.report's reports
+    from .stream import StatusReport
 
 CALIBRATION_PARAMETERS = {
     'calibration_file',
@@ -99,8 +102,9 @@ class CalibratorSession:
         value: Callable[[str], object],
         node_name: str,
         log: Log,
-        fallback_decode: Callable | None = None,
-    ):
+        fallback_decode: Callable[[list[bytes]], tuple[np.ndarray, np.ndarray, list[str]]]
+        | None = None,
+    ) -> None:
         self.value, self.node_name, self.log, self.fallback_decode = (
             value,
             node_name,
@@ -202,7 +206,7 @@ class CalibratorSession:
                 done()
         return out
 
-    def _decode(self, messages: list[bytes]):
+    def _decode(self, messages: list[bytes]) -> tuple[np.ndarray, np.ndarray, list[str]]:
         """(stamps_ns, outputs, frame ids) of serialized samples; rclpy's deserializer for bytes
         the fast decoder does not know.
         """
@@ -380,7 +384,9 @@ class CalibratorSession:
             active.source,
         )
 
-    def start_refit(self, refit_function, on_done: Callable[[object], None]) -> str | None:
+    def start_refit(
+        self, refit_function: Callable[..., Any] | None, on_done: Callable[[object], None]
+    ) -> str | None:
         """Start ~/refit in a worker thread (the pipeline in its own process unless refit_function,
         run_refit's signature, is given); on_done(outcome) from that thread. None when started,
         else the refusal.
@@ -394,7 +400,7 @@ class CalibratorSession:
             return f'refit failed: {err}; {keep}'
         self.refit_running = True
 
-        def work():
+        def work() -> None:
             try:
                 outcome = run_refit_job(
                     job, refit_function, lambda line: self.log('info', f'refit: {line}')
@@ -407,7 +413,9 @@ class CalibratorSession:
         threading.Thread(target=work, name='refit', daemon=True).start()
         return None
 
-    def finish_refit(self, done) -> tuple[bool, str, str | None]:
+    def finish_refit(
+        self, done: tuple[RefitJob, tuple[ActiveCalibration, Path, str] | str]
+    ) -> tuple[bool, str, str | None]:
         """start_refit's outcome -> (success, reply, the calibration file to switch to or None). A
         new calibration is swapped in between two batches of samples; zero and tare stay.
         """
@@ -437,7 +445,7 @@ class CalibratorSession:
         if 'balance' in changes:
             resolve_config_path(changes['balance'])
 
-        def value(name):
+        def value(name: str) -> object:
             return changes.get(name, self.value(name))
 
         if {'input_units', 'excitation_v'} & set(changes):
@@ -487,7 +495,7 @@ class CalibratorSession:
         return 'diagnostics_period_s' in names
 
     # --- /diagnostics ---------------------------------------------------------------------------
-    def report(self):
+    def report(self) -> list[StatusReport]:
         with self.lock:  # the share outside the support is judged out of the samples' way
             live = self.live
             judge = live.support.take(

@@ -11,11 +11,13 @@ only turns messages into arrays and back.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Callable
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
 from ..model.active_calibration import ActiveCalibration, six_axis_loads
+from ..model.balance_model import BalanceModel
+from ..model.r091 import IterativeModel
 from ..model.uncertainty import covariance_and_sigma, has_uncertainty, load_standard_uncertainty
 from ..units import COMPONENTS
 from . import lone_sample
@@ -66,7 +68,7 @@ class InputMonitor:
         'samples lost (gaps in the stamps)',
     )
 
-    def __init__(self, balance: str):
+    def __init__(self, balance: str) -> None:
         self.balance = balance.lower()
         self.total = dict.fromkeys(self.KINDS, 0)
         self.period = dict.fromkeys(self.KINDS, 0)
@@ -82,7 +84,9 @@ class InputMonitor:
             self.total[kind] += count
             self.period[kind] += count
 
-    def update(self, stamps_ns, frame_ids=None) -> None:
+    def update(
+        self, stamps_ns: np.ndarray | Sequence[int], frame_ids: Sequence[str] | None = None
+    ) -> None:
         """A batch of stamps (N,) ns in arrival order (array or list) and their frame ids.
 
         One pass in plain Python: a sequential state machine (the latest stamp so far), and at
@@ -150,7 +154,7 @@ class OverloadMonitor:
     false again once the samples have stayed inside for clear_s.
     """
 
-    def __init__(self, capacity: np.ndarray, fraction: float, clear_s: float):
+    def __init__(self, capacity: np.ndarray, fraction: float, clear_s: float) -> None:
         self.capacity = np.asarray(capacity, dtype=float)
         self.fraction = fraction
         self.clear_s = clear_s
@@ -205,7 +209,7 @@ class LowPass:
     carried across batches (scipy.signal.lfilter).
     """
 
-    def __init__(self, cutoff_hz: float):
+    def __init__(self, cutoff_hz: float) -> None:
         self.cutoff_hz = cutoff_hz
         self.state: np.ndarray | None = None
 
@@ -249,19 +253,19 @@ class Output:
 
     def __init__(
         self,
-        wrench: list,
-        ready: list,
-        later=None,
-        stamps=None,
-        encoder=None,
+        wrench: list[bytes],
+        ready: list[bytes],
+        later: Callable[[], np.ndarray | None] | None = None,
+        stamps: np.ndarray | None = None,
+        encoder: WrenchEncoder | None = None,
         *,
         accelerated: int = 0,
         batch: WrenchBatch | None = None,
-    ):
+    ) -> None:
         self.wrench, self.accelerated, self.batch, self.overload = wrench, accelerated, batch, None
         self._ready, self._later, self._stamps, self._encoder = ready, later, stamps, encoder
 
-    def uncertainty(self) -> list:
+    def uncertainty(self) -> list[bytes]:
         values = None if self._later is None else self._later()
         if values is None:
             return self._ready
@@ -284,12 +288,12 @@ class Published:
 def wrench_uncertainty(
     active: ActiveCalibration,
     zeroed_outputs: np.ndarray,
-    tare_sigma,
+    tare_sigma: np.ndarray | None,
     *,
-    model=None,
-    extra=None,
-    loads_balance=None,
-    design=None,
+    model: BalanceModel | IterativeModel | None = None,
+    extra: Mapping[str, np.ndarray] | None = None,
+    loads_balance: np.ndarray | None = None,
+    design: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """Standard uncertainty (k = 1) of each published load (M, 6), N / N·m, tunnel axes: the
     calibration's coefficient covariance and residual σ (model/uncertainty.py) at these outputs,
@@ -334,7 +338,7 @@ class LiveCalibrator:
     settings: LiveSettings = field(default_factory=LiveSettings)
     tare: TareState | None = None
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self.tare = self.tare or TareState(self.active.calibration.balance)
         self.counters = InputCounters()
         self.inputs = InputMonitor(self.active.calibration.balance)
@@ -429,7 +433,7 @@ class LiveCalibrator:
         self,
         outputs_mv: np.ndarray,
         stamps_ns: np.ndarray,
-        frame_ids=None,
+        frame_ids: Sequence[str] | None = None,
         *,
         now_s: float,
         temperature_c: float | None = None,
@@ -478,7 +482,7 @@ class LiveCalibrator:
             return Published(indices, wrench, batch)
 
         # of this batch, with this calibration and tare (immutable: safe to run later)
-        def uncertainty():
+        def uncertainty() -> np.ndarray | None:
             accepted_outputs = outputs if all_accepted else outputs[indices]
             zeroed = accepted_outputs if tare.zero_mv is None else accepted_outputs - tare.zero_mv
             model = active.model if batch.model_used == active.model_name else active.base_model

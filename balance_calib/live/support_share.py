@@ -22,6 +22,7 @@ import math
 from typing import Callable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..coverage.run import outside_support_of_outputs, recorded_support
 from ..model.active_calibration import ActiveCalibration
@@ -44,7 +45,7 @@ class SupportShare:
 class SupportSampler:
     """Every stride-th sample of the stream, kept as received (bytes), judged per period."""
 
-    def __init__(self, per_period: int = SAMPLES_PER_PERIOD):
+    def __init__(self, per_period: int = SAMPLES_PER_PERIOD) -> None:
         self.per_period = int(per_period)
         self.stride = 1
         self.phase = 0  # samples since the last kept one, modulo stride
@@ -61,12 +62,14 @@ class SupportSampler:
             self.kept.extend(messages[start::stride])
         self.decode, self.input_scale = decode, input_scale
 
-    def judge(self, active: ActiveCalibration, zero_mv, received_in_period: int) -> SupportShare:
+    def judge(
+        self, active: ActiveCalibration, zero_mv: ArrayLike | None, received_in_period: int
+    ) -> SupportShare:
         """The share of the kept samples outside the support; starts the next period."""
         return self.take(active, zero_mv, received_in_period)()
 
     def take(
-        self, active: ActiveCalibration, zero_mv, received_in_period: int
+        self, active: ActiveCalibration, zero_mv: ArrayLike | None, received_in_period: int
     ) -> Callable[[], SupportShare]:
         """The period's kept samples and a call that judges them (to run under no lock); starts
         the next period.
@@ -83,7 +86,7 @@ def judge_samples(
     decode: Callable | None,
     input_scale: float,
     active: ActiveCalibration,
-    zero_mv,
+    zero_mv: ArrayLike | None,
 ) -> SupportShare:
     """The share of serialized samples outside the active calibration's recorded support."""
     calibration = active.calibration

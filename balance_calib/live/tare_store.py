@@ -21,6 +21,7 @@ import hashlib
 import os
 from pathlib import Path
 import stat
+from typing import Any, Sequence
 
 import numpy as np
 import yaml
@@ -56,7 +57,7 @@ class TareOwner:
             calibration_sha256, installation.spec, namespace or '/', node, installation.name
         )
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
@@ -116,8 +117,8 @@ class TareState:
     tare_direction: np.ndarray | None = None
     owner: TareOwner | None = None  # what they were taken for (None: not recorded)
 
-    def to_dict(self) -> dict:
-        def plain(values, names):
+    def to_dict(self) -> dict[str, Any]:
+        def plain(values: np.ndarray | None, names: Sequence[str]) -> dict[str, float] | None:
             return None if values is None else {n: float(v) for n, v in zip(names, values)}
 
         return {
@@ -191,7 +192,7 @@ def load_tare(path: Path, balance: str) -> TareState | None:
     if str(data.get('balance', '')).lower() != balance.lower():
         raise ValueError(f'{path}: tare of balance {data.get("balance")!r}, not of {balance!r}')
 
-    def vector(key, names):
+    def vector(key: str, names: Sequence[str]) -> np.ndarray | None:
         values = data.get(key)
         if values is None:
             return None
@@ -203,7 +204,7 @@ def load_tare(path: Path, balance: str) -> TareState | None:
             raise ValueError(f'{path}: {key} holds a NaN or infinite value')
         return result
 
-    def number(key):
+    def number(key: str) -> float | None:
         value = data.get(key)
         if value is None:
             return None
@@ -231,7 +232,7 @@ def load_tare(path: Path, balance: str) -> TareState | None:
     )
 
 
-def _owner(path: Path, recorded) -> TareOwner | None:
+def _owner(path: Path, recorded: object) -> TareOwner | None:
     """`taken_for` of a tare file; None when absent (a file of the first format)."""
     if recorded is None:
         return None

@@ -11,9 +11,10 @@ from dataclasses import dataclass, field, replace
 import datetime as _dt
 from functools import cached_property
 import re
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import ConfigError
 from ..tunnel_axes import Installation, parse_installation
@@ -30,7 +31,9 @@ DEFAULT_OUTPUT_RANGE_FACTOR = 2.0
 _ONE_COLUMN = 12
 
 
-def six_axis_loads(model: BalanceModel, outputs_mv, extra=None) -> np.ndarray:
+def six_axis_loads(
+    model: BalanceModel, outputs_mv: ArrayLike, extra: Mapping[str, np.ndarray] | None = None
+) -> np.ndarray:
     """Loads (N, 6) in FX..MZ order from the six raw channels (N, 6), whatever channels the model
     uses.
 
@@ -45,7 +48,7 @@ def six_axis_loads(model: BalanceModel, outputs_mv, extra=None) -> np.ndarray:
     return loads
 
 
-def six_axis(values, names, fill: float) -> np.ndarray:
+def six_axis(values: ArrayLike, names: Sequence[str], fill: float) -> np.ndarray:
     """A per-component vector over `names` spread onto FX..MZ, `fill` where a component is
     absent.
     """
@@ -82,7 +85,9 @@ class ActiveCalibration:
         return getattr(self.model, 'form', 'direct') == 'iterative'
 
     @cached_property
-    def plan(self):
+    def plan(
+        self,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
         """What one sample needs, precomputed: input columns, component slots, powers,
         coefficients. An iterative model has no polynomial of the outputs: columns and slots only
         (powers None).
@@ -131,7 +136,9 @@ class ActiveCalibration:
         """
         _, _, plain, absolute, _ = self.plan
         index = self.design_index
-        if index is None or absolute is not None or plain.size == 0 or plain.max() > 3:
+        if index is None or plain is None or absolute is not None:
+            return None
+        if plain.size == 0 or plain.max() > 3:
             return None
         return tuple(tuple(int(i) for i in row if i != _ONE_COLUMN) for row in index)
 
@@ -153,6 +160,8 @@ class ActiveCalibration:
         lacks).
         """
         _, positions, _, _, coefficients = self.plan
+        if coefficients is None:
+            raise TypeError(f'model {self.model_name} is iterative: no polynomial coefficients')
         six = np.zeros((6, coefficients.shape[1]))
         six[positions] = coefficients
         return six
@@ -168,14 +177,16 @@ class ActiveCalibration:
         sample is saturated or non-finite (output_range_mv, the largest float where it is
         infinite, so that an infinite output fails it); a batch that fails gets per-sample masks.
         """
-        return np.minimum(self.output_range_mv, np.finfo(float).max)
+        limit: np.ndarray = np.minimum(self.output_range_mv, np.finfo(float).max)
+        return limit
 
     @cached_property
     def envelope_limit(self) -> np.ndarray:
         """(6,) |every load| <= this: every load finite and inside the envelope (the check of a
         whole batch, as output_limit_mv).
         """
-        return np.minimum(self.envelope, np.finfo(float).max)
+        limit: np.ndarray = np.minimum(self.envelope, np.finfo(float).max)
+        return limit
 
     def layout(self, model: BalanceModel) -> tuple[np.ndarray, np.ndarray | None]:
         """The model's input columns of the six raw outputs and its components' slots in FX..MZ
@@ -207,10 +218,12 @@ class ActiveCalibration:
     def inputs_finite(self, outputs: np.ndarray) -> np.ndarray:
         """(N,) True where every raw output the calibration reads is finite; outputs (N, 6)."""
         if self.unused_inputs is None:
-            return np.isfinite(outputs).all(axis=1)
+            finite: np.ndarray = np.isfinite(outputs).all(axis=1)
+            return finite
         used = np.isfinite(outputs)
         used[:, self.unused_inputs] = True
-        return used.all(axis=1)
+        finite = used.all(axis=1)
+        return finite
 
     @cached_property
     def absent_components(self) -> tuple[str, ...]:

@@ -11,7 +11,9 @@ from functools import cached_property
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from ..array_types import FloatArray
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
 from .terms import as_variables, parse_terms, power_products, Term, term_exponents
 from .tm663 import coefficient_number, tm663_terms
@@ -32,7 +34,7 @@ class BalanceModel:
     inputs: tuple[str, ...] = BRIDGE_OUTPUTS
     metadata: Mapping[str, Any] = field(default_factory=dict)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         coefficients = np.asarray(self.coefficients, dtype=float)
         expected = (len(self.components), len(self.terms))
         if coefficients.shape != expected:
@@ -47,11 +49,17 @@ class BalanceModel:
 
     # --- construction -------------------------------------------------------------------------
     @classmethod
-    def tm663(cls, order: str, coefficients, **kwargs) -> 'BalanceModel':
+    def tm663(cls, order: str, coefficients: ArrayLike, **kwargs: Any) -> 'BalanceModel':
         return cls(order, tm663_terms(order), np.asarray(coefficients, dtype=float), **kwargs)
 
     @classmethod
-    def zeros(cls, name: str, terms: Sequence[Term], components=COMPONENTS, inputs=BRIDGE_OUTPUTS):
+    def zeros(
+        cls,
+        name: str,
+        terms: Sequence[Term],
+        components: Sequence[str] = COMPONENTS,
+        inputs: Sequence[str] = BRIDGE_OUTPUTS,
+    ) -> 'BalanceModel':
         return cls(
             name,
             tuple(terms),
@@ -99,7 +107,7 @@ class BalanceModel:
         return self.variables, plain.astype(float), absolute.astype(float), bool(absolute.any())
 
     def design(
-        self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None
+        self, bridge_outputs_mv: ArrayLike, extra: Mapping[str, np.ndarray] | None = None
     ) -> np.ndarray:
         """(N, n_terms): every term on every sample, as products of powers (one numpy
         expression).
@@ -129,15 +137,15 @@ class BalanceModel:
         return power_products(values, plain, absolute if has_absolute else None)
 
     def loads(
-        self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None
+        self, bridge_outputs_mv: ArrayLike, extra: Mapping[str, np.ndarray] | None = None
     ) -> np.ndarray:
         """Loads (N, n_components) from outputs (N, n_inputs), TM-663 eqs. (1)-(18)."""
         single = np.ndim(bridge_outputs_mv) == 1
-        result = self.design(bridge_outputs_mv, extra) @ self.coefficients.T
+        result: FloatArray = self.design(bridge_outputs_mv, extra) @ self.coefficients.T
         return result[0] if single else result
 
     def jacobian(
-        self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None
+        self, bridge_outputs_mv: ArrayLike, extra: Mapping[str, np.ndarray] | None = None
     ) -> np.ndarray:
         """D loads / d outputs, shape (N, n_components, n_inputs)."""
         outputs = np.atleast_2d(np.asarray(bridge_outputs_mv, dtype=float))
@@ -175,7 +183,7 @@ class BalanceModel:
         )
 
     def with_coefficients(
-        self, coefficients, name: str | None = None, **metadata
+        self, coefficients: ArrayLike, name: str | None = None, **metadata: Any
     ) -> 'BalanceModel':
         return replace(
             self,
@@ -185,7 +193,7 @@ class BalanceModel:
         )
 
     # --- files --------------------------------------------------------------------------------
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """Plain data for YAML: terms in order, one coefficient row per component."""
         return {
             'name': self.name,

@@ -104,7 +104,7 @@ class Calibration:
         except (TypeError, ValueError):
             return None
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             'format': FORMAT,
             'balance': self.balance,

@@ -9,7 +9,9 @@ from __future__ import annotations
 from typing import Mapping
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from ..array_types import FloatArray
 from .balance_model import BalanceModel
 
 
@@ -33,7 +35,7 @@ def linear_part(model: BalanceModel) -> np.ndarray:
 
 def outputs_for_loads(
     model: BalanceModel,
-    loads,
+    loads: ArrayLike,
     extra: Mapping[str, np.ndarray] | None = None,
     tolerance: float = 1e-12,
     max_iterations: int = 50,
@@ -54,7 +56,7 @@ def outputs_for_loads(
     except np.linalg.LinAlgError:
         raise InverseDidNotConverge('the linear part of the model is singular') from None
     constant = model.loads(np.zeros((targets.shape[0], len(model.inputs))), extra)
-    outputs = (targets - constant) @ linear_inverse.T
+    outputs: FloatArray = (targets - constant) @ linear_inverse.T
     scale = np.maximum(np.abs(targets), 1e-9 * (np.abs(linear).max() + 1.0))
     for _ in range(max_iterations):
         error = targets - model.loads(outputs, extra)

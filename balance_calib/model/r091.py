@@ -17,9 +17,10 @@ from dataclasses import dataclass, field, replace
 from functools import cached_property
 from itertools import combinations
 from pathlib import Path
-from typing import Any, cast, Mapping, Sequence
+from typing import Any, cast, Literal, Mapping, NoReturn, overload, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..plain_data import plain_data as _plain
 from .inverse import InverseDidNotConverge
@@ -141,7 +142,7 @@ class TermEvaluator:
         ]
 
     @cached_property
-    def _flat(self):
+    def _flat(self) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Flat column indices into the (N, 2 x n_vars x h) power table (x powers, then |x|
         powers), h - 1 the highest power: each factor's x^a and |x|^b columns, then those of
         x^(a-1) and
@@ -162,7 +163,17 @@ class TermEvaluator:
             b.astype(float),
         )
 
-    def _tables(self, values: np.ndarray, derivative: bool):
+    @overload
+    def _tables(
+        self, values: np.ndarray, derivative: Literal[False]
+    ) -> tuple[np.ndarray, None]: ...
+    @overload
+    def _tables(
+        self, values: np.ndarray, derivative: Literal[True]
+    ) -> tuple[np.ndarray, np.ndarray]: ...
+    def _tables(
+        self, values: np.ndarray, derivative: bool
+    ) -> tuple[np.ndarray, np.ndarray | None]:
         h, at, down_at, var, a, b = self._flat
         n, m = values.shape
         powers = np.empty((n, 2, m, h))  # [1, x, x², ...] and [1, |x|, |x|², ...] per variable
@@ -187,7 +198,7 @@ class TermEvaluator:
 
     def design(self, values: np.ndarray) -> np.ndarray:
         table, _ = self._tables(values, False)
-        result = table[:, self.index[0]]
+        result: np.ndarray = table[:, self.index[0]]
         for k in range(1, self.k):
             result = result * table[:, self.index[k]]
         return result
@@ -231,7 +242,7 @@ class IterativeModel:
     form = 'iterative'
     extra_variables: tuple[str, ...] = ()
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         coefficients = np.asarray(self.coefficients, dtype=float)
         if coefficients.shape != (len(self.inputs), len(self.terms)):
             raise ValueError(
@@ -261,7 +272,7 @@ class IterativeModel:
         return tuple(t.name for t in self.terms)
 
     @property
-    def _exponents(self):
+    def _exponents(self) -> NoReturn:
         # BalanceModel's polynomial shortcut (loads = coefficients · terms(outputs)) does not exist
         # for outputs = f(loads): say so instead of letting a fast path compute wrong loads
         raise AttributeError(
@@ -303,23 +314,24 @@ class IterativeModel:
         """
         capacity = self.metadata.get('capacity') if isinstance(self.metadata, Mapping) else None
         if capacity is not None and len(capacity) == len(self.components):
-            return np.abs(np.asarray(capacity, float))
+            return np.abs(np.asarray(capacity, np.float64))
         return np.ones(len(self.components))
 
     # --- forward: loads -> outputs ------------------------------------------------------------
-    def design(self, loads) -> np.ndarray:
+    def design(self, loads: ArrayLike) -> np.ndarray:
         return self.evaluator.design(np.atleast_2d(np.asarray(loads, float)))
 
-    def outputs(self, loads) -> np.ndarray:
+    def outputs(self, loads: ArrayLike) -> np.ndarray:
         """Outputs (N, n_inputs) the balance gives under total loads (N, n_components)."""
-        return self.design(loads) @ self.coefficients.T
+        outputs: np.ndarray = self.design(loads) @ self.coefficients.T
+        return outputs
 
-    def output_jacobian(self, loads) -> tuple[np.ndarray, np.ndarray]:
+    def output_jacobian(self, loads: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(outputs (N, n_in), d outputs / d loads (N, n_in, n_components))."""
         design, jac = self.design_and_output_jacobian(loads)
         return design @ self.coefficients.T, jac
 
-    def design_and_output_jacobian(self, loads) -> tuple[np.ndarray, np.ndarray]:
+    def design_and_output_jacobian(self, loads: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(g(loads) (N, n_terms), d outputs / d loads (N, n_in, n_components))."""
         design, derivatives = self.evaluator.design_and_derivatives(
             np.atleast_2d(np.asarray(loads, float))
@@ -328,7 +340,7 @@ class IterativeModel:
 
     # --- inverse: outputs -> loads (the BalanceModel interface) ---------------------------------
     def loads(
-        self, bridge_outputs_mv, extra: Mapping[str, np.ndarray] | None = None
+        self, bridge_outputs_mv: ArrayLike, extra: Mapping[str, np.ndarray] | None = None
     ) -> np.ndarray:
         """Loads (N, n_components) from outputs (N, n_inputs) by Newton iteration.
 
@@ -347,7 +359,7 @@ class IterativeModel:
             )
         return loads[0] if single else loads
 
-    def loads_and_status(self, bridge_outputs_mv) -> tuple[np.ndarray, np.ndarray]:
+    def loads_and_status(self, bridge_outputs_mv: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(loads (N, n_components), converged (N,) bool) by Newton iteration, vectorised over
         samples, without raising: a sample whose iteration did not converge gets a NaN row and
         converged False (the live calibrator publishes nothing for it and counts it). Non-finite
@@ -405,7 +417,9 @@ class IterativeModel:
         loads[~finite] = np.nan
         return loads, converged | ~finite
 
-    def jacobian(self, bridge_outputs_mv, extra=None) -> np.ndarray:
+    def jacobian(
+        self, bridge_outputs_mv: ArrayLike, extra: Mapping[str, np.ndarray] | None = None
+    ) -> np.ndarray:
         """D loads / d outputs (N, n_components, n_inputs): the inverse of d outputs / d loads."""
         loads = np.atleast_2d(self.loads(bridge_outputs_mv, extra))
         _, jac = self.output_jacobian(loads)
@@ -414,11 +428,11 @@ class IterativeModel:
     def without_constant(self) -> 'IterativeModel':
         return self  # no constant term (TM-663 §10.1 holds already)
 
-    def with_metadata(self, **metadata) -> 'IterativeModel':
+    def with_metadata(self, **metadata: Any) -> 'IterativeModel':
         return replace(self, metadata={**self.metadata, **metadata})
 
     # --- files --------------------------------------------------------------------------------
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return {
             'name': self.name,
             'form': 'iterative',

@@ -47,7 +47,8 @@ class Factor:
     def derivative(self, value: np.ndarray) -> np.ndarray:
         """d(factor)/d(variable), elementwise."""
         if self.absolute:
-            return self.power * np.abs(value) ** (self.power - 1) * np.sign(value)
+            slope: np.ndarray = self.power * np.abs(value) ** (self.power - 1) * np.sign(value)
+            return slope
         return self.power * value ** (self.power - 1)
 
 
@@ -167,7 +168,7 @@ def power_products(
 ) -> np.ndarray:
     """(N, n_terms) = prod_v values[:, v] ** plain[:, v] * |values[:, v]| ** absolute[:, v]."""
     # np.multiply.reduce is np.prod without its Python wrapper (a lone live sample pays per call)
-    matrix = np.multiply.reduce(np.power(values[:, None, :], plain), axis=2)
+    matrix: np.ndarray = np.multiply.reduce(np.power(values[:, None, :], plain), axis=2)
     if absolute is not None and absolute.any():
         matrix = matrix * np.multiply.reduce(
             np.power(np.abs(values)[:, None, :], absolute), axis=2

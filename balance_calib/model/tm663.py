@@ -10,6 +10,7 @@ from the lists below.
 from __future__ import annotations
 
 from itertools import combinations
+from typing import Sequence
 
 from ..units import BRIDGE_OUTPUTS
 from .terms import parse_terms, Term
@@ -17,7 +18,7 @@ from .terms import parse_terms, Term
 MODEL_ORDERS = ('linear', 'quadratic', 'cubic')
 
 
-def _names(order: str, outputs=BRIDGE_OUTPUTS) -> list[str]:
+def _names(order: str, outputs: Sequence[str] = BRIDGE_OUTPUTS) -> list[str]:
     names = ['1'] + list(outputs)  # eqs. (1)-(6)
     if order in ('quadratic', 'cubic'):
         names += [f'{v}^2' for v in outputs]  # C8-C13 of eq. (7)
@@ -29,7 +30,7 @@ def _names(order: str, outputs=BRIDGE_OUTPUTS) -> list[str]:
     return names
 
 
-def tm663_terms(order: str, outputs=BRIDGE_OUTPUTS) -> tuple[Term, ...]:
+def tm663_terms(order: str, outputs: Sequence[str] = BRIDGE_OUTPUTS) -> tuple[Term, ...]:
     """The term list of TM-663 §2.1 (linear), §2.2 (quadratic) or §2.3 (cubic), in the memo's
     order.
     """

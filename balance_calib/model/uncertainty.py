@@ -17,8 +17,13 @@ from __future__ import annotations
 from typing import Mapping
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from ..array_types import FloatArray
+from .balance_model import BalanceModel
+from .calibration import Calibration
 from .identity_cache import IdentityCache
+from .r091 import IterativeModel
 
 _CACHE: IdentityCache[tuple[np.ndarray, np.ndarray]] = IdentityCache(limit=64)
 
@@ -27,7 +32,9 @@ class UncertaintyUnavailable(ValueError):
     """The calibration carries no coefficient covariance (e.g. the memo's published matrices)."""
 
 
-def covariance_and_sigma(model) -> tuple[np.ndarray, np.ndarray] | None:
+def covariance_and_sigma(
+    model: BalanceModel | IterativeModel,
+) -> tuple[np.ndarray, np.ndarray] | None:
     """The model's unscaled coefficient covariance and residual σ per component (cached), or None
     when the calibration carries none (the memo's published matrices).
     """
@@ -45,17 +52,23 @@ def covariance_and_sigma(model) -> tuple[np.ndarray, np.ndarray] | None:
     return _CACHE.put(model, (covariance, sigma))
 
 
-def _resolve(calibration_or_model, model: str):
+def _resolve(
+    calibration_or_model: Calibration | BalanceModel | IterativeModel, model: str
+) -> BalanceModel | IterativeModel:
     if hasattr(calibration_or_model, 'models') and hasattr(calibration_or_model, 'model'):
         return calibration_or_model.model(model)
     return calibration_or_model
 
 
-def has_uncertainty(calibration_or_model, model: str = 'adopted') -> bool:
+def has_uncertainty(
+    calibration_or_model: Calibration | BalanceModel | IterativeModel, model: str = 'adopted'
+) -> bool:
     return covariance_and_sigma(_resolve(calibration_or_model, model)) is not None
 
 
-def require_covariance(calibration_or_model, model: str = 'adopted') -> None:
+def require_covariance(
+    calibration_or_model: Calibration | BalanceModel | IterativeModel, model: str = 'adopted'
+) -> None:
     chosen = _resolve(calibration_or_model, model)
     if covariance_and_sigma(chosen) is None:
         raise UncertaintyUnavailable(
@@ -65,14 +78,14 @@ def require_covariance(calibration_or_model, model: str = 'adopted') -> None:
 
 
 def load_standard_uncertainty(
-    calibration_or_model,
-    outputs_mv,
+    calibration_or_model: Calibration | BalanceModel | IterativeModel,
+    outputs_mv: ArrayLike,
     extra: Mapping[str, np.ndarray] | None = None,
     *,
     model: str = 'adopted',
-    tare_sigma=None,
-    loads=None,
-    design=None,
+    tare_sigma: ArrayLike | None = None,
+    loads: ArrayLike | None = None,
+    design: ArrayLike | None = None,
 ) -> np.ndarray:
     """(N, n_components) standard uncertainty (k = 1) of each load, N / N·m, model component order.
 
@@ -96,7 +109,7 @@ def load_standard_uncertainty(
         return np.full((n, len(chosen.components)), np.nan)
     covariance, sigma = pieces
     good = outputs if everyone else outputs[finite]
-    if getattr(chosen, 'form', 'direct') == 'iterative':
+    if isinstance(chosen, IterativeModel):
         if loads is not None:
             loads = np.asarray(loads, dtype=float)
             loads = loads if everyone else loads[finite]
@@ -104,7 +117,7 @@ def load_standard_uncertainty(
         design, jac = chosen.design_and_output_jacobian(loads)
         variance_out = _direct_variance(design, covariance, sigma)  # in output space
         inverse = np.linalg.inv(jac)
-        variance = np.einsum('nmk,nk->nm', inverse**2, variance_out)
+        variance: FloatArray = np.einsum('nmk,nk->nm', inverse**2, variance_out)
     else:
         sub_extra = (
             extra

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..config import CalibrationBody
 from ..fit.least_squares import fit_model
@@ -23,17 +24,26 @@ from ..model.terms import parse_terms
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
 
 
-def body_loads_from_rotation(linear_model: BalanceModel, output_difference_mv) -> np.ndarray:
+def body_loads_from_rotation(
+    linear_model: BalanceModel, output_difference_mv: ArrayLike
+) -> np.ndarray:
     """Loads of the body, ½ C ΔV, from the output difference between two opposite orientations.
 
     Eqs. (29)-(31) are the F_Z, M_X and M_Y rows of this product (C16-C21, C23-C28, C30-C35 of
     Table 10 / 14); the other rows are returned too. ΔV = V(orientation) - V(opposite), mV.
     """
-    return 0.5 * linear_part(linear_model) @ np.asarray(output_difference_mv, dtype=float)
+    half_c_dv: np.ndarray = (
+        0.5 * linear_part(linear_model) @ np.asarray(output_difference_mv, dtype=float)
+    )
+    return half_c_dv
 
 
 def tare_loads(
-    body: CalibrationBody, gravity_unit, *, axial_jig: bool = False, axial_jig_sign=1.0
+    body: CalibrationBody,
+    gravity_unit: ArrayLike,
+    *,
+    axial_jig: bool = False,
+    axial_jig_sign: ArrayLike = 1.0,
 ) -> np.ndarray:
     """Loads of the body's weight for gravity direction(s) g (unit vector(s), balance axes).
 
@@ -68,7 +78,7 @@ class BodyEstimate:
 
 
 def estimate_body(
-    linear_model: BalanceModel, gravity_units: Sequence, output_differences_mv: Sequence
+    linear_model: BalanceModel, gravity_units: ArrayLike, output_differences_mv: ArrayLike
 ) -> BodyEstimate:
     """Weight and CG from zero-point output differences at opposite orientations.
 
@@ -94,7 +104,10 @@ def estimate_body(
 
 
 def fit_inverse_linear(
-    bridge_outputs_mv, loads, components=COMPONENTS, outputs=BRIDGE_OUTPUTS
+    bridge_outputs_mv: ArrayLike,
+    loads: ArrayLike,
+    components: Sequence[str] = COMPONENTS,
+    outputs: Sequence[str] = BRIDGE_OUTPUTS,
 ) -> BalanceModel:
     """The linear model outputs = C'(1, loads), eqs. (32)-(37), fitted by least squares."""
     terms = parse_terms(['1'] + list(components))
@@ -110,7 +123,7 @@ def fit_inverse_linear(
     return result.model
 
 
-def tare_outputs(inverse_linear: BalanceModel, tare_loads_n) -> np.ndarray:
+def tare_outputs(inverse_linear: BalanceModel, tare_loads_n: ArrayLike) -> np.ndarray:
     """Outputs of the tare loads, eqs. (32)-(37) with C'1 = C'8 = ... = 0."""
     return inverse_linear.without_constant().loads(tare_loads_n)
 
@@ -124,7 +137,9 @@ class CorrectedData:
     tare_loads: np.ndarray  # (N, 6)
     tare_outputs_mv: np.ndarray  # (N, 6)
 
-    def with_tare_changed(self, load_change, output_change_mv) -> 'CorrectedData':
+    def with_tare_changed(
+        self, load_change: ArrayLike, output_change_mv: ArrayLike
+    ) -> 'CorrectedData':
         """The same points with the tare loads and tare outputs moved by (N, 6) changes: the
         totals move with them (another body, or its outputs read through another model).
         """
@@ -137,7 +152,10 @@ class CorrectedData:
 
 
 def corrected_data(
-    applied_loads, zeroed_outputs_mv, tare_loads_n, tare_outputs_mv
+    applied_loads: ArrayLike,
+    zeroed_outputs_mv: ArrayLike,
+    tare_loads_n: ArrayLike,
+    tare_outputs_mv: ArrayLike,
 ) -> CorrectedData:
     applied = np.asarray(applied_loads, float)
     zeroed = np.asarray(zeroed_outputs_mv, float)
