@@ -1,10 +1,10 @@
-"""The outlier statistic both acceptance gates use (refit/gates.py, tables/gates.py): standardised
+"""The outlier statistic both acceptance gates use (gates/outlier_statistic.py): standardised
 leave-one-out residuals and their robust σ, checked on hand-worked numbers.
 """
 
 import numpy as np
 
-from balance_calib.refit.gates import robust_sigma, standardized_press, worst_first
+from balance_calib.gates.outlier_statistic import robust_sigma, standardized_press, worst_first
 
 
 def test_standardised_press_residuals_are_press_times_root_one_minus_leverage():
