@@ -116,7 +116,7 @@ def schedule_csv_text(schedule: LoadSchedule) -> str:
 def schedule_for(config, path: str | Path, capacity_margin: float) -> LoadSchedule:
     """The schedule in a CSV file, checked against the balance it is to run on: every I_g one the
     config has a gravity direction for, every applied load within the balance's capacity plus
-    capacity_margin (a fraction: the refit's capacity gate's, refit/gates.acceptance_limits).
+    capacity_margin (a fraction: the refit's capacity gate's, gates/limits.acceptance_limits).
     """
     schedule = read_schedule_csv(path)
     unknown = sorted({int(i) for i in schedule.orientation} - set(config.gravity_directions))

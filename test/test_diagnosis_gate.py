@@ -19,7 +19,9 @@ import pytest
 from balance_calib.bags.reader import read_bags
 from balance_calib.config import load_balance_config
 from balance_calib.diagnosis.coherence import diagnosis_structure
-from balance_calib.refit.gates import acceptance_limits, fit_gates
+from balance_calib.gates.bags import fit_gates
+from balance_calib.gates.gate import ModelResiduals
+from balance_calib.gates.limits import acceptance_limits
 from balance_calib.refit.load_points import cut_load_points
 from balance_calib.refit.pipeline import calibrate_points, RefitError, run_refit
 from balance_calib.simulation.balance_sim import (
@@ -104,11 +106,13 @@ def test_the_points_the_structure_explains_are_those_the_gate_refused_before(tmp
     arguments = (
         config,
         result.points,
-        diagnosis.sigma_pct_fs['after'],
-        diagnosis.residuals_after,
-        diagnosis.press_residuals_after,
+        ModelResiduals(
+            diagnosis.sigma_pct_fs['after'],
+            diagnosis.residuals_after,
+            diagnosis.press_residuals_after,
+            'adopted model',
+        ),
         limits,
-        'adopted model',
     )
     before = fit_gates(*arguments)[1]
     after = fit_gates(*arguments, structure=diagnosis_structure(diagnosis, result.points, config))[
@@ -216,11 +220,13 @@ def test_a_loop_and_a_sign_step_pass_the_gate_after_the_effect_named_there(tmp_p
     before = fit_gates(
         config,
         result.points,
-        diagnosis.sigma_pct_fs['after'],
-        diagnosis.residuals_after,
-        diagnosis.press_residuals_after,
+        ModelResiduals(
+            diagnosis.sigma_pct_fs['after'],
+            diagnosis.residuals_after,
+            diagnosis.press_residuals_after,
+            'adopted model',
+        ),
         acceptance_limits(config),
-        'adopted model',
         structure=structure,
     )[1]
     assert not before.passed

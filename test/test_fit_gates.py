@@ -10,8 +10,8 @@ import pytest
 import table_cases as tc
 
 from balance_calib.cli import main
+from balance_calib.gates.fit_quality import condition_gate, overfit_gate
 from balance_calib.tables.balfit_writer import write_table
-from balance_calib.tables.gates import condition_gate, overfit_gate
 
 
 def _balance(seed=7):
@@ -126,7 +126,7 @@ def test_overfit_and_condition_limits_by_hand():
 
 
 def test_overfit_gate_judges_the_ratio_only_above_round_off():
-    from balance_calib.tables.gates import OVERFIT_FLOOR_PCT, overfit_gate
+    from balance_calib.gates.fit_quality import OVERFIT_FLOOR_PCT, overfit_gate
 
     # a noise-free table: both σ round to 0 % capacity; the ratio of round-offs is no overfit
     zero = {'FX': 0.0, 'FY': 0.0}

@@ -1,4 +1,4 @@
-"""~/refit's job hands the calibration in use to the refit's acceptance gates (refit/gates.py), so
+"""~/refit's job hands the calibration in use to the refit's acceptance gates (gates/), so
 a refit whose sensitivities moved far from it (wrong balance, a unit error) is refused in the node
 too; a balance config (nothing fitted yet) is compared only with the balance's nominal
 sensitivities.

@@ -463,7 +463,7 @@ def test_a_component_that_lost_its_loads_is_named_though_few_points_are_missing(
 def test_the_gate_judges_against_the_schedule_it_is_given(clean, tmp_path):
     # a campaign that ran only points 1-200 of the schedule: refused against the full schedule,
     # passed against the schedule it ran (what `refit --schedule FILE` will pass)
-    from balance_calib.refit.gates import schedule_gate
+    from balance_calib.gates.schedule import schedule_gate
     from balance_calib.refit.pipeline import campaign_points
     from balance_calib.simulation.timeline import select_points
 

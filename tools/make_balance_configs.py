@@ -207,7 +207,7 @@ def main(argv=None):
             'table17_sigma_pct_fs': {
                 order: dict(zip(COMP, v)) for order, v in memo['sigma'].items()
             },
-            # refit acceptance gates (balance_calib/refit/gates.py): a refit failing one is not
+            # refit acceptance gates (balance_calib/gates/): a refit failing one is not
             # adopted
             'acceptance': {
                 # σ of the base (cubic) model, eqs. (44)-(49): 3x Table 17's cubic row, at least

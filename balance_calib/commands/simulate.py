@@ -57,7 +57,7 @@ def run(args) -> int:
     from ..accuracy.sigma import format_sigma_table
     from ..accuracy.tables import format_coefficient_tables
     from ..config import ConfigError, load_balance_config
-    from ..refit.gates import acceptance_limits
+    from ..gates.limits import acceptance_limits
     from ..refit.pipeline import calibrate_points, campaign_points, RefitError, summary_line
     from ..schedule_file import schedule_for
     from ..simulation.balance_sim import simulate_campaign, SimulationSettings, table17_noise

@@ -1,6 +1,6 @@
 """Is a point that disagrees with the adopted model wrong on its own, or part of a structure?
 
-The outliers gate (refit/gates.py) flags points whose loads disagree with their outputs beyond
+The outliers gate (gates/outliers.py) flags points whose loads disagree with their outputs beyond
 k robust σ of the adopted model's leave-one-out residuals. A weight typo, a load recorded in the
 wrong unit or a marker on the wrong point is wrong *on its own*: its neighbours in load, load
 history and time do not share its residual. An effect the model lacks (a hysteresis loop of a

@@ -92,7 +92,7 @@ class Diagnosis:
     # (N, 6) residuals and leave-one-out residuals after the effects *named* on each component:
     # the adopted model plus the terms of the families the leftovers found only partly fitting
     # its structure (named in `unexplained`, not adopted); residuals_after where none was dropped
-    # (the outliers gate judges a flagged point on them, refit/gates.py)
+    # (the outliers gate judges a flagged point on them, gates/outliers.py)
     residuals_named: np.ndarray | None = None
     press_residuals_named: np.ndarray | None = None
 

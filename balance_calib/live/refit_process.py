@@ -117,7 +117,7 @@ def run_refit_in_process(
     ends.
 
     active_calibration: the calibration file in use; the refit's acceptance gates refuse a new one
-    whose sensitivities moved far from it (refit/gates.py).
+    whose sensitivities moved far from it (gates/sensitivity.py).
     """
     context = multiprocessing.get_context('spawn')
     receiver, sender = context.Pipe(duplex=False)

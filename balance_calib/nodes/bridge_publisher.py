@@ -47,8 +47,8 @@ from sensor_msgs.msg import FluidPressure, Temperature
 from balance_calib.aero.model_file import load_model
 from balance_calib.bags.errors import BagError
 from balance_calib.config import ConfigError, load_balance_config
+from balance_calib.gates.limits import acceptance_limits
 from balance_calib.parameter_table import defaults
-from balance_calib.refit.gates import acceptance_limits
 from balance_calib.schedule_file import schedule_for
 from balance_calib.simulation import timeline as tl
 from balance_calib.simulation.balance_sim import (

@@ -3,7 +3,7 @@
 bags -> load points -> zero points + tare (corrected data, §5(4), §6-7) -> linear, quadratic and
 cubic fits (§2-3) -> diagnosis of the residuals (what the base model lacks) -> calibration.yaml,
 report.json, report.md and residual plots (interfaces.md). Before anything is written the
-acceptance gates (refit/gates.py) must pass: a failed gate raises RefitError with one line, unless
+acceptance gates (gates/) must pass: a failed gate raises RefitError with one line, unless
 `force` (then the report says so). Everything is written into a staging directory beside `out_dir`
 and moved into place only when complete, so a failure or a kill leaves `out_dir` as it was.
 """
@@ -63,7 +63,7 @@ class CalibrationResult:
     calibration: Calibration
     report: dict
     cut: CutSummary | None = None
-    gates: tuple = ()  # refit.gates.Gate, in order
+    gates: tuple = ()  # gates.gate.Gate, in order
 
 
 @dataclass(frozen=True)
@@ -120,20 +120,15 @@ def calibrate_points(
 ) -> CalibrationResult:
     """Everything after the load points; pure (writes nothing).
 
-    Raises RefitError when an acceptance gate fails (refit/gates.py), unless force; active is the
+    Raises RefitError when an acceptance gate fails (gates/), unless force; active is the
     calibration in use, whose sensitivities the new one must stay near; schedule the load
     schedule the campaign ran (None: the balance config's own), which the points must cover;
     serial (default the config's `serial`) and operator go into the signed record (record.py).
     """
-    from .gates import (
-        acceptance_limits,
-        base_fit_arrays,
-        data_gates,
-        failed,
-        fit_gates,
-        gates_report,
-        output_range_gate,
-    )
+    from ..gates.bags import base_model_residuals, data_gates, fit_gates
+    from ..gates.gate import failed, gates_report, ModelResiduals
+    from ..gates.limits import acceptance_limits
+    from ..gates.outputs import output_range_gate
 
     say = progress or (lambda message: None)
     if base_model not in MODEL_ORDERS:
@@ -173,8 +168,9 @@ def calibrate_points(
         config, points, reduction, fits, cut, active, limits, schedule
     )
     if not diagnose:
-        residuals, press = base_fit_arrays(reduction, fits[base_model])
-        gates += fit_gates(config, points, fits[base_model].sigma_pct_fs, residuals, press, limits)
+        gates += fit_gates(
+            config, points, base_model_residuals(reduction, fits[base_model]), limits
+        )
     _refuse_unless_forced(gates, force, sources, say)
     say(
         'fits: '
@@ -194,18 +190,19 @@ def calibrate_points(
             extra = fit_gates(
                 config,
                 points,
-                diagnosis.sigma_pct_fs['after'],
-                diagnosis.residuals_after,
-                diagnosis.press_residuals_after,
+                ModelResiduals(
+                    diagnosis.sigma_pct_fs['after'],
+                    diagnosis.residuals_after,
+                    diagnosis.press_residuals_after,
+                    'adopted model' if diagnosis.effects else 'base model',
+                ),
                 limits,
-                'adopted model' if diagnosis.effects else 'base model',
                 unexplained,
                 diagnosis_structure(diagnosis, points, config),
             )
         else:
-            residuals, press = base_fit_arrays(reduction, fits[base_model])
             extra = fit_gates(
-                config, points, fits[base_model].sigma_pct_fs, residuals, press, limits
+                config, points, base_model_residuals(reduction, fits[base_model]), limits
             )
         _refuse_unless_forced(extra, force, sources, say)
         gates += extra
@@ -258,7 +255,7 @@ def calibrate_points(
 
 
 def _refuse_unless_forced(gates, force: bool, sources: Sequence[str], say: Progress) -> None:
-    from .gates import failed
+    from ..gates.gate import failed
 
     for gate in gates:
         say(f'gate {gate.name}: {"ok" if gate.passed else "FAILED"}: {gate.reason}')
@@ -397,7 +394,7 @@ def run_refit(
         config = load_balance_config(balance)
         if schedule is not None:
             _require_regular_file(schedule, 'schedule')
-            from .gates import acceptance_limits
+            from ..gates.limits import acceptance_limits
 
             margin = acceptance_limits(config, model).capacity_margin
             config = replace(config, schedule=schedule_for(config, schedule, margin))

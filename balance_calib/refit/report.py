@@ -313,7 +313,7 @@ def _standard_errors(model):
 
 
 def acceptance_markdown(report: Mapping) -> list[str]:
-    """The acceptance gates (refit/gates.py) as a table; a forced refit says so first."""
+    """The acceptance gates (gates/) as a table; a forced refit says so first."""
     acceptance = report.get('acceptance')
     if not acceptance:
         return []

@@ -16,8 +16,12 @@ import scipy.stats
 
 from ..calibration_file import now_iso
 from ..fit.series_tares import SeriesTareFit
+from ..gates.fit_quality import condition_gate, overfit_gate
+from ..gates.gate import first_failure, gates_report, TABLE_PRIORITY
+from ..gates.outlier_gates import table_outlier_gate
+from ..gates.outputs import channel_gate
+from ..gates.sensitivity import table_sensitivity_gate
 from ..model.calibration import Calibration
-from ..refit.gates import gates_report
 from .balfit_reader import CalibrationTable
 from .closing import (
     channel_keys,
@@ -27,14 +31,6 @@ from .closing import (
     temperature_reference_c,
 )
 from .errors import TableCalibrationError
-from .gates import (
-    channel_gate,
-    condition_gate,
-    first_failure,
-    outlier_gate,
-    overfit_gate,
-    sensitivity_gate,
-)
 from .model_selection import (
     AUTO_TERM_SETS,
     choose_form,
@@ -48,6 +44,7 @@ from .model_selection import (
 )
 from .odd_components import odd_components
 from .table_report import build_report, in_file_units, point_rows, sigma_pct, signing_sections
+from .term_screen import linear_response
 from .validation import coverage_warning, FormValidation, range_warnings, validate_form
 
 _choose = choose_form  # the rule between the forms (tests reach it under its old name)
@@ -300,8 +297,8 @@ def calibrate_table(
         rated = rated * excitation_v
     gates = [
         channels,
-        sensitivity_gate(table, outputs, rated),
-        outlier_gate(
+        table_sensitivity_gate(table, rated, lambda: linear_response(table, outputs)[2]),
+        table_outlier_gate(
             table.point_id,
             loads,
             fit.load_residuals,
@@ -322,7 +319,7 @@ def calibrate_table(
     ]
     acceptance = gates_report(gates, forced=force)
     report['gates'], report['forced'] = acceptance['gates'], acceptance['forced']
-    refused = first_failure(gates)
+    refused = first_failure(gates, TABLE_PRIORITY)
     if refused is not None and not force:
         raise TableCalibrationError(_refusal(table, refused))
     rated = np.where(np.isfinite(rated) & (rated > 0), rated, np.max(np.abs(outputs), axis=0))
