@@ -35,9 +35,7 @@ import sys
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Vector3Stamped, WrenchStamped
-import rclpy
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.task import Future
 from rclpy.time import Time
@@ -55,6 +53,7 @@ from balance_calib.tunnel_axes import parse_installation
 
 from ._parameters import declare_table
 from ._qos import STREAM_QOS
+from ._run import run_node
 
 
 class StartupError(ValueError):
@@ -296,22 +295,7 @@ def main(args=None):
     from ._help import exit_if_help
 
     exit_if_help(__name__, args)  # --help: print the parameters and exit before rclpy starts
-    rclpy.init(args=args)
-    node = None
-    status = 0
-    try:
-        node = AeroCoefficients()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except StartupError as err:
-        rclpy.logging.get_logger('aero_coefficients').error(str(err))
-        status = 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+    return run_node('aero_coefficients', AeroCoefficients, refused=(StartupError,), args=args)
 
 
 if __name__ == '__main__':

@@ -29,11 +29,9 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -52,6 +50,7 @@ from balance_calib.live.session import CalibratorSession
 from ._parameters import declare_table, value_getter
 from ._qos import STREAM_QOS
 from ._raw_input import RawInput
+from ._run import run_node
 
 OVERLOAD_QOS = QoSProfile(
     depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL
@@ -243,37 +242,27 @@ class BalanceCalibrator(Node):
         self._diagnostics_pub.publish(array)
 
 
+def _before_spin(node) -> None:
+    # start-up's objects (numpy, scipy, rclpy) out of the collector's way: shorter pauses
+    gc.freeze()
+    # a service callback (a refit's new calibration read and checked) holds the GIL for up to
+    # the switch interval while a sample waits in the reader thread: 0.5 ms instead of Python's
+    # 5 ms
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
+
+
 def main(args=None):
     from ._help import exit_if_help
 
     exit_if_help(__name__, args)  # --help: print the parameters and exit before rclpy starts
-    rclpy.init(args=args)
-    node = None
-    status = 0
-    try:
-        node = BalanceCalibrator()
-        # start-up's objects (numpy, scipy, rclpy) out of the collector's way: shorter pauses
-        gc.freeze()
-        # a service callback (a refit's new calibration read and checked) holds the GIL for up to
-        # the switch interval while a sample waits in the reader thread: 0.5 ms instead of Python's
-        # 5 ms
-        sys.setswitchinterval(SWITCH_INTERVAL_S)
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ConfigError as err:
-        rclpy.logging.get_logger('balance_calibrator').error(f'cannot start: {err}')
-        status = 1
-    except RuntimeError:
-        # a signal landing while spin() builds its wait set surfaces as RCLError "context is not
-        # valid" (ros2/ros2cli#854): that is a shutdown, not a failure
-        if rclpy.ok():
-            raise
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+    return run_node(
+        'balance_calibrator',
+        BalanceCalibrator,
+        refused=(ConfigError,),
+        refusal_prefix='cannot start: ',
+        args=args,
+        before_spin=_before_spin,
+    )
 
 
 if __name__ == '__main__':

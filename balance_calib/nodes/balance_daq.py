@@ -21,8 +21,6 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.time import Time
 from sensor_msgs.msg import Temperature
@@ -36,6 +34,7 @@ from balance_calib.parameter_table import ParameterError
 
 from ._parameters import declare_table
 from ._qos import STREAM_QOS
+from ._run import run_node
 
 DIAGNOSTICS_PERIOD_S = 1.0
 
@@ -110,22 +109,8 @@ def main(args=None):
     from ._help import exit_if_help
 
     exit_if_help(__name__, args)  # --help: print the parameters and exit before rclpy starts
-    rclpy.init(args=args)
-    node = None
-    status = 0
-    try:
-        node = BalanceDaq()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ParameterError as err:  # one line naming the parameter, as every node says it
-        rclpy.logging.get_logger('balance_daq').error(str(err))
-        status = 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+    # a ParameterError is one line naming the parameter, as every node says it
+    return run_node('balance_daq', BalanceDaq, refused=(ParameterError,), args=args)
 
 
 if __name__ == '__main__':

@@ -20,9 +20,7 @@ import signal
 import sys
 import time
 
-import rclpy
 from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -35,6 +33,7 @@ from balance_calib.parameter_table import ParameterError
 
 from ._parameters import declare_table
 from ._qos import STREAM_DEPTH
+from ._run import run_node
 
 DISCOVERY_PERIOD_S = 0.5
 FLUSH_PERIOD_S = 1.0  # the file holds what was received up to this long ago
@@ -237,26 +236,13 @@ def main(args=None):
     # With SIGINT's default action in place, rclpy's handler does not chain to Python's, so
     # Ctrl-C cannot raise KeyboardInterrupt in the middle of writing a message.
     signal.signal(signal.SIGINT, signal.SIG_DFL)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
-    recorder = None
-    try:
-        recorder = BalanceRecorder()
-        rclpy.spin(recorder)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (BagError, ParameterError) as error:
-        rclpy.logging.get_logger('balance_recorder').error(str(error))
-        return 1
-    except RuntimeError:
-        # A signal landing while spin() builds its wait set surfaces as RCLError
-        # "context is not valid" (ros2/ros2cli#854): that is a shutdown, not a failure.
-        if rclpy.ok():
-            raise
-    finally:
-        if recorder is not None:
-            recorder.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(
+        'balance_recorder',
+        BalanceRecorder,
+        refused=(BagError, ParameterError),
+        args=args,
+        signals=SignalHandlerOptions.ALL,
+    )
 
 
 if __name__ == '__main__':

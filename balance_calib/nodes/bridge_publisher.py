@@ -35,9 +35,7 @@ import time
 
 from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 import numpy as np
-import rclpy
 from rclpy.duration import Duration
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
@@ -70,6 +68,7 @@ from balance_calib.tunnel_axes import parse_installation
 
 from ._parameters import declare_table
 from ._qos import STREAM_QOS
+from ._run import run_node
 
 # name -> default, as tests and tools read them; the table (type, range, description) is the
 # pure simulation/publisher_parameters.py's
@@ -519,28 +518,9 @@ def main(args=None):
     from ._help import exit_if_help
 
     exit_if_help(__name__, args)  # --help: print the parameters and exit before rclpy starts
-    rclpy.init(args=args)
-    node = None
-    status = 0
-    try:
-        node = BridgePublisher()
-        rclpy.spin_until_future_complete(node, node.done)
-        if node.failure:
-            rclpy.logging.get_logger('bridge_publisher').error(node.failure)
-            status = 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except StartupError as err:
-        rclpy.logging.get_logger('bridge_publisher').error(str(err))
-        status = 1
-    except RuntimeError:
-        if rclpy.ok():  # a signal during spin's wait-set setup (ros2/ros2cli#854) is a shutdown
-            raise
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+    return run_node(
+        'bridge_publisher', BridgePublisher, refused=(StartupError,), args=args, until_done=True
+    )
 
 
 if __name__ == '__main__':

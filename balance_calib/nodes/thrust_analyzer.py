@@ -40,8 +40,6 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -54,6 +52,7 @@ from balance_calib.thrust_stand.nozzle import Nozzle
 from balance_calib.thrust_stand.report import write_report
 
 from ._parameters import declare_table
+from ._run import run_node
 
 STATUS_NAME = 'thrust_analyzer: thrust coefficient'
 HARDWARE_ID = 'thrust_stand'
@@ -288,26 +287,14 @@ def main(args=None):
 
     exit_if_help(__name__, args)  # --help: print the parameters and exit before rclpy starts
     # SIGINT and SIGTERM both shut the context down; the report is written in destroy_node().
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
-    analyzer = None
-    try:
-        analyzer = ThrustAnalyzer()
-        rclpy.spin(analyzer)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ValueError as error:  # bad parameters
-        rclpy.logging.get_logger('thrust_analyzer').error(str(error))
-        return 1
-    except RuntimeError:
-        # a signal landing while spin() builds its wait set surfaces as RCLError "context is not
-        # valid" (ros2/ros2cli#854): that is a shutdown, not a failure
-        if rclpy.ok():
-            raise
-    finally:
-        if analyzer is not None:
-            analyzer.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    # A ValueError at start-up is a bad parameter.
+    return run_node(
+        'thrust_analyzer',
+        ThrustAnalyzer,
+        refused=(ValueError,),
+        args=args,
+        signals=SignalHandlerOptions.ALL,
+    )
 
 
 if __name__ == '__main__':

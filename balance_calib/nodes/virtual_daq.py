@@ -158,32 +158,19 @@ class VirtualDaq(BridgePublisher):
 
 def run(device: VirtualDevice, parameters: dict, args=None) -> int:
     """Spin the node until the run is over (exit_when_done) or Ctrl-C; the exit status."""
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
     from rclpy.parameter import Parameter
 
-    # not sys.argv: the command's own options (-p NAME:=VALUE) are not ROS arguments
-    rclpy.init(args=['virtual_daq'] if args is None else args)
-    node = None
-    status = 0
-    logger = rclpy.logging.get_logger('virtual_daq')
-    try:
+    from ._run import run_node
+
+    def make_node() -> VirtualDaq:
         overrides = [Parameter(name, value=value) for name, value in parameters.items()]
-        node = VirtualDaq(device, parameter_overrides=overrides)
-        rclpy.spin_until_future_complete(node, node.done)
-        if node.failure:
-            logger.error(node.failure)
-            status = 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (StartupError, ValueError) as err:
-        logger.error(str(err))
-        status = 1
-    except RuntimeError:
-        if rclpy.ok():
-            raise
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return status
+        return VirtualDaq(device, parameter_overrides=overrides)
+
+    # not sys.argv: the command's own options (-p NAME:=VALUE) are not ROS arguments
+    return run_node(
+        'virtual_daq',
+        make_node,
+        refused=(StartupError, ValueError),
+        args=['virtual_daq'] if args is None else args,
+        until_done=True,
+    )
