@@ -1,6 +1,7 @@
 """Every node's parameter table, by executable name, and the docs table made from them.
 
-docs/parameters.md is this module's output (test/test_parameter_tables.py checks that it is):
+docs/parameters.md is this module's output (test/project/test_parameter_tables.py checks that
+it is):
 
     python -m balance_calib.node_parameters > docs/parameters.md
 """

@@ -5,31 +5,16 @@ probe and the memo's calibration file as fixtures, the node started with paramet
 
 from geometry_msgs.msg import WrenchStamped
 import numpy as np
-import pytest
 from rclpy.parameter import Parameter
-from ros_harness import new_domain_id, Probe, RELIABLE, wait_for
+from ros_harness import RELIABLE, wait_for
 from std_srvs.srv import Trigger
 
-from balance_calib.calibration_file import load_calibration, save_calibration
+from balance_calib.calibration_file import load_calibration
 from balance_calib.config import CONFIG_DIR
 from balance_calib.nodes.balance_calibrator import BalanceCalibrator
 
 MEMO = load_calibration(CONFIG_DIR / 'lmc6522.yaml')
 SAMPLE_MV = (0.3, -0.2, 0.5, 0.1, -0.4, 0.2)
-
-
-@pytest.fixture
-def probe():
-    probe = Probe(new_domain_id())
-    yield probe
-    probe.close()
-
-
-@pytest.fixture
-def calibration_file(tmp_path):
-    path = tmp_path / 'calibration.yaml'
-    save_calibration(path, MEMO)
-    return path
 
 
 def start_calibrator(probe, tmp_path, calibration_file, refit=None, **parameters):

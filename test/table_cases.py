@@ -6,6 +6,9 @@ its expected numbers (the injected noise).
 
 from __future__ import annotations
 
+import csv
+import io
+
 import numpy as np
 
 from balance_calib.tables.balfit_reader import CalibrationTable, FILE_TYPE
@@ -234,3 +237,42 @@ def support_fractions(rng, single: int, pair: int, first_series: int = 1):
         series += [label] * pair
         label += 1
     return np.vstack(rows), np.array(series)
+
+
+# A small table as a laboratory tool writes it: provenance comments first, quoted cells (one with
+# a comma), 2 loads (lbs, in-lbs) and 2 outputs in microV/V, a temperature channel, natural zeros
+# at four roll angles, a switched-off point.
+HAND_TABLE = """\
+"; written by some lab tool, version 3.1",,,,,,,
+,,,,,,,
+FILE_TYPE,DATA_FOR_ITERATIVE_REGRESSION_ANALYSIS,,,,,,
+BALANCE_NAME,"MK-1, sting 2",,,,,,
+DESCRIPTION,hand-made,,,,,,
+; load and output symbols,,,,,,,
+,,,,N1,RM,rN1,rRM,TEMP
+; units,,,,,,,
+,,,,lbs,in-lbs,microV/V,microV/V,degF
+; capacities,,,,,,,
+,,,,100,50,,,
+; natural zeros,,,,,,,
+";",point id,set,roll,,,,
+,NZ1,A,0,,,10,-4,70
+,NZ2,A,90,,,12,-6,70
+,NZ3,A,180,,,14,-8,70
+,NZ4,A,270,,,12,-6,70
+; data for analysis,,,,,,,
+,Point ID,Series,NZ set,,,,
+,P1,1,A,0,0,12,-6,70
+,P2,1,A,50,0,512,-6,70
+";",P3,1,A,100,0,1012,-6,70
+,P4,2,A,0,25,12,494,71
+,P5,2,,0,-25,12,-506,71
+""".replace('TEMP', 'TC').replace('N1,RM,rN1,rRM,TC', 'N1,RM,rN1,rRM,TC')
+
+
+def fix_width(text):
+    rows = list(csv.reader(io.StringIO(text)))
+    width = max(len(r) for r in rows)
+    out = io.StringIO()
+    csv.writer(out, lineterminator='\n').writerows([r + [''] * (width - len(r)) for r in rows])
+    return out.getvalue()

@@ -2,9 +2,9 @@
 """Regenerate config/lmc6522.yaml and config/b660h.yaml from NAL TM-663.
 
 Tables 10-16 and Appendices A/B come from the machine-readable extracts in data/tm663 (a copy of
-the steering ../shared/data, held equal by test/test_memo_data.py; its README says how they were
-checked); Tables 1, 3-9 and 17 are short and typed here once, with their table numbers. The YAML
-files are what the package installs and reads; this script is their provenance.
+the steering ../shared/data, held equal by test/project/test_memo_data.py; its README says how
+they were checked); Tables 1, 3-9 and 17 are short and typed here once, with their table
+numbers. The YAML files are what the package installs and reads; this script is their provenance.
     python tools/make_balance_configs.py [--data DIR] [--out-dir DIR]
 (defaults: data/tm663 and config/ of this repository).
 """

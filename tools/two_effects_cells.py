@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Two effects at once over ten seeds (issue 24, deliver 2): the cases of
-test/test_diagnosis_two_effects.py, each effect one floor on its own component; prints one line
-a case and the total (docs/results.md).
+"""Two effects at once over ten seeds: the cases of
+test/diagnosis/test_diagnosis_two_effects.py, each effect one floor on its own component; prints
+one line a case and the total (docs/results.md).
     python tools/two_effects_cells.py [--seeds 10] [--jobs 2]
 A campaign is right when exactly the two families are named, nothing is `unexplained`, and σ
 after on both components is at most 1.15x the clean campaign of the same seed.

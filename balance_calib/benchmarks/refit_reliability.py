@@ -22,7 +22,7 @@ is classed:
 
 With --memory, the peak resident memory of full refits (diagnosis on) of one campaign unsplit and
 split in two sessions 1 h and 16 h apart is measured, each in its own process. The fuzz test
-(test/test_refit_fuzz.py) runs a few hundred of the same mutants.
+(test/refit/test_refit_fuzz.py) runs a few hundred of the same mutants.
 """
 
 from __future__ import annotations

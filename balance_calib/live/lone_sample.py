@@ -9,8 +9,8 @@ serialized wrench and uncertainty: the pure core's only accelerator, called by t
 entry point (stream.LiveCalibrator.process_messages) for the leading samples of a batch it takes;
 the bookkeeping (input monitor, counters, overload) is the pure core's, fed once per batch.
 
-It applies only where its result is the pure core's (test/test_lone_kernel.py holds them equal to
-1e-12): a direct polynomial model of the bridge outputs alone (no temperature or load-history
+It applies only where its result is the pure core's (test/live/test_lone_kernel.py holds them equal
+to 1e-12): a direct polynomial model of the bridge outputs alone (no temperature or load-history
 terms, no absolute values, powers up to 3), no low-pass, no tare window collecting, no overload
 being held. Everything else -- and any sample the kernel declines (a layout it does not know, a
 non-finite, saturated or huge output, a non-finite load) -- goes through the pure core, which also
