@@ -1,4 +1,4 @@
-"""Effects written from their physics, for the diagnosis tests of issue 24 (not from the terms of
+"""Effects written from their physics, for the diagnosis tests (not from the terms of
 balance_calib/diagnosis/candidates.py, and not from the shapes of simulation/effects.py).
 
 Hysteresis loops

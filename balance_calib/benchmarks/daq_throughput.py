@@ -14,7 +14,7 @@ device and sink. Printed first, the harness's own ceilings: the DDS source strai
 (no node between, as live_throughput prints it) and the device source alone (records a second
 this process sends when nothing is paced). Then the raw relay (live_throughput's: bytes in, bytes
 out, the calibrator's reader; DDS in, DDS out), the reference of the CPU target: balance_daq's
-CPU per sample at 1 kHz <= 1.5 x the raw relay's. Targets (issue 34): zero loss at 7 kHz of RDT
+CPU per sample at 1 kHz <= 1.5 x the raw relay's. Targets: zero loss at 7 kHz of RDT
 records, at 2 kHz of lines.
 """
 

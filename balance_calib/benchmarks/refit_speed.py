@@ -8,7 +8,7 @@ Writes one simulated LMC6522 campaign (328 points) as an MCAP bag, then measures
   refit        run_refit: read + cut + zero/tare + 3 fits + diagnosis + report + plots
   written      the same run until calibration.yaml, report.json and report.md are in place (what
                ~/refit's reply waits for; the figures are drawn after)
-and prints the ratios. Targets (issue 36): the whole refit with its figures within 2x
+and prints the ratios. Targets: the whole refit with its figures within 2x
 read+deserialize, without figures within 1x.
 """
 

@@ -1,5 +1,4 @@
-"""Detection and false-discovery rates of the residual diagnosis on simulated campaigns (issues 4,
-11).
+"""Detection and false-discovery rates of the residual diagnosis on simulated campaigns.
 
     launchless_scripts/diagnosis_rates [--clean-seeds 50] [--seeds 10] [--sizes 1] [--jobs 2]
                                        [--families ...] [--outside ...] [--zero-points-only]

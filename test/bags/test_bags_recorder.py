@@ -176,7 +176,7 @@ def assert_identical_through_rosbags_and_mcap(bag):
 
 @pytest.mark.ros
 def test_a_bag_being_recorded_is_read_up_to_the_last_flush(tmp_path, ros_domain, test_node):
-    """Issue 21: ~/refit of the recorder's bag while it still records (no metadata.yaml yet)."""
+    """~/refit of the recorder's bag while it still records (no metadata.yaml yet)."""
     from balance_calib.nodes.balance_recorder import FLUSH_PERIOD_S
 
     node, executor = test_node

@@ -1,4 +1,4 @@
-"""Coverage of a run and design of calibration points (issue 22, interfaces.md "Coverage of a run,
+"""Coverage of a run and design of calibration points (interfaces.md "Coverage of a run,
 and design of calibration points"): the predicted u is honest on simulated campaigns with a
 known truth, a designed schedule reads a sting-mounted model's loads to 0.03 % FS, the commands
 refuse bad input with one line, and a campaign runs and refits on a designed schedule.
@@ -37,7 +37,7 @@ from balance_calib.simulation.balance_sim import (
 
 LMC = load_balance_config('lmc6522')
 DATA = Path(__file__).resolve().parents[3] / 'shared' / 'data'
-ISSUE_SIGMA_PCT_FS = 0.025  # issue 22's "clean campaign": its calibration quotes 0.025 % FS
+ISSUE_SIGMA_PCT_FS = 0.025  # the contract's "clean campaign": its calibration quotes 0.025 % FS
 
 
 def refit(schedule, seed, noise, config=LMC):
@@ -173,7 +173,7 @@ def worst_read_error(calibration, held, true_outputs):
 
 
 def test_a_designed_schedule_reads_held_out_tunnel_loads_within_0_03_pct_fs(capsys):
-    """Issue 22's clean campaign (σ 0.025 % FS): the memo schedule misses the sting envelope by
+    """The clean campaign (σ 0.025 % FS): the memo schedule misses the sting envelope by
     ~0.4 % FS worst; 12 designed points bring it within 0.03 % FS on the median over seeds, and the
     design beats 12 random envelope loads on that median.
     """

@@ -1,4 +1,4 @@
-"""Clean campaigns: the residual diagnosis finds nothing where there is nothing (issues 4, 11).
+"""Clean campaigns: the residual diagnosis finds nothing where there is nothing.
 
 Cubic truth, Table 17 cubic noise, the memo's schedules, no effect: 20 seeds of each balance with
 the repeatability from consecutive zero points alone, 10 more with the points' own samples (8 a

@@ -1,4 +1,4 @@
-"""Hysteresis and sign asymmetry told apart by the schedule's own structure (issue 24, deliver 1):
+"""Hysteresis and sign asymmetry told apart by the schedule's own structure:
 the direction contrast (falling - rising at equal load) of a loop written from its physics is far
 beyond two points' repeatability, that of a sign asymmetry (a sensitivity step at zero, a
 curvature on negative loads) and of a clean campaign is not; the refit draws both contrasts.

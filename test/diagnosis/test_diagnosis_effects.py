@@ -1,4 +1,4 @@
-"""Residual diagnosis on simulated campaigns with one undeclared effect (issue 4).
+"""Residual diagnosis on simulated campaigns with one undeclared effect.
 
 Each effect sits on the F_X bridge with a size of two Table 17 noise floors: the RMS it adds to
 the F_X residual of the cubic fit is twice the memo's cubic σ_FX (as LMC6522's F_X stays at

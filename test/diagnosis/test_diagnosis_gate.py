@@ -1,4 +1,4 @@
-"""The outliers gate after the diagnosis (issue 24, deliver 3).
+"""The outliers gate after the diagnosis.
 
 A campaign whose only fault is a physical effect (hysteresis loops written from their physics in
 test/diagnosis_physics.py: Preisach, Masing and Bouc-Wen loops on every bridge at 0.25 % of rated
@@ -94,8 +94,9 @@ def test_a_campaign_whose_only_fault_is_a_hysteresis_loop_passes_the_gates(
 
 
 def test_the_points_the_structure_explains_are_those_the_gate_refused_before(tmp_path):
-    """Without the campaign's structure (the gate before issue 24) the same residuals are refused
-    at the same point, and the explanation names the structure the diagnosis left there.
+    """Without the campaign's structure (the gate judging before the diagnosis) the same
+    residuals are refused at the same point, and the explanation names the structure the
+    diagnosis left there.
     """
     balance = 'lmc6522'
     result = _calibrated(
@@ -188,7 +189,7 @@ def test_a_point_individually_wrong_is_still_refused_naming_it(mistake, effects,
     assert not (tmp_path / 'out').exists()
 
 
-# Issue 36 (5): a loop and a sign step on every bridge of B660H, one floor each (seed 3001). The
+# A loop and a sign step on every bridge of B660H, one floor each (seed 3001). The
 # leftovers name the sign family on F_Z as fitting part of its structure (`unexplained`, |F_ZV|
 # not adopted); the full-load point there (-F_Z at capacity) sat at 9 robust σ of the adopted
 # model's leave-one-out residuals, which the campaign's structure did not predict from the other

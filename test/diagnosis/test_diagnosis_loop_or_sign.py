@@ -1,4 +1,4 @@
-"""Hysteresis or sign asymmetry decided by the direction contrast (issue 24, deliver 1;
+"""Hysteresis or sign asymmetry decided by the direction contrast (deliver 1;
 diagnosis/loop_or_sign.py): a residual whose falling branch sits above its rising one at equal
 load is a loop and bidirectional yields there; a residual the same on both branches is no loop and
 hysteresis yields; with too few pairs, or a contrast significant but small, it decides nothing.
@@ -85,7 +85,7 @@ def test_the_schedule_pairs_are_equal_loads_on_opposite_branches():
     assert shows_loop(diagnosis.residuals_before[:, k], pairs[k], variance) is False
 
 
-# Issue 36 (5): a loop and a sign step on one bridge (LMC6522 M_Y, one floor each). The direction
+# A loop and a sign step on one bridge (LMC6522 M_Y, one floor each). The direction
 # contrast shows the loop, which is adopted first; what is left of the step (|x| beside the loop,
 # p ~1e-11, 0.0092 % FS removed) fell under the search's 0.01 % FS size gate, and the leftovers,
 # finding M_Y still lacking fit with the loop 62 % of it, named nothing (seeds 3000 and 3002:

@@ -2,7 +2,7 @@
 not from the families' terms), one noise floor in size (the RMS they add to that component's
 cubic-fit residual = Table 17's cubic σ): the right family named first and alone, nothing
 unexplained, σ after (in-sample and cross-validated) within 15 % of the clean campaign of the
-same seed (issue 24). The fast path runs one seed per cell; the slow test the ten seeds of
+same seed. The fast path runs one seed per cell; the slow test the ten seeds of
 the issue's ≥ 9/10.
 
 Only the cells that meet the target are here (all cells: tools/physics_cells.py, its table in
@@ -174,7 +174,7 @@ def test_no_generic_family_where_the_specific_one_left_no_lack_of_fit():
     """B660H, a curvature on negative loads of every bridge, seed 3004: the bidirectional pair
     leaves M_X within its repeatability (lack of fit p about 0.35), yet MYV*MZV² passed the cross
     terms' level after it (p 2e-7; 9e-4 on the clean campaign): a generic family is not adopted
-    where the specific one explains the structure (issue 24, deliver 2).
+    where the specific one explains the structure.
     """
     result = _named_alone('b660h', 'negative_curvature', 'all', 3004)
     assert result.effect_names == ('bidirectional',), result.effect_names

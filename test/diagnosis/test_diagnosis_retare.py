@@ -1,4 +1,4 @@
-"""The tare outputs re-read through the adopted model (retare._retare, issue 24).
+"""The tare outputs re-read through the adopted model (retare._retare).
 
 A hand-made linear balance L = A V whose corrected data carry tare outputs off by a known
 ±δ per orientation (as a first fit bent by an unmodelled loop leaves them): re-reading through

@@ -1,4 +1,4 @@
-"""The diagnosis on effects it does not model exactly (issue 11): a deterministic CI subset of
+"""The diagnosis on effects it does not model exactly: a deterministic CI subset of
 launchless_scripts/diagnosis_rates.
 
 Every campaign carries one effect in an alternative shape of simulation/effects.py (play or

@@ -1,4 +1,4 @@
-"""The shape of a sign asymmetry (issue 24): the bidirectional family offers a one-sided curvature
+"""The shape of a sign asymmetry: the bidirectional family offers a one-sided curvature
 as a pair (x|x| with x²|x|, V|V| with V²|V|), drops the pair's term the points do not resolve,
 and completes a shape whose fit moves with the gravity direction (families._settle_sign_shape).
 

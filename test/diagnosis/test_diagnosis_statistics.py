@@ -114,7 +114,7 @@ def test_variables_referred_to_zero_points_vanish_there_and_keep_fast_changes(lm
 
 
 def test_forward_selection_tests_each_group_at_its_own_level(rng):
-    """Weighted Bonferroni (issue 24, small effects): a group passes at its own level; the planted
+    """Weighted Bonferroni (small effects): a group passes at its own level; the planted
     term's p sits between a flat and a weighted level, so only the weighted split takes it, and the
     stronger term, tested at a level it does not reach, is not taken instead.
     """

@@ -1,5 +1,5 @@
 """Two effects at once, each written from its physics (test/diagnosis_physics.py), each one noise
-floor on its own component (issue 24, deliver 2): a lagged temperature on F_X with a loop on M_Y,
+floor on its own component: a lagged temperature on F_X with a loop on M_Y,
 a sensitivity step at zero on F_Y with power-law creep on M_Z. Both families are named, nothing
 else (no generic cross_terms / bidirectional standing in), nothing unexplained, and σ after on
 both components within 15 % of the clean campaign of the same seed.

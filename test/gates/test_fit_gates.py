@@ -1,4 +1,4 @@
-"""Acceptance gates of `fit` (issue 20, Deliver 4): every bad table is refused with exit 2, one
+"""Acceptance gates of `fit`: every bad table is refused with exit 2, one
 line naming the gate and nothing written; --force writes it anyway and report.json says so.
 """
 

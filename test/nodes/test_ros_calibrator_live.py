@@ -181,7 +181,7 @@ def test_bad_live_input_is_counted_and_reported_and_never_published_as_a_number(
                 return array.status[0], values
 
     status, values = wait_for(counted, 10.0, 'diagnostics counting every sample')
-    # issue 21: the totals are named _since_start (beside the diagnostics period's _last_period)
+    # The totals are named _since_start (beside the diagnostics period's _last_period)
     assert values['samples_lost_since_start'] == '100', str(values)
     assert values['stamps_out_of_order_since_start'] == '1'
     assert values['duplicate_stamps_since_start'] == '1'

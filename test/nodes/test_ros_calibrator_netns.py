@@ -1,4 +1,4 @@
-"""Across hosts (issue 10 item 7): publisher, calibrator and recorder in three network namespaces
+"""Across hosts: publisher, calibrator and recorder in three network namespaces
 joined by a bridge, as on a tunnel's DAQ, compute and storage machines. Addresses from
 198.18.0.0/15 (the benchmarking range), discovery over that subnet
 (ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET, UDPv4 only: no shared memory between the "hosts"); every

@@ -100,7 +100,7 @@ def stop_graph(graph):
 
 
 def test_graph_runs_the_nodes_and_ends_with_the_publisher_closing_the_bag(tmp_path):
-    # issue 21: by default the calibrator outlives the campaign; --stop-with-campaign ends them all
+    # By default the calibrator outlives the campaign; --stop-with-campaign ends them all
     graph = start_graph(tmp_path, graph_params(tmp_path), '--stop-with-campaign')
     try:
         assert graph.wait(90) == 0

@@ -1,4 +1,4 @@
-"""The refit's figures come after its record (issue 36): calibration.yaml, report.json and
+"""The refit's figures come after its record: calibration.yaml, report.json and
 report.md are in place before any figure is drawn, a figure that fails is said and costs nothing
 else, and a long series is decimated to what a panel can show.
 """

@@ -1,4 +1,4 @@
-"""Refits from bags judge their residuals against the points' own sample scatter (issue 11).
+"""Refits from bags judge their residuals against the points' own sample scatter.
 
 The load-point cut keeps each point's output variance and sample count (refit/load_points.py) and
 the pipeline hands them to diagnose(): report.json's repeatability_pct_fs is then the point noise

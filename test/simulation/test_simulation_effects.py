@@ -1,4 +1,4 @@
-"""The simulator's alternative effect shapes (issue 11), checked against hand-worked cases."""
+"""The simulator's alternative effect shapes, checked against hand-worked cases."""
 
 import numpy as np
 import pytest

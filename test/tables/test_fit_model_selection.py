@@ -1,5 +1,5 @@
-"""`fit --method auto --terms auto` chooses form and terms by what the data support (issue 20,
-Deliver 1): truth tables written out here (a loads-from-outputs polynomial with |x| terms, an
+"""`fit --method auto --terms auto` chooses form and terms by what the data support:
+truth tables written out here (a loads-from-outputs polynomial with |x| terms, an
 outputs-from-loads R-091 polynomial) must get their generating form and term set and validate
 within 1.05x the floor the injected noise sets; an 8-channel sensor on 60 poses must not get a
 model that cross-validates worse than the linear one.

@@ -74,7 +74,7 @@ def test_unknown_term_and_unknown_validation_series_are_refused(tmp_path, capsys
     )
     assert 'QQ' in capsys.readouterr().err
     assert not (tmp_path / 'a').exists()
-    # issue 20 changed this: a validation series the calibration lacks (another setup) is no longer
+    # a validation series the calibration lacks (another setup) is not
     # refused; its tare is estimated from its own points with the model held fixed
     assert (
         main(

@@ -1,4 +1,4 @@
-"""What a laboratory signs (issue 20, Deliver 7) and the odd component named with its points,
+"""What a laboratory signs and the odd component named with its points,
 with a term of its own channel offered when it removes the structure (Deliver 6).
 """
 

@@ -1,5 +1,5 @@
 """Terms the load schedule cannot determine are dropped and listed, never an error unless nothing
-is left (issue 20, Deliver 8 and 1): a 3-component cell loaded one axis at a time with deadweights,
+is left: a 3-component cell loaded one axis at a time with deadweights,
 the screening worked by hand, and `fit` with defaults on `export-table`'s output.
 """
 

@@ -103,7 +103,7 @@ def test_iterative_truth_auto_picks_iterative_and_validates_at_the_noise_floor(
     assert np.all(validation <= 1.05 * floor_pct), (validation / floor_pct).round(3)
     assert np.all(validation >= 0.95 * floor_pct)  # and not below what the noise allows
     assert report['term_set'] == 'r091-96'  # the generating term set
-    # the cubic cannot follow |F| terms (issue 20: methods_compared now holds each form's best
+    # the cubic cannot follow |F| terms (methods_compared holds each form's best
     # term set, which for the direct form may be the 96 terms too; the cubic is a candidate)
     cubic = next(
         c

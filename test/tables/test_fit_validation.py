@@ -1,4 +1,4 @@
-"""Honest validation of table calibrations (issue 20, Deliver 5): validation series the calibration
+"""Honest validation of table calibrations: validation series the calibration
 lacks get their own tares with the model held fixed; loads beyond the calibrated range or in a
 sign never calibrated, and a coverage of ±1.96 u below 90 %, are warned; the console line shows
 in-sample, cross-validated and validation σ.

@@ -148,7 +148,7 @@ def test_rounding_needs_a_positive_error():
         round_result(1.0, 0.0)
 
 
-# --- the residual of a one-axis calibration examined (issue 11) --------------------------------
+# --- the residual of a one-axis calibration examined --------------------------------
 # A load cell read on loading and unloading, twice (0, 10, ..., 100 N up, down, up, down: 41
 # points). Its effects are written from the physics, not from the candidate columns: a hysteresis
 # loop widest at mid-range, h sin(pi y / FS) with the sign of the direction of travel (the

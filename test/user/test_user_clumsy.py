@@ -1,5 +1,5 @@
 """A new user's clumsy inputs: each answered in one clear line, never a traceback, never a silent
-wrong answer (issue 35).
+wrong answer.
 
 The one list: misspelled parameters and names, wrong files, missing keys, NaN in a table, loads in
 the wrong unit, a missing bag, a model file that is not the model that was run. Each case is a

@@ -25,7 +25,7 @@ NODES = [
     'aero_coefficients',
     'balance_daq',
 ]
-# scripts whose options another issue's engineer documents (diagnosis_rates: issue 11)
+# scripts whose options another guide documents (diagnosis_rates: docs/results.md)
 OPTIONS_DOCUMENTED_ELSEWHERE = {'diagnosis_rates'}
 
 
