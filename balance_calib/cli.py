@@ -60,7 +60,7 @@ def main(argv=None) -> int:
         print(f'balance-calib {args.command}: interrupted', file=sys.stderr)
         return 130
     except BrokenPipeError:  # `balance-calib ... | head`: the reader is gone
-        from .closed_pipe import stdout_closed
+        from .broken_pipe import stdout_closed
 
         stdout_closed()
         return 0

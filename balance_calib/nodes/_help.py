@@ -100,7 +100,7 @@ def exit_if_help(module_name: str, args: Sequence[str] | None = None) -> None:
             print(help_text(module_name))
             sys.stdout.flush()
         except BrokenPipeError:  # `NODE --help | head`: the reader is gone
-            from ..closed_pipe import stdout_closed
+            from ..broken_pipe import stdout_closed
 
             stdout_closed()
         sys.exit(0)

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import sys
 from typing import Any, Callable
 
-from balance_calib.closed_pipe import stdout_closed
+from balance_calib.broken_pipe import stdout_closed
 
 from . import bag, node, param, service, topic
 from .errors import ToolError
