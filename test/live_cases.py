@@ -68,7 +68,7 @@ def calibration_with_covariance():
     """
     from dataclasses import replace
 
-    from balance_calib.model.uncertainty import with_fitted_covariance
+    from balance_calib.fit.fitted_covariance import with_fitted_covariance
 
     rng = np.random.default_rng(11)
     outputs = rng.uniform(-1.0, 1.0, (300, 6)) * MEMO.rated_output_mv

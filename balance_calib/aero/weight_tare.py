@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from ..fit.svd import scaled_svd
 from .axes import gravity_direction, loads_from_body
 from .deflection import Deflection
 
@@ -186,9 +187,7 @@ def fit_weight_tare(
         target = readings - basis @ p0
         a = (design / sigma[None, :, None]).reshape(-1, k + 6)
         b = (target / sigma).ravel()
-        scale = np.linalg.norm(a, axis=0)
-        scale[scale == 0] = 1.0
-        u, s, vt = np.linalg.svd(a / scale, full_matrices=False)
+        u, s, vt, scale = scaled_svd(a)
         if s[-1] <= 1e-9 * s[0]:
             weakest = int(np.argmax(np.abs(vt[-1])))
             raise WeightTareError(

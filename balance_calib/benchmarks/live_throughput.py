@@ -345,7 +345,7 @@ def calibration_with_covariance(directory: str) -> str:
     from dataclasses import replace
 
     from balance_calib.calibration_file import load_calibration, save_calibration
-    from balance_calib.model.uncertainty import with_fitted_covariance
+    from balance_calib.fit.fitted_covariance import with_fitted_covariance
 
     memo = load_calibration('lmc6522')
     rng = np.random.default_rng(11)

@@ -29,9 +29,10 @@ from typing import Mapping
 import numpy as np
 
 from ..config import BalanceConfig, LoadSchedule
+from ..fit.svd import unscaled_covariance
 from ..model.balance_model import BalanceModel
 from ..model.inverse import outputs_for_loads
-from ..model.uncertainty import load_standard_uncertainty, unscaled_covariance, with_covariance
+from ..model.uncertainty import load_standard_uncertainty, with_covariance
 from ..tare.calibration_body import tare_loads
 from ..units import STANDARD_GRAVITY_M_S2
 

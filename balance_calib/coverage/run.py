@@ -20,12 +20,8 @@ import numpy as np
 
 from ..model.calibration import Calibration
 from ..model.inverse import outputs_for_loads
-from ..model.uncertainty import (
-    covariance_and_sigma,
-    leverage_of_rows,
-    load_standard_uncertainty,
-    require_covariance,
-)
+from ..model.leverage import leverage_of_rows
+from ..model.uncertainty import covariance_and_sigma, load_standard_uncertainty, require_covariance
 from .support import outside_support, ScheduleSupport
 
 LOADS_BEYOND_CAPACITY = 2.0  # loads beyond this x capacity are not inverted (u is NaN there)

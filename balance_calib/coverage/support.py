@@ -22,7 +22,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..model.uncertainty import leverage_of_rows
+from ..model.leverage import leverage_of_rows
 
 RANGE_TOLERANCE_FS = 0.02  # 2 % FS beyond the calibrated range still counts as inside
 LEVERAGE_TOLERANCE = 1.1  # and 10 % beyond the largest leverage of a calibration point

@@ -390,6 +390,15 @@ def play_loop(outputs, times_s, half_width) -> np.ndarray:
     return play_lag(outputs, times_s, half) - np.clip(outputs / half, -1.0, 1.0)
 
 
+@dataclass(frozen=True)
+class BridgeOutputs:
+    """The bridge outputs the play operators follow, with their names and rated outputs."""
+
+    values: np.ndarray  # (N, n) mV
+    names: Sequence[str]  # (n,) e.g. FXV
+    rated_mv: np.ndarray  # (n,) mV: the play widths are fractions of it
+
+
 def direction_variables(
     loads,
     times_s,
@@ -397,9 +406,7 @@ def direction_variables(
     components,
     is_zero_point,
     orientation,
-    outputs=None,
-    outputs_names=(),
-    rated_outputs=None,
+    outputs: BridgeOutputs | None = None,
     fitted_loads=None,
 ):
     """dir_X, turn_X (and with outputs: play_XV_m) referred to the zero points, and the raw ±1 load
@@ -414,11 +421,11 @@ def direction_variables(
     names = [f'dir_{c}' for c in components] + [f'turn_{c}' for c in components]
     if outputs is not None:
         for m, width in enumerate(PLAY_WIDTHS, start=1):
-            half = width * np.asarray(rated_outputs, float)
-            columns.append(play_lag(outputs, times_s, half))
-            names += [f'play_{v}_{m}' for v in outputs_names]
-        columns.append(play_loop(outputs, times_s, half))  # the widest play's loop alone
-        names += [f'loop_{v}_{len(PLAY_WIDTHS)}' for v in outputs_names]
+            half = width * np.asarray(outputs.rated_mv, float)
+            columns.append(play_lag(outputs.values, times_s, half))
+            names += [f'play_{v}_{m}' for v in outputs.names]
+        columns.append(play_loop(outputs.values, times_s, half))  # the widest play's loop alone
+        names += [f'loop_{v}_{len(PLAY_WIDTHS)}' for v in outputs.names]
     referred = refer_to_zero_points(np.hstack(columns), times_s, is_zero_point, orientation)
     return {name: referred[:, i] for i, name in enumerate(names)}, raw
 

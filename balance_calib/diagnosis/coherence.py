@@ -44,7 +44,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.stats
 
-from .candidates import absolute_load_variables, direction_variables, play_lag
+from ..fit.svd import minimum_norm_solve
+from .candidates import (
+    absolute_load_variables,
+    BridgeOutputs,
+    direction_variables,
+    play_lag,
+)
 
 EXTRA_PLAY_WIDTHS = (0.05, 0.2, 0.6)  # x rated output, besides candidates.PLAY_WIDTHS
 ALPHA_STRUCTURE = 1e-3  # the basis's F-test on the points not flagged, per component
@@ -62,20 +68,19 @@ class StructureFit:
 
 def structure_basis(
     fitted_loads: np.ndarray,
-    outputs_mv: np.ndarray,
+    outputs: BridgeOutputs,
     times_s: np.ndarray,
     is_zero_point: np.ndarray,
     orientation: np.ndarray,
     capacity: np.ndarray,
     components,
-    outputs_names,
-    rated_outputs_mv: np.ndarray,
 ) -> np.ndarray:
     """(N, m) columns a structure across the campaign can follow (see the module docstring).
 
-    fitted_loads (N, 6) N, N·m; outputs_mv (N, 6) mV; times_s (N,) s; capacity (6,);
-    rated_outputs_mv (6,). Columns are centred and scaled to unit RMS; constant ones dropped.
+    fitted_loads (N, 6) N, N·m; outputs: (N, 6) mV, their names and (6,) rated outputs; times_s
+    (N,) s; capacity (6,). Columns are centred and scaled to unit RMS; constant ones dropped.
     """
+    outputs_mv, rated_outputs_mv = outputs.values, outputs.rated_mv
     variables, _ = direction_variables(
         fitted_loads,
         times_s,
@@ -83,9 +88,7 @@ def structure_basis(
         components,
         is_zero_point,
         orientation,
-        outputs=outputs_mv,
-        outputs_names=outputs_names,
-        rated_outputs=rated_outputs_mv,
+        outputs=outputs,
         fitted_loads=fitted_loads,
     )
     columns = list(variables.values())
@@ -125,7 +128,7 @@ def fit_structure(
     x = np.column_stack([np.ones(len(residual)), basis])
     train = np.isfinite(residual) & ~np.asarray(flagged, bool)
     y = residual[train]
-    coefficients, _, rank, _ = np.linalg.lstsq(x[train], y, rcond=1e-10)
+    coefficients, rank = minimum_norm_solve(x[train], y, rcond=1e-10)
     out = np.where(np.isfinite(residual), residual - x @ coefficients, np.nan)
     rss = float(np.sum((y - x[train] @ coefficients) ** 2))
     base_rss = float(np.sum((y - y.mean()) ** 2))
@@ -177,14 +180,14 @@ def diagnosis_structure(diagnosis, points, config) -> CampaignStructure | None:
     )
     basis = structure_basis(
         fitted,
-        diagnosis.corrected.bridge_outputs_mv,
+        BridgeOutputs(
+            diagnosis.corrected.bridge_outputs_mv, config.bridge_outputs, config.rated_output_mv
+        ),
         points.times_s,
         points.is_zero_point,
         points.orientation,
         config.capacity,
         config.components,
-        config.bridge_outputs,
-        config.rated_output_mv,
     )
     return CampaignStructure(
         basis,

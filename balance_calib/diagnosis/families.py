@@ -9,6 +9,8 @@ from typing import Sequence
 import numpy as np
 
 from ..accuracy.sigma import sigma_pct_fs
+from ..fit.least_squares import LeastSquares
+from ..fit.svd import minimum_norm_solve
 from ..model.terms import parse_terms
 from .candidates import (
     CandidateFamily,
@@ -17,7 +19,7 @@ from .candidates import (
 )
 from .search_state import _Candidate, _Fit, _Problem, SearchState
 from .settings import DiagnosisSettings
-from .statistics import ComponentFit, fit_columns, forward_select, partial_f
+from .statistics import fit_columns, forward_select, partial_f
 
 
 def _component_statistics(before: _Fit, after: _Fit, capacity: float, n_tests: int) -> dict:
@@ -93,7 +95,7 @@ def _examine_family(family, state: SearchState, n_searches, any_size=frozenset()
                 offered,
                 selection.groups,
                 settings,
-                family.max_groups,
+                family,
             )
         elif family.name == 'hysteresis':
             chosen = _completed_at_lack_of_fit(
@@ -107,8 +109,7 @@ def _examine_family(family, state: SearchState, n_searches, any_size=frozenset()
                 offered,
                 chosen,
                 settings,
-                family.max_groups,
-                family.name,
+                family,
             )
         added = [t for g in chosen for t in g]
         # the adjusted p of the first group taken: p x α / its level
@@ -130,7 +131,7 @@ def _examine_family(family, state: SearchState, n_searches, any_size=frozenset()
 
 
 def _settle_sign_shape(
-    problem, k, terms, fit, offered, taken, settings, max_groups: int
+    problem, k, terms, fit, offered, taken, settings, family: CandidateFamily
 ) -> list[tuple[str, ...]]:
     """The shape of a sign asymmetry on component k, once the family's first group has passed its
     level there: settled at the leftovers' lack-of-fit level (settings.alpha_lack_of_fit, what
@@ -150,7 +151,8 @@ def _settle_sign_shape(
       orientations (LMC6522 F_Y by 14 % of capacity), so that fit changes with the gravity
       direction and the Chow test would reject the effect on a component that has it. The
       family's next best group (the same side's curvature keyed to the bridge output instead of
-      the load) is added while it does, up to max_groups, each step significant at that level.
+      the load) is added while it does, up to the family's max_groups, each step significant at
+      that level.
 
     offered: (whitened candidate columns (N_loaded, m), each group's indices into them, the
     groups' term names); taken: indices into the groups, in the order the selection chose them.
@@ -176,19 +178,17 @@ def _settle_sign_shape(
     moving = _moves(problem, k, terms, simpler, fit, settings, 'bidirectional')
     if simpler != chosen and not moving:
         chosen = simpler
-    return _completed_while_moving(
-        problem, k, terms, fit, offered, chosen, settings, max_groups, 'bidirectional'
-    )
+    return _completed_while_moving(problem, k, terms, fit, offered, chosen, settings, family)
 
 
 def _completed_while_moving(
-    problem, k, terms, fit, offered, chosen, settings, max_groups: int, family: str
+    problem, k, terms, fit, offered, chosen, settings, family: CandidateFamily
 ) -> list[tuple[str, ...]]:
     """`chosen` (groups of one family on component k) if its coefficients hold over the campaign
     (_changes_over_campaign); else `chosen` with the family's next best groups added, each step
-    significant at the leftovers' lack-of-fit level, up to max_groups in all, as soon as the
-    coefficients hold; `chosen` unchanged when no such completion exists (the Chow test then
-    rejects it). offered: as for _settle_sign_shape.
+    significant at the leftovers' lack-of-fit level, up to the family's max_groups in all, as
+    soon as the coefficients hold; `chosen` unchanged when no such completion exists (the Chow
+    test then rejects it). offered: as for _settle_sign_shape.
 
     A shape between the family's groups is fitted by one group with coefficients that depend
     on the part of the campaign the points cover: a one-sided |x|^2.5 (see _settle_sign_shape);
@@ -198,10 +198,10 @@ def _completed_while_moving(
     in seeds 3005 and 3007, which a second play completes; 3005 is then named right).
     """
     candidates, columns, groups = offered
-    if not _moves(problem, k, terms, chosen, fit, settings, family):
+    if not _moves(problem, k, terms, chosen, fit, settings, family.name):
         return list(chosen)
     current = list(chosen)
-    while len(current) < max_groups:
+    while len(current) < family.max_groups:
         present = set(_flat(current))
         rest = [i for i, g in enumerate(groups) if not set(g) & present]
         if not rest:
@@ -216,7 +216,7 @@ def _completed_while_moving(
         if not step.steps:
             break
         current.append(tuple(groups[rest[step.groups[0]]]))
-        if not _moves(problem, k, terms, current, fit, settings, family):
+        if not _moves(problem, k, terms, current, fit, settings, family.name):
             return current
     return list(chosen)
 
@@ -360,7 +360,7 @@ def _examine_excitation(family, state: SearchState):
     for k, b in enumerate(blocks):
         basis[k * n_white : (k + 1) * n_white, column : column + b.shape[1]] = b
         column += b.shape[1]
-    stacked = ComponentFit(np.zeros(0), residual, np.zeros(len(residual)), basis, basis.shape[1])
+    stacked = LeastSquares.of_projection(basis, residual)
     columns = np.column_stack(
         [
             np.concatenate(
@@ -386,7 +386,7 @@ def _examine_excitation(family, state: SearchState):
     # the score with the gain shared, as the effect is: Σ_k n ln(RSS_k before / after) - q ln n
     picked = columns[:, list(selection.groups)]
     picked = picked - basis @ (basis.T @ picked)
-    coefficients, *_ = np.linalg.lstsq(picked, residual, rcond=None)
+    coefficients = minimum_norm_solve(picked, residual).solution
     shared = (residual - picked @ coefficients).reshape(n_components, n_white)
     before = residual.reshape(n_components, n_white)
     score = float(

@@ -35,6 +35,7 @@ import numpy as np
 import scipy.stats
 
 from ..accuracy.sigma import sigma_pct_fs
+from ..fit.svd import minimum_norm_solve
 from .candidates import STATIC_FAMILIES
 from .search_state import SearchState
 from .statistics import fit_columns, partial_f
@@ -187,7 +188,7 @@ def _best_tracker(residual, trackers, alpha=0.01):
         return best
     for name, columns in trackers.items():
         design = np.column_stack([np.ones(n), columns])
-        coefficients, *_ = np.linalg.lstsq(design, residual, rcond=None)
+        coefficients = minimum_norm_solve(design, residual).solution
         rss = float(np.sum((residual - design @ coefficients) ** 2))
         q = np.linalg.matrix_rank(design) - 1
         if q <= 0 or n - q - 1 <= 0:
@@ -309,8 +310,8 @@ def repeatability_variance(
 
 
 def lack_of_fit(gls, s2: float, nu: float) -> tuple[float, float]:
-    """The residual variance of a whitened fit (statistics.ComponentFit) against the repeatability
-    s² with ν degrees of freedom: (ratio, p of the F test).
+    """The residual variance of a whitened fit (fit/least_squares.LeastSquares) against the
+    repeatability s² with ν degrees of freedom: (ratio, p of the F test).
     """
     variance = gls.rss / gls.dof
     ratio = variance / s2 if s2 > 0 else float('inf')
@@ -487,7 +488,7 @@ def examine_leftovers(state: SearchState, effects) -> Leftovers:
                 name, r = f'load {c} × {directed[0]}', float('nan')
                 # the structure itself: the residual's least-squares projection on the basis
                 basis = bases[directed[0]]
-                coefficients, *_ = np.linalg.lstsq(basis[loaded], residual[loaded], rcond=None)
+                coefficients = minimum_norm_solve(basis[loaded], residual[loaded]).solution
                 column = basis @ coefficients
                 track_values = np.where(
                     loaded, column / max(float(np.max(np.abs(column[loaded]))), 1e-300), np.nan

@@ -15,6 +15,7 @@ from ..tare.calibration_body import tare_loads
 from .candidates import (
     absolute_load_variables,
     bidirectional_family,
+    BridgeOutputs,
     CandidateFamily,
     creep_family,
     creep_time_constants,
@@ -96,9 +97,7 @@ def families_offered(reduction, config, base_model, times, temps, settings) -> O
         components,
         points.is_zero_point,
         points.orientation,
-        corrected.bridge_outputs_mv,
-        outputs_names,
-        config.rated_output_mv,
+        BridgeOutputs(corrected.bridge_outputs_mv, outputs_names, config.rated_output_mv),
         fitted_loads,
     )
     if 'hysteresis' in wanted:

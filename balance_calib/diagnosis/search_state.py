@@ -9,10 +9,12 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..fit.least_squares import LeastSquares
+from ..fit.svd import orthonormal_columns
 from ..model.terms import parse_terms
 from ..tare.calibration_body import CorrectedData
 from .settings import DiagnosisSettings
-from .statistics import ComponentFit, fit_columns, ZeroPointWhitening
+from .statistics import fit_columns, ZeroPointWhitening
 from .tare_refit import BodyRefit
 
 
@@ -88,8 +90,8 @@ class _Problem:
         residuals: list = [None] * len(terms_per_component)
         for terms, ks in groups.items():
             matrix = self.white_columns(list(terms))
-            q, r = np.linalg.qr(matrix / np.maximum(np.linalg.norm(matrix, axis=0), 1e-300))
-            q = q[:, np.abs(np.diag(r)) > 1e-9 * np.abs(r[0, 0])]
+            scaled = matrix / np.maximum(np.linalg.norm(matrix, axis=0), 1e-300)
+            q = orthonormal_columns(scaled, 1e-9)
             targets = self.loads_white[:, ks]
             fitted = targets - q @ (q.T @ targets)
             for i, k in enumerate(ks):
@@ -105,8 +107,8 @@ class _Problem:
 
 @dataclass(frozen=True)
 class _Fit:
-    ols: ComponentFit  # all points, eq. (19): coefficients, σ, PRESS
-    gls: ComponentFit  # loaded points, whitened: the tests
+    ols: LeastSquares  # all points, eq. (19): coefficients, σ, PRESS
+    gls: LeastSquares  # loaded points, whitened: the tests
 
 
 @dataclass

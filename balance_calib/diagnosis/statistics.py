@@ -1,9 +1,8 @@
 """The statistics of the diagnosis, one load component at a time (BALFIT-style).
 
 - `fit_columns`: least squares by pivoted QR of norm-scaled columns, with the hat-matrix
-  diagonal (fit/least_squares.scaled_least_squares).
-- PRESS residuals e_i / (1 - h_ii): the leave-one-out residual in closed form, so a
-  cross-validated σ costs one fit.
+  diagonal and the PRESS residuals e_i / (1 - h_ii), the leave-one-out residual in closed form,
+  so a cross-validated σ costs one fit (fit/least_squares.LeastSquares).
 - Partial F-test of added terms against the current fit.
 - Forward selection of term groups from a candidate family, each step a partial F-test at a
   Bonferroni-corrected level (the caller divides α by the number of tests it makes).
@@ -17,14 +16,12 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
-from ..fit.least_squares import scaled_least_squares
+from ..fit.least_squares import LeastSquares, scaled_least_squares
+from ..fit.svd import orthonormal_columns
 
 # A column whose part not explained by the others is below this fraction of its own size (after
 # norm scaling) counts as dependent: fixed at zero, as fit_model does with unexcited terms.
 DEPENDENT_TOLERANCE = 1e-9
-# A point that alone determines a coefficient (h_ii -> 1) has no leave-one-out prediction; its
-# PRESS residual is taken with 1 - h clipped here instead of dividing by zero.
-MIN_ONE_MINUS_LEVERAGE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -59,55 +56,14 @@ class ZeroPointWhitening:
         )
 
 
-@dataclass(frozen=True)
-class ComponentFit:
-    """A least-squares fit of one load component on a set of design columns."""
-
-    coefficients: np.ndarray  # (p,) per design column; 0 for dependent columns
-    residuals: np.ndarray  # (N,) measured - fitted, N or N·m
-    hat: np.ndarray  # (N,) leverage h_ii
-    basis: np.ndarray  # (N, rank) orthonormal basis of the column space
-    rank: int
-
-    @property
-    def points(self) -> int:
-        return len(self.residuals)
-
-    @property
-    def dof(self) -> int:
-        return self.points - self.rank
-
-    @property
-    def rss(self) -> float:
-        return float(self.residuals @ self.residuals)
-
-    @property
-    def variance(self) -> float:
-        return self.rss / self.dof if self.dof > 0 else float('nan')
-
-    @property
-    def press_residuals(self) -> np.ndarray:
-        """Leave-one-out residuals e_i / (1 - h_ii) (PRESS)."""
-        return self.residuals / np.maximum(1.0 - self.hat, MIN_ONE_MINUS_LEVERAGE)
-
-    @property
-    def press(self) -> float:
-        return float(np.sum(self.press_residuals**2))
-
-
-def fit_columns(design: np.ndarray, target: np.ndarray) -> ComponentFit:
+def fit_columns(design: np.ndarray, target: np.ndarray) -> LeastSquares:
     """Least squares target ≈ design · c, TM-663 eq. (19) for one component.
 
     design (N, p) and target (N,) in any units; columns scaled to unit norm, a dependent column
-    fixed at zero (fit/least_squares.scaled_least_squares).
+    fixed at zero (fit/least_squares.scaled_least_squares). Returns the fit: coefficients,
+    residuals, leverage, PRESS residuals, basis and rank.
     """
-    design = np.asarray(design, dtype=float)
-    target = np.asarray(target, dtype=float)
-    solution = scaled_least_squares(design, target, tolerance=DEPENDENT_TOLERANCE)
-    residuals = target - design @ solution.coefficients
-    return ComponentFit(
-        solution.coefficients, residuals, solution.leverage, solution.basis, solution.rank
-    )
+    return scaled_least_squares(design, target, tolerance=DEPENDENT_TOLERANCE)
 
 
 def partial_f(
@@ -140,7 +96,7 @@ class Selection:
 
 
 def forward_select(
-    fit: ComponentFit,
+    fit: LeastSquares,
     candidates: np.ndarray,
     groups,
     *,
@@ -211,12 +167,10 @@ def forward_select(
         f_values = np.where(passing, f_values, -np.inf)
         best = int(np.lexsort((-f_values, p_values))[0])
         columns = [first[best]] + ([second[best]] if second[best] >= 0 else [])
-        q, r = np.linalg.qr(orthogonal[:, columns])
-        keep = np.abs(np.diag(r)) > 1e-12 * max(np.abs(r[0, 0]), 1e-300)
-        q = q[:, keep]
+        q = orthonormal_columns(orthogonal[:, columns], 1e-12)
         residual = residual - q @ (q.T @ residual)
         orthogonal = orthogonal - q @ (q.T @ orthogonal)
-        rss, dof = float(residual @ residual), dof - int(keep.sum())
+        rss, dof = float(residual @ residual), dof - q.shape[1]
         available[best] = False
         steps.append(Step(best, float(f_values[best]), float(p_values[best]), rss))
     return Selection(tuple(steps), fit.rss, fit.dof)

@@ -25,14 +25,16 @@ that return to a load they had earlier (calibration_points.returning_series).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import scipy.stats
 
 from ..accuracy.sigma import sigma_pct_fs
 from ..calibration_points import CalibrationPoints, ExtraChannel
+from ..fit.least_squares import LeastSquares
 from ..fit.series_tares import series_indicator
+from ..fit.svd import minimum_norm_solve
 from ..model.terms import as_variables, design_matrix, parse_terms, Term
 from .candidates import (
     absolute_load_variables,
@@ -45,7 +47,7 @@ from .candidates import (
     temperature_family,
     without_base_terms,
 )
-from .statistics import ComponentFit, fit_columns, forward_select
+from .statistics import fit_columns, forward_select
 
 TABLE_EFFECTS = ('temperature', 'channel', 'zero_drift', 'hysteresis', 'bidirectional')
 ALPHA = 1e-4  # one family's forward selection (Bonferroni within it), as diagnose.py
@@ -341,8 +343,17 @@ def diagnose_points(
         return np.hstack([columns(terms), -onehot])
 
     comp_terms = [list(base) for _ in components]
-    fits: list[ComponentFit] = list(base_fits)
-    rng = np.random.default_rng(seed)
+    fits: list[LeastSquares] = list(base_fits)
+    search = _TableSearch(
+        design,
+        columns,
+        points,
+        series_level,
+        alpha,
+        alpha_crossval,
+        permutations,
+        np.random.default_rng(seed),
+    )
     adopted: list[TableEffect] = []
     adopted_families: set[tuple[str, str | None]] = set()
     added_order: list[str] = []
@@ -352,20 +363,7 @@ def diagnose_points(
             key = (family.name, family_variable)
             if key in adopted_families:
                 continue
-            trial = _examine(
-                family,
-                family_variable,
-                comp_terms,
-                fits,
-                design,
-                columns,
-                points,
-                series_level,
-                alpha,
-                alpha_crossval,
-                permutations,
-                rng,
-            )
+            trial = _examine(family, family_variable, comp_terms, fits, search)
             if trial is not None and (best is None or trial['score'] > best['score']):
                 best = trial
         if best is None:
@@ -389,23 +387,34 @@ def diagnose_points(
     )
 
 
+@dataclass(frozen=True)
+class _TableSearch:
+    """What every examination of one table's diagnosis reads, fixed for the diagnosis."""
+
+    design: Callable[[Sequence[str]], np.ndarray]  # term names -> (N, p) columns and -tares
+    columns: _Columns  # term names -> (N, p) columns
+    points: CalibrationPoints
+    series_level: set[str]  # variables constant within every series
+    alpha: float  # the family's level (Bonferroni over its groups)
+    alpha_crossval: float  # the cross-validated σ's drop beyond chance
+    permutations: int  # of the series-level permutation test
+    rng: np.random.Generator  # its permutations
+
+
 def _examine(
-    family,
-    variable,
-    comp_terms,
-    fits,
-    design,
-    columns,
-    points,
-    series_level,
-    alpha,
-    alpha_crossval,
-    permutations,
-    rng,
+    family: CandidateFamily,
+    variable,  # the channel variable the family is keyed to (None: the loads)
+    comp_terms: list[list[str]],
+    fits: list[LeastSquares],
+    search: _TableSearch,
 ) -> dict | None:
     """The family's forward selection on every component, kept where the cross-validated σ
     falls beyond chance; None when no component keeps it.
     """
+    design, columns, points = search.design, search.columns, search.points
+    alpha, alpha_crossval = search.alpha, search.alpha_crossval
+    permutations, rng = search.permutations, search.rng
+    series_level = search.series_level
     components, capacity = points.load_symbols, points.capacity
     n = points.points
     series = points.series
@@ -419,7 +428,7 @@ def _examine(
     if not offered:
         return None
     level = alpha / sum(len(g) for g in offered.values())
-    passing: dict[int, tuple[tuple[str, ...], ComponentFit]] = {}
+    passing: dict[int, tuple[tuple[str, ...], LeastSquares]] = {}
     stats: dict[int, tuple[float, float, float, float, float]] = {}
     score = 0.0
     for k, groups in offered.items():
@@ -450,7 +459,7 @@ def _examine(
                 permuted = rng.permutation(per_series)[position]
                 trial = _with_variable(columns, variable, permuted, added)
                 trial = trial - basis @ (basis.T @ trial)  # what the fit before cannot absorb
-                coefficients = np.linalg.lstsq(trial, residual, rcond=None)[0]
+                coefficients = minimum_norm_solve(trial, residual).solution
                 left = residual - trial @ coefficients
                 beaten += fits[k].rss - float(left @ left) >= gain
             p_cv = (1 + beaten) / (1 + permutations)

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..config import CalibrationBody
 from ..fit.gauss_newton import gauss_newton
+from ..fit.svd import singular_values
 from ..model.balance_model import BalanceModel
 from ..model.inverse import InverseDidNotConverge, linear_part, outputs_for_loads
 from ..tare.calibration_body import CorrectedData, tare_loads
@@ -137,7 +138,7 @@ def refit_body(
     unknowns = result.parameters
     if result.objective > float(np.sum(at_start**2)):
         unknowns = start  # never worse than the body we were given
-    singular = np.linalg.svd(chord, compute_uv=False)
+    singular = singular_values(chord)
     identifiable = int(np.sum(singular > 1e-6 * max(singular[0], 1e-300))) if singular.size else 0
     return BodyRefit(
         body_from_unknowns(declared, unknown_names, unknowns),

@@ -1,7 +1,7 @@
 """Cross-validated residuals of a linear-in-coefficients fit: PRESS, leave-one-point-out.
 
 For least squares the residual of point i when it is left out of the fit is e_i / (1 - h_ii),
-h_ii the leverage (diagonal of the hat matrix, fit/least_squares.ScaledSolution.leverage); no
+h_ii the leverage (diagonal of the hat matrix, fit/least_squares.LeastSquares.leverage); no
 refits needed.
 """
 

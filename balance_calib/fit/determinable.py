@@ -70,7 +70,8 @@ def screen_terms(
         vector = column / np.linalg.norm(column)
         for _ in range(2):
             vector = vector - basis @ (basis.T @ vector)
-        return vector
+        part: np.ndarray = vector
+        return part
 
     def new_part(column: np.ndarray) -> float:
         return float(np.linalg.norm(orthogonal_part(column))) if np.any(column) else 0.0

@@ -17,13 +17,23 @@ from __future__ import annotations
 from typing import cast, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from ..model.leverage import leverage_of_rows
 from ..model.r091 import IterativeModel, TermEvaluator
 from ..model.terms import Term
-from ..model.uncertainty import leverage_of_rows
 from .least_squares import TooFewPointsError
-from .series_tares import series_indicator, series_rows, SeriesTareFit, solve_scaled
+from .series_tares import (
+    series_indicator,
+    series_rows,
+    SeriesLabels,
+    SeriesTareFit,
+    solve_scaled,
+)
 from .term_selection import term_statistics
+
+# Gauss-Newton steps on the tares before giving up (they settle in a handful on a sound schedule)
+MAX_ITERATIONS = 40
 
 
 class IterationDidNotConverge(ArithmeticError):
@@ -32,17 +42,23 @@ class IterationDidNotConverge(ArithmeticError):
 
 def fit_iterative(
     terms: Sequence[Term],
-    applied_loads,
-    outputs,
-    series,
+    applied_loads: ArrayLike,
+    outputs: ArrayLike,
+    series: ArrayLike,
     *,
     components: Sequence[str],
     inputs: Sequence[str],
-    capacity,
-    name: str = 'iterative',
-    max_iterations: int = 40,
+    capacity: ArrayLike,
     statistics: bool = True,
 ) -> SeriesTareFit:
+    """Fit outputs = A · g(applied + tares) by variable projection (module docstring), the model
+    named 'iterative'. components: the load symbols (the terms' variables), inputs: the bridge
+    outputs, capacity (n_loads,) N / N·m: the tares' convergence scale. statistics: also the
+    per-term statistics (term_selection.term_statistics). Returns the fit with its tares, load
+    residuals (own and leave-one-out) and point uncertainty; IterationDidNotConverge after
+    MAX_ITERATIONS Gauss-Newton steps.
+    """
+    name = 'iterative'
     terms = tuple(t for t in terms if not t.is_constant)
     applied = np.atleast_2d(np.asarray(applied_loads, float))
     outputs = np.atleast_2d(np.asarray(outputs, float))
@@ -74,7 +90,7 @@ def fit_iterative(
 
     converged = False
     iteration = 0
-    for iteration in range(1, max_iterations + 1):
+    for iteration in range(1, MAX_ITERATIONS + 1):
         totals = applied + tares[index]
         design, derivatives = evaluator.design_and_derivatives(totals)
         solution = solve_scaled(design, outputs, term_names, name)
@@ -97,7 +113,7 @@ def fit_iterative(
             break
     if not converged:
         raise IterationDidNotConverge(
-            f'{name}: series tares did not converge in {max_iterations} iterations (last step '
+            f'{name}: series tares did not converge in {MAX_ITERATIONS} iterations (last step '
             f'{np.max(np.abs(step) / capacity):.2e} of capacity); the term set may be too large '
             'for the data'
         )
@@ -168,7 +184,9 @@ def fit_iterative(
     )
 
 
-def _linear_matrix(terms, components, coefficients) -> np.ndarray:
+def _linear_matrix(
+    terms: Sequence[Term], components: Sequence[str], coefficients: np.ndarray
+) -> np.ndarray:
     matrix = np.zeros((coefficients.shape[0], len(components)))
     for j, term in enumerate(terms):
         if term.degree == 1 and not term.factors[0].absolute:
@@ -178,10 +196,13 @@ def _linear_matrix(terms, components, coefficients) -> np.ndarray:
 
 def _load_sigma(inverse: np.ndarray, output_variance: np.ndarray) -> np.ndarray:
     """sqrt(diag(J⁻¹ diag(var_V) J⁻ᵀ)) per point: (N, m)."""
-    return np.sqrt(np.einsum('nmk,nk->nm', inverse**2, output_variance))
+    sigma: np.ndarray = np.sqrt(np.einsum('nmk,nk->nm', inverse**2, output_variance))
+    return sigma
 
 
-def iterative_point_uncertainty(fit: SeriesTareFit, outputs, series) -> np.ndarray:
+def iterative_point_uncertainty(
+    fit: SeriesTareFit, outputs: ArrayLike, series: SeriesLabels
+) -> np.ndarray:
     """K = 1 uncertainty of applied loads predicted at new points with the calibration's tares."""
     model = fit.model
     outputs = np.atleast_2d(np.asarray(outputs, float))

@@ -14,14 +14,21 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 import scipy.linalg
 
+from ..array_types import FloatArray
 from ..model.balance_model import BalanceModel
+from ..model.leverage import leverage_of_rows
 from ..model.terms import as_variables, design_matrix, Term
 from ..units import BRIDGE_OUTPUTS, COMPONENTS
+from .svd import column_norms, singular_values
+
+IntArray = NDArray[np.intp]
+BoolArray = NDArray[np.bool_]
 
 # A term whose rated-scaled column, after removing what the other terms already explain, keeps
 # less than this fraction of a fully excited column is "not excited by the schedule".
@@ -50,9 +57,16 @@ class TooFewPointsError(ValueError):
         )
 
 
+# A point that alone determines a coefficient (h_ii -> 1) has no leave-one-out prediction; its
+# PRESS residual is taken with 1 - h clipped here instead of dividing by zero.
+MIN_ONE_MINUS_LEVERAGE = 1e-6
+
+
 @dataclass(frozen=True)
-class ScaledSolution:
-    """The least-squares solution of ``design · coefficients ≈ targets``, eqs. (19) and (28).
+class LeastSquares:
+    """The least-squares fit of ``design · coefficients ≈ targets``, eqs. (19) and (28): the one
+    result type of the package's least squares (as statsmodels' RegressionResults with
+    OLSInfluence's leverage and PRESS residuals).
 
     Shapes: N points, p design columns, k targets (k absent for a 1-D target), r = rank.
     Coefficients are in the units of targets / design column; a column the others already
@@ -60,36 +74,90 @@ class ScaledSolution:
     `covariance_unscaled`.
     """
 
-    coefficients: np.ndarray  # (p,) or (p, k); 0 for dependent columns
-    pivots: np.ndarray  # (p,) column order of the pivoted QR: most new information first
-    pivot_diagonal: np.ndarray  # (p,) |R_ii| of the scaled columns in pivot order, 0-padded
-    r_factor: np.ndarray  # (r, r) upper triangular factor of the kept scaled columns
-    basis: np.ndarray  # (N, r) orthonormal basis of the kept columns' span (Q)
-    scales: np.ndarray  # (p,) the column scales used (design / scales was factored)
+    coefficients: FloatArray  # (p,) or (p, k); 0 for dependent columns
+    pivots: IntArray  # (p,) column order of the pivoted QR: most new information first
+    pivot_diagonal: FloatArray  # (p,) |R_ii| of the scaled columns in pivot order, 0-padded
+    r_factor: FloatArray  # (r, r) upper triangular factor of the kept scaled columns
+    basis: FloatArray  # (N, r) orthonormal basis of the kept columns' span (Q)
+    scales: FloatArray  # (p,) the column scales used (design / scales was factored)
+    residuals: FloatArray  # (N,) or (N, k) targets - design · coefficients
+
+    @classmethod
+    def of_projection(cls, basis: FloatArray, residuals: FloatArray) -> LeastSquares:
+        """The fit whose residuals (N,) are already orthogonal to an orthonormal basis (N, r)
+        of its columns: the basis is its own Q (R = I, unit scales), the coefficients are not
+        kept (zeros). For stacking the fits of several components into one (block-diagonal)
+        basis.
+        """
+        rank = basis.shape[1]
+        return cls(
+            np.zeros(rank),
+            np.arange(rank),
+            np.ones(rank),
+            np.eye(rank),
+            basis,
+            np.ones(rank),
+            residuals,
+        )
 
     @property
     def rank(self) -> int:
-        return self.basis.shape[1]
+        return int(self.basis.shape[1])
+
+    @property
+    def points(self) -> int:
+        return int(self.residuals.shape[0])
+
+    @property
+    def dof(self) -> int:
+        """Residual degrees of freedom, N - rank."""
+        return self.points - self.rank
+
+    @property
+    def rss(self) -> float:
+        """Residual sum of squares of a 1-D target."""
+        return float(self.residuals @ self.residuals)
+
+    @property
+    def variance(self) -> float:
+        """Residual variance RSS / (N - rank) of a 1-D target (NaN without degrees of freedom)."""
+        return self.rss / self.dof if self.dof > 0 else float('nan')
 
     @cached_property
-    def kept(self) -> np.ndarray:
+    def kept(self) -> BoolArray:
         """(p,) bool: the columns solved for (the others are dependent, fixed at zero)."""
         mask = np.zeros(self.pivots.size, dtype=bool)
         mask[self.pivots[: self.rank]] = True
         return mask
 
     @cached_property
-    def dependent_columns(self) -> np.ndarray:
+    def dependent_columns(self) -> IntArray:
         """Indices of the dependent columns, in pivot order (least new information last)."""
         return self.pivots[self.rank :]
 
     @cached_property
-    def leverage(self) -> np.ndarray:
+    def leverage(self) -> FloatArray:
         """(N,) hat-matrix diagonal h_ii: the squared row norms of the basis."""
-        return np.sum(self.basis**2, axis=1)
+        return leverage_of_rows(self.basis)
+
+    @property
+    def press_residuals(self) -> FloatArray:
+        """Leave-one-out residuals e_i / (1 - h_ii) (PRESS), 1 - h_ii clipped at
+        MIN_ONE_MINUS_LEVERAGE; (N,) or (N, k) as the residuals.
+        """
+        one_minus = np.maximum(1.0 - self.leverage, MIN_ONE_MINUS_LEVERAGE)
+        press: FloatArray = self.residuals / (
+            one_minus if self.residuals.ndim == 1 else one_minus[:, None]
+        )
+        return press
+
+    @property
+    def press(self) -> float:
+        """Sum of the squared PRESS residuals (all targets)."""
+        return float(np.sum(self.press_residuals**2))
 
     @cached_property
-    def covariance_unscaled(self) -> np.ndarray:
+    def covariance_unscaled(self) -> FloatArray:
         """(p, p) (XᵀX)⁻¹ over the kept columns, in the design's units (zero rows and columns
         for dependent ones): times σ² it is the coefficient covariance of eq. (28)'s solution.
         """
@@ -102,30 +170,41 @@ class ScaledSolution:
         )
         return covariance
 
+    @property
+    def covariance(self) -> FloatArray:
+        """Coefficient covariance σ² (XᵀX)⁻¹: (p, p) for a 1-D target, (k, p, p) for k targets
+        (σ² = RSS / (N - rank) of each; NaN without degrees of freedom).
+        """
+        sigma2 = np.sum(self.residuals**2, axis=0) / self.dof if self.dof > 0 else np.nan
+        covariance: FloatArray = np.multiply.outer(sigma2, self.covariance_unscaled)
+        return covariance
+
+    @property
+    def t_statistics(self) -> FloatArray:
+        """Per-term t = coefficient / standard error, (p,) or (k, p) (0 for dependent columns)."""
+        variance = np.diagonal(self.covariance, axis1=-2, axis2=-1)
+        coefficients = self.coefficients.T  # (p,) or (k, p)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            t: FloatArray = np.where(self.kept, coefficients / np.sqrt(variance), 0.0)
+        return t
+
     @cached_property
     def condition_number(self) -> float:
         """2-norm condition number of the kept scaled columns (inf when none is kept)."""
         if not self.rank:
             return float('inf')
-        singular = np.linalg.svd(self.r_factor, compute_uv=False)
+        singular = singular_values(self.r_factor)
         return float(singular[0] / singular[-1])
 
 
-def column_norms(design: np.ndarray) -> np.ndarray:
-    """(p,) Euclidean norm of every column of design (N, p); 1 for an all-zero column."""
-    norms = np.linalg.norm(design, axis=0)
-    norms[norms == 0] = 1.0
-    return norms
-
-
 def scaled_least_squares(
-    design,
-    targets,
+    design: ArrayLike,
+    targets: ArrayLike,
     *,
-    scales: np.ndarray | None = None,
+    scales: FloatArray | None = None,
     tolerance: float = 1e-9,
     relative: bool = True,
-) -> ScaledSolution:
+) -> LeastSquares:
     """Minimise ``||targets - design · coefficients||²`` per target column, eqs. (19), (28).
 
     Parameters
@@ -145,9 +224,10 @@ def scaled_least_squares(
 
     Returns
     -------
-    ScaledSolution
-        Coefficients of shape (p,) or (p, k) in the design's units, with the factor, basis,
-        leverage, covariance and condition number of the kept columns.
+    LeastSquares
+        Coefficients of shape (p,) or (p, k) in the design's units and the residuals, with the
+        factor, basis, leverage, PRESS residuals, covariance and condition number of the kept
+        columns.
     """
     design = np.asarray(design, dtype=float)
     targets = np.asarray(targets, dtype=float)
@@ -166,7 +246,8 @@ def scaled_least_squares(
         order = pivots[:rank]
         scale = scales[order] if targets.ndim == 1 else scales[order, None]
         coefficients[order] = solution / scale
-    return ScaledSolution(coefficients, pivots, diagonal, r_kept, basis, scales)
+    residuals = targets - design @ coefficients
+    return LeastSquares(coefficients, pivots, diagonal, r_kept, basis, scales, residuals)
 
 
 @dataclass(frozen=True)
@@ -183,7 +264,7 @@ class FitResult:
 
     @property
     def points(self) -> int:
-        return self.residuals.shape[0]
+        return int(self.residuals.shape[0])
 
 
 def term_scales(
@@ -204,11 +285,10 @@ def term_scales(
 
 def fit_model(
     terms: Sequence[Term],
-    bridge_outputs_mv,
-    loads,
+    bridge_outputs_mv: ArrayLike,
+    loads: ArrayLike,
     *,
     name: str = 'custom',
-    extra: Mapping[str, np.ndarray] | None = None,
     rated_outputs: Mapping[str, float] | None = None,
     components: Sequence[str] = COMPONENTS,
     inputs: Sequence[str] = BRIDGE_OUTPUTS,
@@ -229,7 +309,7 @@ def fit_model(
     if not (np.all(np.isfinite(outputs)) and np.all(np.isfinite(targets))):
         raise ValueError('calibration data contain NaN or infinity; reject those points first')
     n_points, n_terms = outputs.shape[0], len(terms)
-    design = design_matrix(terms, as_variables(tuple(inputs), outputs, extra), n_points)
+    design = design_matrix(terms, as_variables(tuple(inputs), outputs), n_points)
 
     # Column scaling by the term's size at rated output, normalised so a fully excited column
     # has norm about 1: the absolute tolerance then means "not excited by the schedule".
@@ -261,8 +341,10 @@ def fit_model(
     return FitResult(model, int(kept.size), condition, unexcited, standard_errors, residuals, dof)
 
 
-def refit_like(model: BalanceModel, bridge_outputs_mv, loads, **kwargs) -> FitResult:
-    """Fit the term list of an existing model to new data."""
+def refit_like(
+    model: BalanceModel, bridge_outputs_mv: ArrayLike, loads: ArrayLike, **kwargs: Any
+) -> FitResult:
+    """Fit the term list of an existing model to new data; returns the fit."""
     return fit_model(
         model.terms,
         bridge_outputs_mv,

@@ -17,24 +17,27 @@ from dataclasses import dataclass, field
 from typing import Any, cast, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..model.balance_model import BalanceModel
+from ..model.leverage import leverage_of_rows
 from ..model.terms import as_variables, design_matrix, Term
-from ..model.uncertainty import leverage_of_rows
 from .least_squares import (
+    LeastSquares,
     scaled_least_squares,
-    ScaledSolution,
     TooFewPointsError,
     UnexcitedTermsError,
 )
 from .term_selection import term_statistics, TermStatistics
 
 RANK_TOLERANCE = 1e-9
+# the load series of each point (N,): integer labels, a list or an array
+SeriesLabels = Sequence[int] | np.ndarray
 
 
 def solve_scaled(
     design: np.ndarray, targets: np.ndarray, column_names: Sequence[str], model_name: str = 'model'
-) -> ScaledSolution:
+) -> LeastSquares:
     """Least squares with columns scaled to unit norm, eq. (19) with the tares as columns.
 
     design (N, q), targets (N, k); raises UnexcitedTermsError naming the dependent columns.
@@ -47,7 +50,7 @@ def solve_scaled(
     return solution
 
 
-def series_indicator(series) -> tuple[tuple[int, ...], np.ndarray, np.ndarray]:
+def series_indicator(series: ArrayLike) -> tuple[tuple[int, ...], np.ndarray, np.ndarray]:
     """(labels, index of each point's series (N,), one-hot (N, n_series))."""
     series = np.asarray(series, dtype=int)
     labels, index = np.unique(series, return_inverse=True)
@@ -77,7 +80,7 @@ class SeriesTareFit:
     # (p + n_series, p + n_series) of [terms, series]
     full_covariance_unscaled: np.ndarray | None = None
 
-    def tare_rows(self, series) -> np.ndarray:
+    def tare_rows(self, series: SeriesLabels) -> np.ndarray:
         """(N, n_loads) the calibration's tare of each point's series; KeyError names a series
         it lacks.
         """
@@ -90,18 +93,19 @@ class SeriesTareFit:
             )
         return self.tares[[lookup[int(s)] for s in series]]
 
-    def predict_applied(self, outputs, series) -> np.ndarray:
+    def predict_applied(self, outputs: ArrayLike, series: SeriesLabels) -> np.ndarray:
         """Applied loads predicted for validation points: model loads minus the calibration's
         tares.
         """
-        return np.atleast_2d(self.model.loads(outputs)) - self.tare_rows(series)
+        predicted: np.ndarray = np.atleast_2d(self.model.loads(outputs)) - self.tare_rows(series)
+        return predicted
 
 
 def fit_direct(
     terms: Sequence[Term],
-    outputs,
-    applied_loads,
-    series,
+    outputs: ArrayLike,
+    applied_loads: ArrayLike,
+    series: ArrayLike,
     *,
     components: Sequence[str],
     inputs: Sequence[str],
@@ -170,7 +174,7 @@ def fit_direct(
     )
 
 
-def series_rows(fit: SeriesTareFit, series) -> np.ndarray:
+def series_rows(fit: SeriesTareFit, series: SeriesLabels) -> np.ndarray:
     """(N, n_series) one-hot rows of the calibration's series for new points (KeyError if
     unknown).
     """
@@ -180,7 +184,9 @@ def series_rows(fit: SeriesTareFit, series) -> np.ndarray:
     return rows
 
 
-def direct_point_uncertainty(fit: SeriesTareFit, outputs, series) -> np.ndarray:
+def direct_point_uncertainty(
+    fit: SeriesTareFit, outputs: ArrayLike, series: SeriesLabels
+) -> np.ndarray:
     """K = 1 uncertainty of applied loads predicted at new points with the calibration's tares:
     u² = σ² (1 + z (ZᵀZ)⁻¹ zᵀ), z = [x(V), -e_s]: coefficients, the tare's own uncertainty and
     their correlation, plus the residual scatter.
@@ -193,7 +199,7 @@ def direct_point_uncertainty(fit: SeriesTareFit, outputs, series) -> np.ndarray:
 
 
 def tares_with_model_fixed(
-    totals, applied, series
+    totals: ArrayLike, applied: ArrayLike, series: ArrayLike
 ) -> tuple[np.ndarray, dict[int, np.ndarray], dict[int, np.ndarray]]:
     """Each series' tare estimated from its own points with the model held fixed.
 

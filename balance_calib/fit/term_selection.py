@@ -19,7 +19,7 @@ from typing import Sequence
 import numpy as np
 import scipy.stats
 
-from ..model.uncertainty import leverage_of_rows
+from ..model.leverage import leverage_of_rows
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,7 @@ class TermStatistics:
     p_value: np.ndarray  # (p, k)
     press_ratio: np.ndarray  # (p, k): PRESS without the term / PRESS with it (> 1: the term helps)
 
-    def to_report(self, limit: int | None = None) -> list[dict]:
+    def to_report(self, limit: int | None = None) -> list[dict[str, object]]:
         rows = []
         for j, term in enumerate(self.terms):
             rows.append(

@@ -23,6 +23,7 @@ from ..array_types import FloatArray
 from .balance_model import BalanceModel
 from .calibration import Calibration
 from .identity_cache import IdentityCache
+from .leverage import leverage_of_rows
 from .r091 import IterativeModel
 
 _CACHE: IdentityCache[tuple[np.ndarray, np.ndarray]] = IdentityCache(limit=64)
@@ -146,37 +147,15 @@ def _direct_variance(design: np.ndarray, covariance: np.ndarray, sigma: np.ndarr
     """(N, n_components) u² = σ² (1 + x (XᵀX)⁻¹ xᵀ) for design rows x (N, n_terms) of a direct
     model.
     """
-    return np.multiply.outer(1.0 + leverage_of_rows(design, covariance), np.square(sigma))
+    variance: FloatArray = np.multiply.outer(
+        1.0 + leverage_of_rows(design, covariance), np.square(sigma)
+    )
+    return variance
 
 
-def leverage_of_rows(design_rows, covariance_unscaled) -> np.ndarray:
-    """(N,) leverage h = x (XᵀX)⁻¹ xᵀ of design rows x (N, p), (XᵀX)⁻¹ the fit's unscaled
-    covariance (p, p): the one definition for rows given a covariance (a calibration point's own
-    h_ii from the factorisation is fit/least_squares.ScaledSolution.leverage). Here, below fit/,
-    because the runtime's uncertainty needs it without the fitting code. One matrix product
-    (BLAS), where a three-operand einsum loops over p² products per row in C (3.5 µs a row at 34
-    terms).
-    """
-    rows = np.atleast_2d(np.asarray(design_rows, dtype=float))
-    return np.add.reduce((rows @ np.asarray(covariance_unscaled, dtype=float)) * rows, axis=1)
-
-
-def with_fitted_covariance(
-    model, bridge_outputs_mv, residuals, extra: Mapping[str, np.ndarray] | None = None
-):
-    """A least-squares-fitted BalanceModel with `metadata.uncertainty` from its own fitted points:
-    (XᵀX)⁻¹ by SVD of the unit-norm-scaled design (rank-deficient directions left out) and the
-    residual σ per component with N − rank degrees of freedom. For refit's calibration.yaml.
-    """
-    design = model.design(bridge_outputs_mv, extra)
-    residuals = np.atleast_2d(np.asarray(residuals, dtype=float))
-    covariance, rank = unscaled_covariance(design)
-    dof = max(design.shape[0] - rank, 1)
-    sigma = np.sqrt((residuals**2).sum(axis=0) / dof)
-    return with_covariance(model, covariance, sigma, dof)
-
-
-def with_covariance(model, covariance: np.ndarray, sigma, dof: int):
+def with_covariance(
+    model: BalanceModel, covariance: ArrayLike, sigma: ArrayLike, dof: int
+) -> BalanceModel:
     """The model with `metadata.uncertainty` = this (n_terms, n_terms) unscaled covariance (XᵀX)⁻¹
     and residual σ (n_components,), N / N·m, as calibration.yaml stores them.
     """
@@ -188,18 +167,3 @@ def with_covariance(model, covariance: np.ndarray, sigma, dof: int):
             'dof': int(dof),
         },
     )
-
-
-def unscaled_covariance(design: np.ndarray) -> tuple[np.ndarray, int]:
-    """(XᵀX)⁻¹ (n_terms, n_terms) of design rows X (N, n_terms), and the rank of X.
-
-    By SVD of the unit-norm-scaled design; directions the rows do not determine (rank-deficient)
-    are left out, so they add nothing rather than infinity.
-    """
-    design = np.atleast_2d(np.asarray(design, dtype=float))
-    scales = np.linalg.norm(design, axis=0)
-    scales[scales == 0] = 1.0
-    _, singular, vt = np.linalg.svd(design / scales, full_matrices=False)
-    keep = singular > singular[0] * 1e-10 if singular.size else np.zeros(0, bool)
-    v_scaled = vt[keep].T / singular[keep]
-    return (v_scaled @ v_scaled.T) / np.outer(scales, scales), int(keep.sum())

@@ -78,7 +78,7 @@ def _live_with_covariance(live, diagnosis):
     """The adopted live model with its coefficient covariance on the points the diagnosis fitted
     (one shared (XᵀX)⁻¹ over the union of terms: conservative for components that use fewer).
     """
-    from ..model.uncertainty import with_fitted_covariance
+    from ..fit.fitted_covariance import with_fitted_covariance
 
     try:
         return with_fitted_covariance(
@@ -96,7 +96,7 @@ def build_calibration(
     config, reduction, fits, base_model, diagnosis, sources: Sequence[str]
 ) -> Calibration:
     # covariance for /balance/wrench_uncertainty
-    from ..model.uncertainty import with_fitted_covariance
+    from ..fit.fitted_covariance import with_fitted_covariance
 
     models = {
         order: with_fitted_covariance(

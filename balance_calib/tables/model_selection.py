@@ -115,7 +115,6 @@ def fit_form(
         components=table.load_symbols,
         inputs=table.bridge_symbols,
         capacity=table.load_capacity_si,
-        name='iterative',
         statistics=statistics,
     )
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..fit.determinable import screen_terms, TermScreen
 from ..fit.series_tares import series_indicator
+from ..fit.svd import minimum_norm_solve
 from ..model.r091 import TermEvaluator
 from ..model.terms import Factor, Term
 from .errors import TableCalibrationError
@@ -29,7 +30,7 @@ def linear_response(table, outputs: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     _, _, onehot = series_indicator(table.series)
     relative = table.applied_loads_si / table.load_capacity_si
     n_loads = relative.shape[1]
-    response = np.linalg.lstsq(np.hstack([relative, onehot]), outputs, rcond=None)[0][:n_loads]
+    response = minimum_norm_solve(np.hstack([relative, onehot]), outputs).solution[:n_loads]
     return relative, onehot, response
 
 
@@ -42,9 +43,8 @@ def dominant_loads(
     """(n_outputs,) index of the load each output follows most (response at capacity)."""
     n_loads = relative_loads.shape[1]
     if response is None:
-        response = np.linalg.lstsq(np.hstack([relative_loads, onehot]), outputs, rcond=None)[0][
-            :n_loads
-        ]
+        response = minimum_norm_solve(np.hstack([relative_loads, onehot]), outputs).solution
+        response = response[:n_loads]
     scale = np.maximum(np.max(np.abs(response), axis=0), 1e-300)
     return np.argmax(np.abs(response) / scale, axis=0)
 

@@ -25,7 +25,7 @@ from ..fit.series_tares import (
     tares_with_model_fixed,
 )
 from ..model.inverse import InverseDidNotConverge
-from ..model.uncertainty import leverage_of_rows
+from ..model.leverage import leverage_of_rows
 from .errors import TableCalibrationError
 
 COVERAGE_WARNING = 0.90

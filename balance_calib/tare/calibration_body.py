@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike
 
 from ..config import CalibrationBody
 from ..fit.least_squares import fit_model
+from ..fit.svd import minimum_norm_solve
 from ..model.balance_model import BalanceModel
 from ..model.inverse import linear_part
 from ..model.terms import parse_terms
@@ -98,7 +99,7 @@ def estimate_body(
         rows.append(-np.array([[0, -fz, fy], [fz, 0, -fx], [-fy, fx, 0]]))
     system = np.vstack(rows)
     target = moments.reshape(-1)
-    cg, *_ = np.linalg.lstsq(system, target, rcond=1e-10)  # min-norm: unobservable axes stay 0
+    cg = minimum_norm_solve(system, target, rcond=1e-10).solution  # unobservable axes stay 0
     residual = float(np.sqrt(np.mean((system @ cg - target) ** 2))) if target.size else 0.0
     return BodyEstimate(weight, (float(cg[0]), float(cg[1]), float(cg[2])), len(gravity), residual)
 

@@ -34,7 +34,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.stats
 
-from ..diagnosis.statistics import ComponentFit, fit_columns
+from ..diagnosis.statistics import fit_columns
+from ..fit.least_squares import LeastSquares
 
 FAMILIES = ('hysteresis', 'nonlinearity', 'zero_drift')
 
@@ -193,7 +194,7 @@ def examine_line(
     base = fit_columns(design, y)
     current = base
     max_columns = max(2, int(n * settings.terms_per_point))
-    effects: list[tuple[str, list[str], ComponentFit, ComponentFit]] = []
+    effects: list[tuple[str, list[str], LeastSquares, LeastSquares]] = []
     warnings: list[str] = []
     close: list = []
     adopted: set[str] = set()

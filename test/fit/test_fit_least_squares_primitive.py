@@ -11,8 +11,14 @@ import pytest
 import scipy.linalg
 
 from balance_calib.diagnosis.statistics import fit_columns
-from balance_calib.fit.least_squares import fit_model, scaled_least_squares, UnexcitedTermsError
+from balance_calib.fit.least_squares import (
+    fit_model,
+    LeastSquares,
+    scaled_least_squares,
+    UnexcitedTermsError,
+)
 from balance_calib.fit.series_tares import solve_scaled
+from balance_calib.model.leverage import leverage_of_rows
 from balance_calib.model.terms import parse_terms
 
 HADAMARD = scipy.linalg.hadamard(8).astype(float)  # columns orthogonal, norm √8
@@ -90,7 +96,7 @@ def test_the_three_callers_give_the_primitives_answer():
             component.coefficients, primitive.coefficients[:, k], rtol=1e-12
         )
         np.testing.assert_allclose(component.coefficients, coefficients[:, k], rtol=1e-12)
-        np.testing.assert_allclose(component.hat, np.full(8, 5 / 8), rtol=1e-13)
+        np.testing.assert_allclose(component.leverage, np.full(8, 5 / 8), rtol=1e-13)
         assert component.rank == 5 and component.dof == 3
         assert component.rss == pytest.approx(float(OFF_MODEL[:, k] @ OFF_MODEL[:, k]), rel=1e-12)
 
@@ -152,3 +158,67 @@ def test_fit_model_drops_a_term_the_schedule_does_not_excite():
     )
     assert fit.unexcited_terms == ('MYV',) and fit.rank == 2
     assert np.all(fit.model.coefficients[:, 2] == 0.0) and np.all(fit.standard_errors[:, 2] == 0.0)
+
+
+def test_the_one_result_type_on_a_hand_worked_straight_line():
+    """Y = a + b x through four points, every statistic from the textbook formulas:
+    b = Sxy / Sxx, a = ȳ - b x̄, h_ii = 1/n + (x_i - x̄)² / Sxx, PRESS e_i / (1 - h_ii),
+    Var(b) = σ² / Sxx, Var(a) = σ² (1/n + x̄² / Sxx), Cov(a, b) = -x̄ σ² / Sxx, σ² = RSS / (n - 2).
+    """
+    x = np.array([0.0, 1.0, 2.0, 3.0])
+    y = np.array([1.0, 3.0, 2.0, 5.0])
+    n = 4
+    x_mean, y_mean = 1.5, 2.75
+    sxx = 5.0  # 2.25 + 0.25 + 0.25 + 2.25
+    sxy = 5.5  # 2.625 - 0.125 - 0.375 + 3.375
+    slope = sxy / sxx  # 1.1
+    intercept = y_mean - slope * x_mean  # 1.1
+    residuals = np.array([-0.1, 0.8, -1.3, 0.6])  # y - (1.1 + 1.1 x)
+    rss = 2.7
+    sigma2 = rss / (n - 2)
+    leverage = 1 / n + (x - x_mean) ** 2 / sxx  # 0.7, 0.3, 0.3, 0.7
+    unscaled = np.array([[1 / n + x_mean**2 / sxx, -x_mean / sxx], [-x_mean / sxx, 1 / sxx]])
+    # unit-norm columns (1, x) / (2, √14): Gram [[1, c], [c, 1]], eigenvalues 1 ± c
+    c = 3 / np.sqrt(14)
+
+    fit = scaled_least_squares(np.column_stack([np.ones(n), x]), y)
+
+    assert isinstance(fit, LeastSquares) and fit.rank == 2 and fit.dof == 2
+    np.testing.assert_allclose(fit.coefficients, [intercept, slope], rtol=1e-14)
+    np.testing.assert_allclose(fit.residuals, residuals, atol=1e-14)
+    assert fit.rss == pytest.approx(rss, rel=1e-14)
+    assert fit.variance == pytest.approx(sigma2, rel=1e-14)
+    np.testing.assert_allclose(fit.leverage, [0.7, 0.3, 0.3, 0.7], rtol=1e-14)
+    np.testing.assert_allclose(fit.leverage, leverage, rtol=1e-14)
+    np.testing.assert_allclose(fit.press_residuals, residuals / (1 - leverage), rtol=1e-13)
+    assert fit.press == pytest.approx(float(np.sum((residuals / (1 - leverage)) ** 2)), rel=1e-13)
+    np.testing.assert_allclose(fit.covariance_unscaled, unscaled, rtol=1e-13)
+    np.testing.assert_allclose(fit.covariance, sigma2 * unscaled, rtol=1e-13)
+    np.testing.assert_allclose(
+        fit.t_statistics,
+        [intercept / np.sqrt(sigma2 * unscaled[0, 0]), slope / np.sqrt(sigma2 * unscaled[1, 1])],
+        rtol=1e-13,
+    )
+    assert fit.condition_number == pytest.approx(np.sqrt((1 + c) / (1 - c)), rel=1e-13)
+    # the same line twice (k = 2 targets): per-target residuals, covariance and t
+    both = scaled_least_squares(np.column_stack([np.ones(n), x]), np.column_stack([y, 2 * y]))
+    np.testing.assert_allclose(
+        both.residuals, np.column_stack([residuals, 2 * residuals]), atol=1e-13
+    )
+    np.testing.assert_allclose(both.covariance[1], 4 * sigma2 * unscaled, rtol=1e-13)
+    np.testing.assert_allclose(both.t_statistics[1], fit.t_statistics, rtol=1e-13)
+
+
+def test_leverage_of_other_rows_is_the_same_hat_diagonal():
+    """model/leverage.leverage_of_rows with the fit's (XᵀX)⁻¹ gives the fit's own h_ii back, and
+    at a new point x0 the textbook 1/n + (x0 - x̄)² / Sxx.
+    """
+    x = np.array([0.0, 1.0, 2.0, 3.0])
+    design = np.column_stack([np.ones(4), x])
+    fit = scaled_least_squares(design, np.array([1.0, 3.0, 2.0, 5.0]))
+    np.testing.assert_allclose(
+        leverage_of_rows(design, fit.covariance_unscaled), fit.leverage, rtol=1e-13
+    )
+    assert leverage_of_rows([[1.0, 5.0]], fit.covariance_unscaled)[0] == pytest.approx(
+        1 / 4 + 3.5**2 / 5, rel=1e-13
+    )

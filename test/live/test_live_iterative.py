@@ -378,8 +378,8 @@ def test_uncertainty_of_a_model_with_a_temperature_input_uses_that_input():
     """
     from balance_calib.calibration_file import Calibration
     from balance_calib.config import CONFIG_DIR
+    from balance_calib.fit.fitted_covariance import with_fitted_covariance
     from balance_calib.model.balance_model import BalanceModel
-    from balance_calib.model.uncertainty import with_fitted_covariance
 
     memo = load_calibration(CONFIG_DIR / 'lmc6522.yaml')
     linear = memo.model('linear')

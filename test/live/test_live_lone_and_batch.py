@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from balance_calib.calibration_file import Calibration
+from balance_calib.fit.fitted_covariance import with_fitted_covariance
 from balance_calib.live.calibrator_core import compute_wrench
 from balance_calib.live.stream import LiveCalibrator, LiveSettings
 from balance_calib.model.active_calibration import activate
 from balance_calib.model.balance_model import BalanceModel
 from balance_calib.model.terms import parse_terms
-from balance_calib.model.uncertainty import with_fitted_covariance
 from balance_calib.tables import synthetic as sy
 from balance_calib.tables.calibrate import calibrate_table
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
