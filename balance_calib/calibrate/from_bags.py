@@ -89,7 +89,12 @@ def run_refit(
     points = read_bag_points(
         paths,
         config,
-        BagReading(given.salvage, given.estimate_body, None, say, started),
+        BagReading(
+            salvage=given.salvage,
+            estimate_body=given.estimate_body,
+            progress=say,
+            started_s=started,
+        ),
     )
     written = given.written
     result = cast(
