@@ -3,8 +3,9 @@
 One value for what a bag or a table carries (issue 36, Deliver 1): applied loads, bridge outputs,
 load series, gravity and times where known, the extra channels with their units and symbols, the
 load direction and the order of each point within its series. The table reader's side is
-`tables/table_points.points_from_table`; the bag reader could produce the same value later
-(today the bag path is unchanged).
+`tables/table_points.points_from_table`, the bag reader's `refit/bag_points.read_bag_points`.
+What only one kind of source has rides along: a bag's cut, zero points, tare and integrity
+(`BagRecord`), a table's own rows (`table`); `calibrate/path.calibrate` dispatches on them.
 
 The load direction and the returning series follow interfaces.md, "Effects found in table
 calibrations": a point's direction is the sign of the change, since the previous point of its
@@ -15,9 +16,14 @@ returns to loads it had earlier.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any, Mapping, TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .config import BalanceConfig
+    from .reduction import LoadPoints, Reduction
 
 TEMPERATURE_UNITS = ('degC', 'degF', 'K')
 # a load within this fraction of capacity of an earlier one of its series is that load again, and
@@ -65,6 +71,52 @@ class ExtraChannel:
 
 
 @dataclass(frozen=True)
+class CutSummary:
+    """What cutting a bag into load points kept and rejected (refit/load_points.py)."""
+
+    points: int
+    samples_used: int
+    samples_rejected_outliers: int
+    samples_rejected_nan: int  # NaN, infinite or beyond 1000x the rated output
+    empty_points: int  # applied_load messages with no samples before the next one
+    markers_out_of_order: int = 0  # applied_load stamps going back against receive order
+    first_marker_out_of_order: int = -1  # its index (0-based, receive order), -1: none
+    duplicate_marker_stamps: int = 0
+    # raw samples in no point (between points, beyond a point's end)
+    samples_outside_points: int = 0
+    pauses_s: tuple[float, ...] = ()  # pauses between sessions that were shortened, seconds
+    # (bridge, mV, samples, points) flat-topped
+    clipped: tuple[tuple[str, float, int, int], ...] = ()
+    # per point (same order as the LoadPoints returned): variance of the mean output per bridge,
+    # mV² (successive differences, see the module's docstring; NaN with < 2 samples), samples
+    # averaged
+    point_labels: np.ndarray | None = field(default=None, compare=False, repr=False)  # (P,)
+    # (P, n)
+    point_variance_mv2: np.ndarray | None = field(default=None, compare=False, repr=False)
+    point_samples: np.ndarray | None = field(default=None, compare=False, repr=False)  # (P,)
+
+
+@dataclass(frozen=True)
+class BagRecord:
+    """What only a recorded (or simulated) campaign carries beside its corrected points."""
+
+    load_points: LoadPoints  # the cut's points, before zero points and tare
+    # zero points and calibration-body tare applied (§5(4), §6-7); None until reduced
+    reduction: Reduction | None = None
+    cut: CutSummary | None = None  # None: points straight from a simulation, no bag
+    files: tuple[str, ...] = ()  # the bags read
+    integrity: Mapping[str, Any] | None = None  # report.json's bag_integrity
+    clock: str | None = None  # a simulator's clock: the report must not date the campaign by it
+    started_s: float | None = None  # time.monotonic() when the refit began (wall_time_s)
+    config: BalanceConfig | None = None  # the balance the points were reduced with
+
+    @property
+    def orientation(self) -> np.ndarray:
+        """(N,) I_g of each load point (Fig. 3), in the order of the points."""
+        return np.asarray(self.load_points.orientation)
+
+
+@dataclass(frozen=True)
 class CalibrationPoints:
     """Points of one calibration, SI inside: loads N / N·m, outputs as the fit takes them."""
 
@@ -79,6 +131,9 @@ class CalibrationPoints:
     channels: tuple[ExtraChannel, ...] = ()
     times_s: np.ndarray | None = None  # unknown for a table
     gravity: np.ndarray | None = None  # (N, 3) unknown for a table
+    bag: BagRecord | None = field(default=None, compare=False, repr=False)
+    # the tables.balfit_reader.CalibrationTable the points were read from
+    table: Any = field(default=None, compare=False, repr=False)
 
     @property
     def points(self) -> int:

@@ -464,7 +464,8 @@ def _names_a_file(text: str, mutant: Mutant) -> bool:
 
 def judge_in_process(mutant: Mutant, out_dir: Path) -> tuple[str, str]:
     """(verdict, detail) for one mutant through run_refit in this process."""
-    from ..refit.pipeline import RefitError, run_refit
+    from ..calibrate.from_bags import run_refit
+    from ..refit.errors import RefitError
 
     try:
         result = run_refit(mutant.paths, mutant.balance, out_dir, diagnose=False, plots=False)
@@ -567,7 +568,7 @@ def run_mutants(
 _MEMORY_CHILD = r"""
 import json, resource, sys, time
 from pathlib import Path
-from balance_calib.refit.pipeline import run_refit
+from balance_calib.calibrate.from_bags import run_refit
 paths = sys.argv[3:]
 started = time.monotonic()
 result = run_refit(paths, sys.argv[1], Path(sys.argv[2]), plots=False)

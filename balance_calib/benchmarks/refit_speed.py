@@ -34,8 +34,8 @@ def main(argv=None) -> None:
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import get_typestore, Stores
 
+    from balance_calib.calibrate.from_bags import run_refit
     from balance_calib.config import load_balance_config
-    from balance_calib.refit.pipeline import run_refit
     from balance_calib.simulation.balance_sim import (
         simulate_campaign,
         SimulationSettings,

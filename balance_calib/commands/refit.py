@@ -86,7 +86,8 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..refit.pipeline import RefitError, run_refit
+    from ..calibrate.from_bags import run_refit
+    from ..refit.errors import RefitError
     from .errors import CommandError
 
     def progress(message: str) -> None:

@@ -8,6 +8,7 @@ from dataclasses import replace
 import os
 from pathlib import Path
 import sys
+from typing import cast
 
 from .run_arguments import add_simulated_balance_arguments, SimulatedBalance
 
@@ -56,9 +57,13 @@ def register(subparsers) -> None:
 def run(args) -> int:
     from ..accuracy.sigma import format_sigma_table
     from ..accuracy.tables import format_coefficient_tables
+    from ..calibrate.path import calibrate
+    from ..calibration_settings import CalibrationSettings
     from ..config import ConfigError, load_balance_config
     from ..gates.limits import acceptance_limits
-    from ..refit.pipeline import calibrate_points, campaign_points, RefitError, summary_line
+    from ..refit.bag_points import campaign_points, load_points_record, reduced_points
+    from ..refit.errors import RefitError
+    from ..refit.pipeline import CalibrationResult, summary_line
     from ..schedule_file import schedule_for
     from ..simulation.balance_sim import simulate_campaign, SimulationSettings, table17_noise
     from ..simulation.effects import parse_effects
@@ -118,8 +123,10 @@ def run(args) -> int:
             f'{", ".join(campaign.effects) or "none"})'
         )
         try:
-            result = calibrate_points(
-                campaign_points(campaign), config, diagnose=not args.no_diagnosis
+            points = reduced_points(load_points_record(campaign_points(campaign)), config)
+            result = cast(
+                CalibrationResult,
+                calibrate(points, CalibrationSettings(diagnose=not args.no_diagnosis)),
             )
         except RefitError as err:
             raise CommandError(str(err)) from None

@@ -63,7 +63,7 @@ def _child(connection, bags, balance, out_dir, model, parent_pid, active=None) -
         pass
     replied: list[bool] = []  # after the reply the caller reads no more from the pipe
     try:
-        from balance_calib.refit.pipeline import run_refit
+        from balance_calib.calibrate.from_bags import run_refit
 
         def reply(result) -> None:
             # calibration.yaml and the report are in place: the figures follow without the caller

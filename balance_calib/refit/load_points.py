@@ -29,40 +29,15 @@ shows in the zero points, which the diagnosis compares with it. Memory: two (P, 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
+from ..calibration_points import CutSummary
 from ..config import BalanceConfig
 from ..reduction import LoadPoints
 
 
 class LoadPointError(ValueError):
     """The bag cannot be cut into load points; the message says why and names the topic."""
-
-
-@dataclass(frozen=True)
-class CutSummary:
-    points: int
-    samples_used: int
-    samples_rejected_outliers: int
-    samples_rejected_nan: int  # NaN, infinite or beyond 1000x the rated output
-    empty_points: int  # applied_load messages with no samples before the next one
-    markers_out_of_order: int = 0  # applied_load stamps going back against receive order
-    first_marker_out_of_order: int = -1  # its index (0-based, receive order), -1: none
-    duplicate_marker_stamps: int = 0
-    # raw samples in no point (between points, beyond a point's end)
-    samples_outside_points: int = 0
-    pauses_s: tuple[float, ...] = ()  # pauses between sessions that were shortened, seconds
-    # (bridge, mV, samples, points) flat-topped
-    clipped: tuple[tuple[str, float, int, int], ...] = ()
-    # per point (same order as the LoadPoints returned): variance of the mean output per bridge,
-    # mV² (successive differences, see the module's docstring; NaN with < 2 samples), samples
-    # averaged
-    point_labels: np.ndarray | None = field(default=None, compare=False, repr=False)  # (P,)
-    # (P, n)
-    point_variance_mv2: np.ndarray | None = field(default=None, compare=False, repr=False)
-    point_samples: np.ndarray | None = field(default=None, compare=False, repr=False)  # (P,)
 
 
 # An applied load beyond this many rated loads is no calibration weight.

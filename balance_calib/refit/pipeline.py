@@ -1,46 +1,51 @@
-"""The refit pipeline behind `~/refit` and `balance-calib refit`.
+"""The bag side of the calibration path, behind `~/refit`, `balance-calib refit` and `simulate`.
 
-bags -> load points -> zero points + tare (corrected data, §5(4), §6-7) -> linear, quadratic and
-cubic fits (§2-3) -> diagnosis of the residuals (what the base model lacks) -> calibration.yaml,
-report.json, report.md and residual plots (interfaces.md). Before anything is written the
-acceptance gates (gates/) must pass: a failed gate raises RefitError with one line, unless
-`force` (then the report says so). Everything is written into a staging directory beside `out_dir`
-and moved into place only when complete, so a failure or a kill leaves `out_dir` as it was.
+bags -> load points -> zero points + tare (refit/bag_points.py) -> calibrate/path.calibrate ->
+calibrate_bag here: linear, quadratic and cubic fits (§2-3) -> diagnosis of the residuals (what
+the base model lacks) -> calibration.yaml, report.json, report.md and residual plots
+(interfaces.md), written by calibrate/write_record.py. Before anything is written the acceptance
+gates (gates/) must pass: a failed gate raises RefitError with one line, unless `force` (then the
+report says so).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-import json
-import os
+from dataclasses import dataclass
 from pathlib import Path
-import shutil
 import time
-from typing import Callable, cast, Mapping, Sequence, TYPE_CHECKING
+from typing import Any, Callable, cast, Mapping, Sequence, TYPE_CHECKING
 
 import numpy as np
 
 from ..accuracy.sigma import sigma_by_component
-from ..calibration_file import ConfigError, save_calibration
-from ..config import BalanceConfig, load_balance_config, LoadSchedule
+from ..calibration_file import ConfigError
+from ..calibration_points import CalibrationPoints, CutSummary
+from ..calibration_settings import CalibrationSettings
+from ..config import BalanceConfig
 from ..fit.crossval import press_residuals
 from ..fit.least_squares import fit_model, FitResult, UnexcitedTermsError
 from ..model.calibration import Calibration
 from ..model.inverse import InverseDidNotConverge
 from ..model.tm663 import MODEL_ORDERS, tm663_terms
-from ..reduction import LoadPoints, reduce_points, Reduction, retare_with_model
-from ..schedule_file import schedule_for
+from ..reduction import LoadPoints, Reduction, retare_with_model
 from ..zero_points import ZeroPointError
-from .load_points import cut_load_points, CutSummary, LoadPointError
+from .bag_points import (
+    BagReading,
+    campaign_points,
+    load_points_record,
+    reduced_points,
+)
+from .errors import named as _named
+from .errors import RefitError
+from .errors import where as _where
+from .load_points import LoadPointError
 
 if TYPE_CHECKING:
     from ..diagnosis.diagnose import Diagnosis
 
 Progress = Callable[[str], None]
 
-
-class RefitError(ValueError):
-    """The refit cannot be done with these inputs; the message says which file and why."""
+__all__ = ['campaign_points', 'RefitError']
 
 
 @dataclass(frozen=True)
@@ -105,44 +110,54 @@ def _fit_all(
 def calibrate_points(
     points: LoadPoints,
     config: BalanceConfig,
-    *,
-    base_model: str = 'cubic',
-    diagnose: bool = True,
-    estimate_body: bool = True,
-    progress: Progress | None = None,
     cut: CutSummary | None = None,
-    sources: Sequence[str] = (),
-    active: Calibration | None = None,
-    force: bool = False,
-    schedule: LoadSchedule | None = None,
-    serial: str | None = None,
-    operator: str | None = None,
+    **options: Any,
 ) -> CalibrationResult:
-    """Everything after the load points; pure (writes nothing).
+    """calibrate_bag of load points cut elsewhere (a simulation, a test): the bag branch of
+    calibrate/path.calibrate, which writes nothing here.
 
-    Raises RefitError when an acceptance gate fails (gates/), unless force; active is the
-    calibration in use, whose sensitivities the new one must stay near; schedule the load
-    schedule the campaign ran (None: the balance config's own), which the points must cover;
-    serial (default the config's `serial`) and operator go into the signed record (record.py).
+    options: CalibrationSettings' fields, and estimate_body (default True: the calibration body
+    from the zero points) and sources (the files the points came from, named in errors).
+    """
+    estimate_body = options.pop('estimate_body', True)
+    sources = options.pop('sources', ())
+    if 'base_model' in options:  # the name this function's option had
+        options['model'] = options.pop('base_model')
+    settings = CalibrationSettings(**options)
+    check_model(settings.model)
+    record = load_points_record(points, cut, sources)
+    reading = BagReading(estimate_body=estimate_body, progress=settings.progress)
+    return calibrate_bag(reduced_points(record, config, reading), settings)
+
+
+def check_model(model: str) -> None:
+    """RefitError unless `model` is a TM-663 base model (linear, quadratic, cubic)."""
+    if model not in MODEL_ORDERS:
+        raise RefitError(f'base model {model!r}: expected one of {", ".join(MODEL_ORDERS)}')
+
+
+def calibrate_bag(points: CalibrationPoints, settings: CalibrationSettings) -> CalibrationResult:
+    """Everything after the zero points and tare of a bag's (or a simulation's) points; pure
+    (writes nothing). Returns the fits, the diagnosis, the calibration and its report.
+
+    Raises RefitError when an acceptance gate fails (gates/), unless settings.force;
+    settings.active is the calibration in use, whose sensitivities the new one must stay near;
+    the points must cover the balance config's schedule; settings.serial (default the config's
+    `serial`) and operator go into the signed record (record.py).
     """
     from ..gates.bags import base_model_residuals, data_gates, fit_gates
     from ..gates.gate import failed, gates_report, ModelResiduals
     from ..gates.limits import acceptance_limits
     from ..gates.outputs import output_range_gate
 
-    say = progress or (lambda message: None)
-    if base_model not in MODEL_ORDERS:
-        raise RefitError(f'base model {base_model!r}: expected one of {", ".join(MODEL_ORDERS)}')
-    if len(points.label) < 10:
-        raise RefitError(
-            f'only {len(points.label)} load points: far too few to calibrate a balance'
-        )
+    bag = points.bag
+    if bag is None or bag.reduction is None or bag.config is None:
+        raise ValueError(f'{points.source}: no reduced bag points to calibrate')
+    say = settings.progress or (lambda message: None)
+    config, reduction, cut, sources = bag.config, bag.reduction, bag.cut, bag.files
+    base_model, force = settings.model, settings.force
+    check_model(base_model)
     try:
-        reduction = reduce_points(points, config, estimate_body_weight=estimate_body)
-        say(
-            f'zero points and tare applied to {len(points.label)} points '
-            f'(body {reduction.body.weight_n:.2f} N, {reduction.body_source})'
-        )
         range_gate = output_range_gate(config, reduction)
         _refuse_unless_forced([range_gate], force, sources, say)
         orders = [
@@ -164,12 +179,13 @@ def calibrate_points(
         raise RefitError(
             f'{_where(sources)}: the load points cannot be fitted ({" ".join(str(err).split())})'
         ) from None
+    loaded = bag.load_points  # the gates judge the points as cut
     gates = [range_gate] + data_gates(
-        config, points, reduction, fits, cut, active, limits, schedule
+        config, loaded, reduction, fits, cut, settings.active, limits, None
     )
-    if not diagnose:
+    if not settings.diagnose:
         gates += fit_gates(
-            config, points, base_model_residuals(reduction, fits[base_model]), limits
+            config, loaded, base_model_residuals(reduction, fits[base_model]), limits
         )
     _refuse_unless_forced(gates, force, sources, say)
     say(
@@ -180,7 +196,7 @@ def calibrate_points(
     )
 
     diagnosis = None
-    if diagnose:
+    if settings.diagnose:
         diagnosis = _run_diagnosis(reduction, config, base_model, fits[base_model], say, cut)
         if diagnosis is not None:
             # σ and outliers of the model that will be adopted (effects found included)
@@ -189,7 +205,7 @@ def calibrate_points(
             unexplained = {c: u.tracks for u in diagnosis.unexplained for c in u.components}
             extra = fit_gates(
                 config,
-                points,
+                loaded,
                 ModelResiduals(
                     diagnosis.sigma_pct_fs['after'],
                     diagnosis.residuals_after,
@@ -198,11 +214,11 @@ def calibrate_points(
                 ),
                 limits,
                 unexplained,
-                diagnosis_structure(diagnosis, points, config),
+                diagnosis_structure(diagnosis, loaded, config),
             )
         else:
             extra = fit_gates(
-                config, points, base_model_residuals(reduction, fits[base_model]), limits
+                config, loaded, base_model_residuals(reduction, fits[base_model]), limits
             )
         _refuse_unless_forced(extra, force, sources, say)
         gates += extra
@@ -210,10 +226,10 @@ def calibrate_points(
     from .report import build_calibration, build_report
 
     calibration = build_calibration(config, reduction, fits, base_model, diagnosis, sources)
-    report = build_report(config, points, reduction, fits, base_model, diagnosis, cut, sources)
+    report = build_report(config, loaded, reduction, fits, base_model, diagnosis, cut, sources)
     from ..record import signed_record
 
-    serial = serial or config.serial
+    serial = settings.serial or config.serial
     if serial:
         cast(dict, calibration.extra)['serial'] = serial
     # the lab's record first, then the numbers the report adds to it (report_sections.py)
@@ -221,7 +237,7 @@ def calibrate_points(
         **signed_record(
             balance=config.name,
             serial=serial,
-            operator=operator,
+            operator=settings.operator,
             inputs=sources,
             calibration=calibration,
         ),
@@ -240,9 +256,16 @@ def calibrate_points(
             'forced': True,
             'failed': [g.name for g in bad],
         }
+    if bag.integrity is not None:
+        report['bag_integrity'] = dict(bag.integrity)
+    if bag.started_s is not None:
+        report['wall_time_s'] = round(time.monotonic() - bag.started_s, 3)
+    if bag.clock is not None and 'record' in report:
+        # the stamps are a simulator's clock: the report must not date a campaign by them
+        report['record']['campaign']['clock'] = bag.clock
     return CalibrationResult(
         config,
-        points,
+        loaded,
         reduction,
         fits,
         base_model,
@@ -296,17 +319,6 @@ def _missing_points_warning(gates) -> list[str]:
     ]
 
 
-def _named(text: str, sources: Sequence[str]) -> str:
-    """The message with the campaign's files in front, unless it names them already."""
-    if not sources or any(str(s) in text for s in sources):
-        return text
-    return f'{_where(sources)}: {text}'
-
-
-def _where(sources: Sequence[str]) -> str:
-    return ', '.join(str(s) for s in sources) if sources else 'campaign'
-
-
 def point_scatter_for(points: LoadPoints, cut: CutSummary | None) -> dict:
     """diagnose()'s point_variance_mv2 (P, n) and point_samples (P,) in the order of `points`.
 
@@ -343,155 +355,6 @@ def _run_diagnosis(reduction, config, base_model, base_fit, say, cut=None):
     return diagnose_residuals(reduction, config, base_model=base_model, **scatter)
 
 
-def run_refit(
-    bag_paths: Sequence[str | Path],
-    balance: str | Path,
-    out_dir: str | Path,
-    *,
-    model: str = 'cubic',
-    diagnose: bool = True,
-    estimate_body: bool = True,
-    progress: Progress | None = None,
-    plots: bool = True,
-    force: bool = False,
-    salvage: bool = False,
-    active_calibration: Calibration | str | Path | None = None,
-    overwrite: bool = True,
-    schedule: str | Path | None = None,
-    serial: str | None = None,
-    operator: str | None = None,
-    written: Callable[[RefitResult], None] | None = None,
-) -> RefitResult:
-    """Refit from bags and write calibration.yaml, report.json, report.md and plots into out_dir.
-
-    Every input error, integrity failure (bags/reader.py) and failed acceptance gate raises
-    RefitError with one line naming the file; `out_dir` is checked before any work. force writes
-    a calibration that failed a gate (marked in the report); salvage reads what is intact of a
-    damaged bag and the report says what was lost; active_calibration (a Calibration or a file)
-    is the calibration in use, which the new one's sensitivities must stay near. overwrite: an
-    out_dir holding an earlier calibration record is replaced (the command line refuses it unless
-    --overwrite; output_dir.py). schedule (a CSV in the layout of ../data/*_schedule.csv): the
-    schedule the campaign ran when it is not the balance config's own; it replaces
-    config.schedule, which the gates (the schedule gate among them) judge the campaign against.
-    serial (default the balance config's) and operator: the signed record's (record.py).
-    written(result): called once calibration.yaml, report.json and report.md are in out_dir,
-    before the figures are drawn (~/refit replies then); run_refit returns after the figures.
-    """
-    from ..bags.errors import BagError
-    from ..bags.messages import SIMULATION_TOPIC
-    from ..bags.reader import read_bags
-    from ..calibration_file import load_calibration
-
-    say = progress or (lambda message: None)
-    started = time.monotonic()
-    paths = [Path(p) for p in bag_paths]
-    if not paths:
-        raise RefitError('no bags given (parameter calibration_bags is empty)')
-    out_dir = Path(out_dir)
-    check_out_dir(out_dir, overwrite)
-    _require_regular_file(balance, 'balance config')
-    try:
-        config = load_balance_config(balance)
-        if schedule is not None:
-            _require_regular_file(schedule, 'schedule')
-            from ..gates.limits import acceptance_limits
-
-            margin = acceptance_limits(config, model).capacity_margin
-            config = replace(config, schedule=schedule_for(config, schedule, margin))
-    except ConfigError as err:
-        raise RefitError(str(err)) from None
-    active = active_calibration
-    if isinstance(active, (str, Path)):
-        _require_regular_file(active, 'active calibration')
-        try:
-            active = load_calibration(active)
-        except (ConfigError, OSError) as err:  # ConfigError names the file (and line) itself
-            text = str(err) if str(err).startswith(str(active)) else f'{active}: {err}'
-            raise RefitError(f'active calibration {text}') from None
-    say(f'reading {len(paths)} bag(s)...')
-
-    said = ['']
-
-    def bag_progress(done, total):
-        line = f'read {done}/{total} messages ({100 * done / max(total, 1):.0f} %)'
-        if line != said[0]:  # the reader may report its last count twice (end of data, end of bag)
-            said[0] = line
-            say(line)
-
-    try:
-        bag = read_bags(
-            paths,
-            required=('raw', 'applied_load', 'gravity'),
-            progress=bag_progress,
-            salvage=salvage,
-            extra_topics=(SIMULATION_TOPIC,),
-        )
-    except BagError as err:
-        raise RefitError(str(err)) from None
-    for loss in bag.losses:
-        say(f'salvaged: {loss}')
-    source = ', '.join(str(p) for p in paths)
-    try:
-        points, cut = cut_load_points(bag, config, source=source)
-    except LoadPointError as err:
-        raise RefitError(str(err)) from None
-    say(
-        f'{cut.points} load points, {cut.samples_used} samples used, '
-        f'{cut.samples_rejected_outliers} outliers and {cut.samples_rejected_nan} NaN samples '
-        'rejected'
-    )
-    if cut.pauses_s:
-        say(
-            f'{len(cut.pauses_s) + 1} sessions: pauses of '
-            f'{", ".join(f"{p:.0f}" for p in cut.pauses_s)} s shortened on the time axis'
-        )
-    result = calibrate_points(
-        points,
-        config,
-        base_model=model,
-        diagnose=diagnose,
-        estimate_body=estimate_body,
-        progress=say,
-        cut=cut,
-        sources=[str(p) for p in paths],
-        active=active,
-        force=force,
-        serial=serial,
-        operator=operator,
-    )
-    result.report['bag_integrity'] = {
-        'salvaged': bool(salvage and bag.losses),
-        'lost': list(bag.losses),
-        'messages_read': dict(bag.message_counts),
-    }
-    result.report['wall_time_s'] = round(time.monotonic() - started, 3)
-    simulated = bag.extra.get(SIMULATION_TOPIC)
-    if simulated is not None and len(simulated.messages) and 'record' in result.report:
-        # the stamps are a simulator's clock: the report must not date a campaign by them
-        result.report['record']['campaign']['clock'] = str(simulated.messages[0].data)
-    say(
-        f'writing calibration.yaml, report.json, report.md{" and plots" if plots else ""} into '
-        f'{out_dir}'
-    )
-    refit = RefitResult(
-        result.calibration,
-        out_dir / 'calibration.yaml',
-        result.report,
-        summary_line(result.report),
-        out_dir,
-    )
-    out = write_outputs(
-        result,
-        out_dir,
-        plots=plots,
-        overwrite=overwrite,
-        written=None if written is None else (lambda _: written(refit)),
-        progress=say,
-    )
-    say(f'wrote {out}')
-    return refit
-
-
 def summary_line(report: Mapping) -> str:
     before, after = report['sigma_pct_fs']['before'], report['sigma_pct_fs']['after']
     parts = ' '.join(f'{c} {before[c]:.3f}->{after[c]:.3f}' for c in before)
@@ -516,8 +379,10 @@ def check_out_dir(out_dir: Path, overwrite: bool = True) -> Path:
 _MAX_CONFIG_BYTES = 64 * 1024 * 1024
 
 
-def _require_regular_file(path: str | Path, what: str) -> None:
-    """A FIFO or device would block the read or never end: refuse it before opening."""
+def require_regular_file(path: str | Path, what: str) -> None:
+    """RefitError for a path that is no regular file or too large: a FIFO or device would block
+    the read or never end, so it is refused before opening.
+    """
     import stat
 
     path = Path(path)
@@ -528,103 +393,3 @@ def _require_regular_file(path: str | Path, what: str) -> None:
         raise RefitError(f'{path}: {what} is not a regular file')
     if path.stat().st_size > _MAX_CONFIG_BYTES:
         raise RefitError(f'{path}: {what} of {path.stat().st_size} bytes is too large')
-
-
-def write_outputs(
-    result: CalibrationResult,
-    out_dir: Path,
-    *,
-    plots: bool = True,
-    overwrite: bool = True,
-    written: Callable[[Path], None] | None = None,
-    progress: Progress | None = None,
-) -> Path:
-    """Write the files into a staging directory, then move them in (nothing half-written).
-
-    output_dir.py says how: a new out_dir appears whole with one rename; into an existing one
-    (allowed with overwrite) the earlier run's outputs not written again are removed and each
-    file is replaced by a rename. Files are readable by others (0644, directory 0755).
-
-    The figures come last, off the critical path: calibration.yaml, report.json and report.md
-    (which already names every figure) are installed first and `written(out_dir)` is called;
-    then each figure is drawn into a staging directory and renamed into out_dir. A figure that
-    cannot be drawn is said (progress, report's `warnings`) and left out of report.md's links;
-    the calibration stays.
-    """
-    from ..output_dir import install_outputs, make_staging
-    from .report import report_markdown
-
-    out_dir = Path(out_dir)
-    figures = []
-    if plots:
-        from .plots import figure_plan
-
-        figures = figure_plan(result)
-    result.report.setdefault('plots', [name for name, _ in figures])
-    staging = make_staging(out_dir, check_out_dir(out_dir, overwrite), 'refit')
-    try:
-        save_calibration(staging / 'calibration.yaml', result.calibration)
-        (staging / 'report.json').write_text(
-            json.dumps(result.report, indent=2, allow_nan=False) + '\n'
-        )
-        (staging / 'report.md').write_text(report_markdown(result.report, result))
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    out = install_outputs(staging, out_dir, overwrite=overwrite)
-    if written is not None:
-        written(out)
-    if figures:
-        _draw_figures(result, figures, out, progress or (lambda message: None))
-    return out
-
-
-def _draw_figures(result: CalibrationResult, figures, out_dir: Path, say: Progress) -> None:
-    """Draw (name, draw) into a staging directory in out_dir and rename each into place; a
-    failure is told and taken out of the report (report.json, report.md rewritten atomically).
-    """
-    from ..calibration_file import write_text_atomically
-    from ..figure_png import draw_figures
-    from ..output_dir import FILE_MODE, make_staging
-    from .report import report_markdown
-
-    staging = make_staging(out_dir, out_dir, 'refit')
-    try:
-        # the residual figures share one figure (refit/plots.py); the others are drawn beside
-        failed = draw_figures(
-            figures, staging, beside=lambda name: not name.startswith('residuals_')
-        )
-        for name in dict.fromkeys(name for name, _ in figures):  # a name drawn twice: once
-            if name not in failed:
-                os.chmod(staging / name, FILE_MODE)
-                os.replace(staging / name, out_dir / name)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-    if not failed:
-        return
-    report = result.report
-    report['plots'] = [name for name in report.get('plots', []) if name not in failed]
-    report['warnings'] = list(report.get('warnings', [])) + [
-        f'figure {name} could not be drawn ({why}); the calibration is not affected'
-        for name, why in failed.items()
-    ]
-    for line in report['warnings'][-len(failed) :]:
-        say(line)
-    write_text_atomically(
-        out_dir / 'report.json', json.dumps(report, indent=2, allow_nan=False) + '\n'
-    )
-    write_text_atomically(out_dir / 'report.md', report_markdown(report, result))
-
-
-def campaign_points(campaign) -> LoadPoints:
-    """LoadPoints straight from a simulated Campaign (no bag), for the demo and tests."""
-    means, times, temps = campaign.point_means()
-    return LoadPoints(
-        np.asarray(campaign.point),
-        means,
-        times,
-        temps,
-        np.asarray(campaign.orientation),
-        campaign.gravity,
-        campaign.applied_loads,
-    )

@@ -2,7 +2,8 @@
 uncertainty.
 
 Pure (writes nothing): `calibrate_table` returns the Calibration (loadable by balance_calibrator),
-the report dict (interfaces.md keys) and per-point rows; `commands/fit.py` writes them.
+the report dict (interfaces.md keys) and per-point rows; calibrate/path.calibrate runs it for a
+table's points and calibrate/write_record.py writes them.
 """
 
 from __future__ import annotations
@@ -43,7 +44,14 @@ from .model_selection import (
     with_statistics,
 )
 from .odd_components import odd_components
-from .table_report import build_report, in_file_units, point_rows, sigma_pct, signing_sections
+from .table_report import (
+    build_report,
+    FormChoice,
+    in_file_units,
+    point_rows,
+    sigma_pct,
+    signing_sections,
+)
 from .term_screen import linear_response
 from .validation import coverage_warning, FormValidation, range_warnings, validate_form
 
@@ -218,13 +226,10 @@ def calibrate_table(
         table,
         validation,
         fits,
-        chosen,
-        why,
-        term_sets,
+        FormChoice(chosen, why, term_sets, {m: c.candidate.term_set for m, c in choices.items()}),
         validation_sigma,
         validation_u,
         t95,
-        {m: c.candidate.term_set for m, c in choices.items()},
     )
     report['terms_dropped'] = {m: terms_dropped(c) for m, c in choices.items()}
     # the loop closed on the table: effects found in its points and adopted beyond chance

@@ -1,11 +1,12 @@
 """A calibration campaign recorded as bags -> the BALFIT-style table other tools read.
 
-The bag is reduced exactly as `refit` reduces it (load points, zero points §5(4), calibration-body
-tare §6-7 with the tare outputs from the fitted cubic's inverse): the table holds the corrected
-total loads (N, N·m) and the zero-corrected outputs (mV), one load series (the body tare is
-already in the loads, so its fitted tare is the model's constant, nothing else) and a natural zero
-of 0 at four roll angles. Fitting that table with the direct method and the tm663-cubic terms gives
-the refit's cubic calibration.
+The bag is read by refit's reader (refit/bag_points.py: load points, zero points §5(4),
+calibration-body tare §6-7 with the tare outputs from a fitted cubic's inverse, as the refit
+reduces it before its fits; no fit of the calibration, no gate, no report): the table holds the
+corrected total loads (N, N·m) and the zero-corrected outputs (mV), one load series (the body
+tare is already in the loads, so its fitted tare is the model's constant, nothing else) and a
+natural zero of 0 at four roll angles. Fitting that table with the direct method and the
+tm663-cubic terms gives the refit's cubic calibration.
 """
 
 from __future__ import annotations
@@ -24,8 +25,14 @@ class ExportError(ValueError):
 
 
 def corrected_table(config, corrected, name: str = '') -> CalibrationTable:
-    loads = np.asarray(corrected.loads, float)
-    outputs = np.asarray(corrected.bridge_outputs_mv, float)
+    """loads_table of corrected data (reduction.CorrectedData: loads, bridge_outputs_mv)."""
+    return loads_table(config, corrected.loads, corrected.bridge_outputs_mv, name)
+
+
+def loads_table(config, loads, outputs, name: str = '') -> CalibrationTable:
+    """The table of corrected points: total loads (N, 6) N / N·m, outputs (N, 6) mV, one series."""
+    loads = np.asarray(loads, float)
+    outputs = np.asarray(outputs, float)
     n = len(loads)
     units = tuple('N' if c.startswith('F') else 'N-m' for c in config.components)
     return CalibrationTable(
@@ -52,21 +59,22 @@ def corrected_table(config, corrected, name: str = '') -> CalibrationTable:
 
 
 def export_bags_table(bags: Sequence[str | Path], balance: str, out: Path) -> tuple[Path, int]:
-    from ..bags.errors import BagError
-    from ..bags.reader import read_bags
+    """Write the corrected points of the campaign in `bags` to `out`; returns (out, points).
+
+    ExportError (one line naming the file) when the config or the bags cannot be read or the
+    points cannot be reduced.
+    """
     from ..calibration_file import ConfigError
     from ..config import load_balance_config
-    from ..refit.load_points import cut_load_points, LoadPointError
-    from ..refit.pipeline import calibrate_points, RefitError
+    from ..refit.bag_points import BagReading, read_bag_points
+    from ..refit.errors import RefitError
 
     try:
         config = load_balance_config(balance)
-        bag = read_bags([Path(b) for b in bags], required=('raw', 'applied_load', 'gravity'))
-        points, cut = cut_load_points(bag, config, source=', '.join(map(str, bags)))
-        result = calibrate_points(points, config, diagnose=False, cut=cut)
-    except (ConfigError, BagError, LoadPointError, RefitError) as err:
+        points = read_bag_points(bags, config, BagReading(tare_model='cubic'))
+    except (ConfigError, RefitError) as err:
         raise ExportError(str(err)) from None
-    table = corrected_table(config, result.reduction.corrected)
+    table = loads_table(config, points.applied_loads, points.outputs)
     write_table(
         out, table, comments=[f'exported by balance-calib from {", ".join(map(str, bags))}']
     )

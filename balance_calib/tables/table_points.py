@@ -40,3 +40,12 @@ def points_from_table(table, outputs: np.ndarray) -> CalibrationPoints:
         series=np.asarray(table.series, int),
         channels=tuple(channels),
     )
+
+
+def table_calibration_points(table) -> CalibrationPoints:
+    """The points of a CalibrationTable (its outputs as written) carrying the table itself, for
+    calibrate/path.calibrate.
+    """
+    from dataclasses import replace
+
+    return replace(points_from_table(table, table.bridge_outputs), table=table)

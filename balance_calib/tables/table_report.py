@@ -4,6 +4,9 @@ tables"): σ in % of capacity, the forms compared, tares in the file's units, wa
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any, Mapping
+
 import numpy as np
 import scipy.stats
 
@@ -52,21 +55,30 @@ def in_file_units(values_si, table) -> np.ndarray:
     return np.asarray(values_si) / table.load_factor
 
 
+@dataclass(frozen=True)
+class FormChoice:
+    """The form adopted and why, with each form's terms (term_sets) and their set's name."""
+
+    chosen: str
+    why: str
+    term_sets: Mapping
+    term_set_names: Mapping[str, str]
+
+
 def build_report(
     table,
     validation,
     fits,
-    chosen,
-    why,
-    term_sets,
+    choice: FormChoice,
     validation_sigma,
     validation_u,
     t95,
-    term_set_names,
 ) -> dict:
-    """report.json of a table calibration (interfaces.md keys); fits, term_sets and
-    term_set_names by form.
+    """report.json of a table calibration (interfaces.md keys); fits, validation_sigma
+    ((σ, residuals) by form) and validation_u (uncertainty by form) by form.
     """
+    chosen, why = choice.chosen, choice.why
+    term_sets, term_set_names = choice.term_sets, choice.term_set_names
     fit = fits[chosen]
     loads = table.load_symbols
     capacity = table.load_capacity_si
@@ -95,7 +107,7 @@ def build_report(
         compared[m] = entry
     stats = {m: f.statistics.to_report() for m, f in fits.items() if f.statistics is not None}
     weak = {m: f.statistics.weak_terms() for m, f in fits.items() if f.statistics is not None}
-    report = {
+    report: dict[str, Any] = {
         'balance': table.balance_name or 'balance',
         'format': 'balfit',
         'method': chosen,

@@ -125,7 +125,7 @@ def test_refit_record_serial_operator_inputs_and_signature_lines(campaigns, tmp_
 
 
 def test_the_serial_comes_from_the_balance_config(campaigns, tmp_path):
-    from balance_calib.refit.pipeline import run_refit
+    from balance_calib.calibrate.from_bags import run_refit
 
     assert load_balance_config('lmc6522').serial is None
     config = tmp_path / 'lmc6522_s.yaml'

@@ -17,13 +17,14 @@ import numpy as np
 import pytest
 
 from balance_calib.bags.reader import read_bags
+from balance_calib.calibrate.from_bags import run_refit
 from balance_calib.config import load_balance_config
 from balance_calib.diagnosis.coherence import diagnosis_structure
 from balance_calib.gates.bags import fit_gates
 from balance_calib.gates.gate import ModelResiduals
 from balance_calib.gates.limits import acceptance_limits
 from balance_calib.refit.load_points import cut_load_points
-from balance_calib.refit.pipeline import calibrate_points, RefitError, run_refit
+from balance_calib.refit.pipeline import calibrate_points, RefitError
 from balance_calib.simulation.balance_sim import (
     simulate_campaign,
     SimulationSettings,

@@ -27,9 +27,10 @@ from balance_calib.benchmarks.refit_reliability import (
     small_campaign,
     write_mcap,
 )
+from balance_calib.calibrate.from_bags import run_refit
 from balance_calib.calibration_file import load_calibration
 from balance_calib.config import load_balance_config
-from balance_calib.refit.pipeline import RefitError, run_refit
+from balance_calib.refit.pipeline import RefitError
 
 
 @pytest.fixture(scope='module')

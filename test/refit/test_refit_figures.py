@@ -7,10 +7,13 @@ import json
 
 import numpy as np
 
+from balance_calib.calibrate.records import bag_record
+from balance_calib.calibrate.write_record import write_record
 from balance_calib.calibration_file import load_calibration
+from balance_calib.calibration_settings import RecordOptions
 from balance_calib.figure_png import decimated, draw_figures
 from balance_calib.refit import plots
-from balance_calib.refit.pipeline import calibrate_points, write_outputs
+from balance_calib.refit.pipeline import calibrate_points
 
 
 def _result(campaigns, lmc6522):
@@ -25,7 +28,10 @@ def test_record_is_written_before_the_figures(campaigns, lmc6522, tmp_path):
         seen['files'] = sorted(p.name for p in directory.iterdir() if not p.name.startswith('.'))
         seen['plots'] = json.loads((directory / 'report.json').read_text())['plots']
 
-    write_outputs(_result(campaigns, lmc6522), out, written=written)
+    write_record(
+        bag_record(_result(campaigns, lmc6522)),
+        RecordOptions(out, written=lambda _, directory: written(directory)),
+    )
     models = ['residuals_linear.png', 'residuals_quadratic.png', 'residuals_cubic.png']
     assert seen['files'] == ['calibration.yaml', 'report.json', 'report.md']
     assert seen['plots'] == models  # report.md's links are known before the figures exist
@@ -47,7 +53,7 @@ def test_a_failed_figure_is_said_and_loses_nothing_else(campaigns, lmc6522, tmp_
     monkeypatch.setattr(plots, 'figure_plan', broken_quadratic)
     said = []
     result = _result(campaigns, lmc6522)
-    out = write_outputs(result, tmp_path / 'out', progress=said.append)
+    out = write_record(bag_record(result), RecordOptions(tmp_path / 'out'), said.append)
     assert load_calibration(out / 'calibration.yaml').model().name == 'cubic'
     report = json.loads((out / 'report.json').read_text())
     assert report['plots'] == ['residuals_linear.png', 'residuals_cubic.png']

@@ -9,10 +9,11 @@ import subprocess
 import numpy as np
 import pytest
 
+from balance_calib.calibrate.from_bags import run_refit
 from balance_calib.calibration_file import load_calibration
 from balance_calib.config import load_balance_config
 from balance_calib.model.inverse import outputs_for_loads
-from balance_calib.refit.pipeline import RefitError, run_refit
+from balance_calib.refit.pipeline import RefitError
 
 REPORT_KEYS = {
     'balance',

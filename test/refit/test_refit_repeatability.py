@@ -12,10 +12,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from balance_calib.calibrate.from_bags import run_refit
 from balance_calib.config import load_balance_config
 from balance_calib.model.inverse import linear_part
 from balance_calib.model.tm663 import tm663_terms
-from balance_calib.refit.pipeline import run_refit
 from balance_calib.simulation.balance_sim import (
     simulate_campaign,
     SimulationSettings,

@@ -71,9 +71,9 @@ def test_too_few_points_and_nothing_determinable_say_so_in_one_line(tmp_path):
 
 
 def test_export_table_fitted_with_defaults_equals_the_refit_cubic(tmp_path, capsys, campaigns):
+    from balance_calib.calibrate.from_bags import run_refit
     from balance_calib.calibration_file import load_calibration
     from balance_calib.config import load_balance_config
-    from balance_calib.refit.pipeline import run_refit
 
     config = load_balance_config('lmc6522')
     bag = campaigns.bag(seed=29, recipe='bag')

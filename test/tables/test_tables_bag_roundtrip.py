@@ -5,9 +5,9 @@ series tare takes the place of the cubic's constant terms.
 
 import numpy as np
 
+from balance_calib.calibrate.from_bags import run_refit
 from balance_calib.cli import main
 from balance_calib.config import load_balance_config
-from balance_calib.refit.pipeline import run_refit
 from balance_calib.tables.balfit_reader import read_table
 from balance_calib.tables.calibrate import calibrate_table
 

@@ -12,8 +12,11 @@ import numpy as np
 from PIL import Image
 import pytest
 
+from balance_calib.calibrate.records import bag_record
+from balance_calib.calibrate.write_record import write_record
+from balance_calib.calibration_settings import RecordOptions
 from balance_calib.config import load_balance_config
-from balance_calib.refit.pipeline import calibrate_points, write_outputs
+from balance_calib.refit.pipeline import calibrate_points
 from balance_calib.refit.plots import CLIP_PCT, describe_variable, point_categories
 from balance_calib.refit.report_sections import add_lab_units_to_report
 from balance_calib.simulation.balance_sim import (
@@ -55,7 +58,7 @@ def refit(tmp_path_factory, campaigns):
     config = load_balance_config('lmc6522')
     result = calibrate_points(campaigns.points(seed=3, effects=DEMO_EFFECTS), config)
     out = tmp_path_factory.mktemp('refit')
-    write_outputs(result, out)
+    write_record(bag_record(result), RecordOptions(out))
     return result, out, (out / 'report.md').read_text()
 
 
@@ -285,7 +288,7 @@ def test_a_simulated_bag_is_not_dated_as_a_campaign(tmp_path):
         small_campaign,
         write_mcap,
     )
-    from balance_calib.refit.pipeline import run_refit
+    from balance_calib.calibrate.from_bags import run_refit
     from balance_calib.simulation.campaign_bag import write_campaign_bag
 
     config = load_balance_config('lmc6522')

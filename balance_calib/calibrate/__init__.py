@@ -1,0 +1,1 @@
+"""One calibration path for every source of points (bags, simulations, tables)."""
