@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from balance_calib.coverage.support import ScheduleSupport
-from balance_calib.live.calibrator_core import OK, WARN
+from balance_calib.live.diagnostics_status import OK, WARN
 from balance_calib.live.raw_codec import decode_wrenches, WrenchEncoder
 from balance_calib.live.stream import LiveCalibrator
 from balance_calib.live.support_share import SupportSampler

@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from balance_calib.calibration_file import save_calibration
-from balance_calib.live.calibrator_core import OK, WARN
+from balance_calib.live.diagnostics_status import OK, WARN
 from balance_calib.live.parameters import PARAMETERS, STRING_ARRAY
 from balance_calib.live.session import CalibratorSession
 from balance_calib.live.tare_store import calibration_sha256, restore_refusal, TareOwner
