@@ -66,6 +66,7 @@ def check_steady(
     scatter = np.std(values, axis=0) / noise
     step = np.abs(values[n // 2 :].mean(axis=0) - values[: n // 2].mean(axis=0)) / noise
     worst_scatter, worst_step = int(np.argmax(scatter)), int(np.argmax(step))
+    ratios = (float(scatter.max()), float(step.max()))
     if step[worst_step] > max_ratio:
         k = worst_step
         delta = values[n // 2 :, k].mean() - values[: n // 2, k].mean()
@@ -73,8 +74,7 @@ def check_steady(
             False,
             f'{names[k]} moved by {delta:+.4g} {units[k]} within the window '
             f'({step[k]:.0f}x its noise {noise[k]:.3g} {units[k]}): a load step or ramp',
-            float(scatter.max()),
-            float(step.max()),
+            *ratios,
         )
     if scatter[worst_scatter] > max_ratio:
         k = worst_scatter
@@ -82,10 +82,9 @@ def check_steady(
             False,
             f'{names[k]} scatters by {np.std(values[:, k]):.4g} {units[k]} '
             f'({scatter[k]:.1f}x its sample-to-sample noise {noise[k]:.3g} {units[k]})',
-            float(scatter.max()),
-            float(step.max()),
+            *ratios,
         )
-    return Steadiness(True, '', float(scatter.max()), float(step.max()))
+    return Steadiness(True, '', *ratios)
 
 
 @dataclass
