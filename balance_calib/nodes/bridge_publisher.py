@@ -68,6 +68,7 @@ from balance_calib.simulation.wind_on import (
 )
 from balance_calib.tunnel_axes import parse_installation
 
+from ._messages import set_wrench
 from ._parameters import declare_table
 from ._qos import STREAM_QOS
 from ._run import run_node
@@ -458,14 +459,7 @@ class BridgePublisher(Node):
                 AERO_TRUTH: 'body',
                 AERO_TRUTH_WIND: 'wind',
             }.get(kind, 'tunnel')
-            (
-                msg.wrench.force.x,
-                msg.wrench.force.y,
-                msg.wrench.force.z,
-                msg.wrench.torque.x,
-                msg.wrench.torque.y,
-                msg.wrench.torque.z,
-            ) = (float(v) for v in values)
+            set_wrench(msg.wrench, values)
         elif kind in (tl.GRAVITY, ATTITUDE):
             msg = Vector3Stamped()
             msg.header.frame_id = 'balance' if kind == tl.GRAVITY else 'tunnel'
