@@ -340,7 +340,8 @@ def raw_relay_main(both_topics: bool = False) -> None:
         rclpy.try_shutdown()
 
 
-def start_process(command, env):
+def start_process(command: list[str], env: dict[str, str]) -> subprocess.Popen:
+    """Start a measured node in its own session, its output discarded; stop_process ends it."""
     return subprocess.Popen(
         command,
         env=env,
@@ -350,7 +351,8 @@ def start_process(command, env):
     )
 
 
-def stop_process(process):
+def stop_process(process: subprocess.Popen) -> None:
+    """SIGINT to the node's process group; SIGKILL when it has not ended within 10 s."""
     os.killpg(process.pid, signal.SIGINT)
     try:
         process.wait(timeout=10)
@@ -359,6 +361,7 @@ def stop_process(process):
 
 
 def machine_line() -> str:
+    """The machine, Python and rmw the benchmark ran on and the load average, as one line."""
     load = os.getloadavg()
     return (
         f'machine: {platform.machine()}, {os.cpu_count()} cores, Python '

@@ -38,6 +38,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..calibration_file import ConfigError
 from ..model.active_calibration import ActiveCalibration, six_axis_loads
@@ -124,12 +125,17 @@ class WrenchBatch:
 
     @property
     def nonfinite(self) -> np.ndarray:
+        """(N,) True for the samples rejected as not finite (neither saturated nor unsolved)."""
         rejected = ~self.accepted & ~self.saturated
         return rejected if self.not_converged is None else rejected & ~self.not_converged
 
 
 def model_loads(
-    active: ActiveCalibration, outputs_mv, *, temperature_c=None, load_direction=None
+    active: ActiveCalibration,
+    outputs_mv: ArrayLike,
+    *,
+    temperature_c: ArrayLike | None = None,
+    load_direction: np.ndarray | None = None,
 ) -> tuple[np.ndarray, str, str]:
     """Balance-axis loads (N, 6) of finite outputs (N, 6); also the model used and why a
     fallback.
@@ -180,7 +186,7 @@ def _plain_loads(
     return design @ active.coefficients_six_t, design  # zero columns: components it lacks
 
 
-def _rows(outputs_mv) -> np.ndarray:
+def _rows(outputs_mv: ArrayLike) -> np.ndarray:
     """Samples as a float array (N, 6), without a copy when they are one already."""
     if type(outputs_mv) is np.ndarray and outputs_mv.ndim == 2 and outputs_mv.dtype == float:
         return outputs_mv
@@ -189,14 +195,14 @@ def _rows(outputs_mv) -> np.ndarray:
 
 def compute_wrench(
     active: ActiveCalibration,
-    outputs_mv,
+    outputs_mv: ArrayLike,
     *,
-    zero_mv=None,
-    tare_load=None,
-    temperature_c=None,
-    load_direction=None,
-    zero_temperature_c=None,
-    zero_direction=None,
+    zero_mv: ArrayLike | None = None,
+    tare_load: ArrayLike | None = None,
+    temperature_c: ArrayLike | None = None,
+    load_direction: np.ndarray | None = None,
+    zero_temperature_c: float | None = None,
+    zero_direction: np.ndarray | None = None,
 ) -> WrenchBatch:
     """Raw outputs (N, 6) mV -> wrench in tunnel axes (N, 6); see the module docstring.
 
@@ -219,15 +225,16 @@ def compute_wrench(
 
 
 def _compute_wrench(
-    active,
-    outputs,
-    zero_mv,
-    tare_load,
-    temperature_c,
-    load_direction,
-    zero_temperature_c,
-    zero_direction,
+    active: ActiveCalibration,
+    outputs: np.ndarray,
+    zero_mv: ArrayLike | None,
+    tare_load: ArrayLike | None,
+    temperature_c: ArrayLike | None,
+    load_direction: np.ndarray | None,
+    zero_temperature_c: float | None,
+    zero_direction: np.ndarray | None,
 ) -> WrenchBatch:
+    """compute_wrench on float rows (N, 6), floating-point warnings already silenced."""
     n = len(outputs)
     # the whole batch checked at once (at 1 kHz a batch is one sample): per-sample masks only
     # for a batch where some output is not finite or beyond the bridge's range
@@ -301,8 +308,17 @@ def _compute_wrench(
 
 
 def _loads_with_zero(
-    active, zeroed, temperature_c, load_direction, zero_mv, zero_temperature_c, zero_direction
-):
+    active: ActiveCalibration,
+    zeroed: np.ndarray,
+    temperature_c: ArrayLike | None,
+    load_direction: np.ndarray | None,
+    zero_mv: ArrayLike | None,
+    zero_temperature_c: float | None,
+    zero_direction: np.ndarray | None,
+) -> tuple[np.ndarray, str, str]:
+    """model_loads of the zeroed outputs (loads, model used, why a fallback); with a zero and a
+    model with temperature or direction terms, less what those terms gave when the zero was taken.
+    """
     loads, name, reason = model_loads(
         active, zeroed, temperature_c=temperature_c, load_direction=load_direction
     )

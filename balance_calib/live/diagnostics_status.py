@@ -66,6 +66,7 @@ class InputCounters:
             self.period_out_of_envelope += out
 
     def start_period(self) -> None:
+        """Zero the counts of the diagnostics period (a report was sent)."""
         self.period_received = self.period_rejected = self.period_out_of_envelope = (
             self.period_saturated
         ) = 0

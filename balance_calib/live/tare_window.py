@@ -99,6 +99,7 @@ class TareWindow:
     temperatures_c: list = field(default_factory=list)
 
     def __post_init__(self) -> None:
+        """ValueError for a window of fewer than one sample."""
         if int(self.samples) < 1:
             raise ValueError(f'tare needs at least one sample, not {self.samples}')
 
