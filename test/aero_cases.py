@@ -11,7 +11,7 @@ from balance_calib.calibration_file import load_calibration
 from balance_calib.config import load_balance_config
 from balance_calib.model.active_calibration import activate, six_axis_loads
 from balance_calib.simulation.balance_sim import noise_mv_for_load_sigma
-from balance_calib.simulation.wind_on import aero_run_profile, wind_on_outputs
+from balance_calib.simulation.wind_on import aero_run_profile, TunnelRun, wind_on_outputs
 from balance_calib.tunnel_axes import UPRIGHT
 
 CONFIG = load_balance_config('lmc6522')
@@ -27,13 +27,11 @@ def simulated_run(
     profile = aero_run_profile(
         model,
         UPRIGHT,
-        rate_hz,
-        q_pa=q_pa,
+        TunnelRun(
+            q_pa=q_pa, rate_hz=rate_hz, alphas_deg=tuple(alphas), hold_s=0.5, wind_off_hold_s=0.5
+        ),
         weight_n=TRUE_WEIGHT_N,
         cg_m=TRUE_CG_M,
-        alphas_deg=tuple(alphas),
-        hold_s=0.5,
-        wind_off_hold_s=0.5,
     )
     truth = CONFIG.matrices['cubic']
     samples_per_hold = round(0.5 * rate_hz)

@@ -53,8 +53,8 @@ class RunSamples:
 
 
 def parse_zero_mv(text: str) -> np.ndarray | None:
-    """balance_calibrator's /diagnostics `zero_mv` ('FXV=+0.04000, FYV=…', calibrator_core) ->
-    (6,) mV, bridges it does not name 0; None for 'none' or what does not parse.
+    """balance_calibrator's /diagnostics `zero_mv` ('FXV=+0.04000, FYV=…', diagnostics_status)
+    -> (6,) mV, bridges it does not name 0; None for 'none' or what does not parse.
     """
     zero = np.zeros(6)
     try:

@@ -258,9 +258,7 @@ class LiveReduction:
             attitudes,
             q,
             self.settings,
-            self.model,
             self.tracker,
-            self.sigma_loads,
         )
         request.finish(True, f'{request.samples} samples averaged', point, stamp)
 
@@ -284,9 +282,7 @@ class LiveReduction:
             support,
             q,
             self.settings,
-            self.model,
             self.tracker,
-            self.sigma_loads,
         )
         self.counters.points += int(not point.wind_off and point.reduced is not None)
         points.append(LivePoint(self._hold[b - 1][0], point))

@@ -157,25 +157,16 @@ def zero_from_the_bag(samples: RunSamples, calibration: Calibration):
     return zero, source, warnings
 
 
-def reduce_bags(
-    bags: Sequence[str | Path],
-    calibration_path: str,
-    model_path: str,
-    *,
-    compare: Sequence[str] = (),
-    calibration_model: str = 'adopted',
-    installation: str = 'upright',
-    settings: HoldSettings = HoldSettings(),
-    max_input_age_s: float = DEFAULT_MAX_INPUT_AGE_S,
-    estimate_weight: bool = False,
-    raw_topic: str = '/balance/raw',
-    attitude_topic: str = '/model/attitude',
-    dynamic_pressure_topic: str = '/tunnel/dynamic_pressure',
-    electrical_zero_mv=None,
-    zero_drift: str = 'linear',
-) -> Reduction:
-    """Everything `reduce` computes. Raises ReduceError (or ConfigError/BagError) naming the input.
+@dataclass(frozen=True)
+class ReduceOptions:
+    """How `reduce` treats a run (its options; the defaults are the command's).
 
+    compare: other calibration models to reduce the run through; calibration_model: the model of
+    the main columns ('adopted': the calibration's); installation: upright, inverted or a signed
+    permutation; settings: how holds are found and averaged; max_input_age_s: attitude and q∞
+    older than this at a raw sample make it stale; estimate_weight: weight and CG from the
+    wind-off sweep even if the model file declares them; raw_topic, attitude_topic,
+    dynamic_pressure_topic: the topics in the bags.
     electrical_zero_mv (6,): the bridge outputs with nothing on the balance (the calibrator's
     ~/zero), subtracted from the raw outputs before the calibration (output space, exact for any
     model); what remains constant is taken by the wind-off sweep's offsets in load space. None:
@@ -184,13 +175,43 @@ def reduce_bags(
     zero_drift 'linear' | 'none': the offsets interpolated in time between the pre-run and
     post-run wind-off sweeps, or the pre-run ones throughout (zero_drift.py).
     """
+
+    compare: Sequence[str] = ()
+    calibration_model: str = 'adopted'
+    installation: str = 'upright'
+    settings: HoldSettings = HoldSettings()
+    max_input_age_s: float = DEFAULT_MAX_INPUT_AGE_S
+    estimate_weight: bool = False
+    raw_topic: str = '/balance/raw'
+    attitude_topic: str = '/model/attitude'
+    dynamic_pressure_topic: str = '/tunnel/dynamic_pressure'
+    electrical_zero_mv: Sequence[float] | np.ndarray | None = None
+    zero_drift: str = 'linear'
+
+
+def reduce_bags(
+    bags: Sequence[str | Path],
+    calibration_path: str,
+    model_path: str,
+    options: ReduceOptions = ReduceOptions(),
+) -> Reduction:
+    """Everything `reduce` computes, as `options` say (ReduceOptions). Raises ReduceError (or
+    ConfigError/BagError) naming the input.
+    """
+    compare, calibration_model, installation, settings = (
+        options.compare,
+        options.calibration_model,
+        options.installation,
+        options.settings,
+    )
+    max_input_age_s, electrical_zero_mv = options.max_input_age_s, options.electrical_zero_mv
     try:
         calibration = load_calibration(calibration_path)
         model = load_model(model_path)
         parsed = parse_installation(installation)
     except ValueError as err:  # ConfigError too
         raise ReduceError(str(err)) from None
-    if estimate_weight:
+    if options.estimate_weight:
         model = model.with_estimated_weight()
     main_name = calibration.adopted if calibration_model in ('adopted', '') else calibration_model
     names = [main_name] + [n for n in compare if n != main_name]
@@ -201,9 +222,9 @@ def reduce_bags(
             )
     samples = read_run(
         bags,
-        raw_topic=raw_topic,
-        attitude_topic=attitude_topic,
-        dynamic_pressure_topic=dynamic_pressure_topic,
+        raw_topic=options.raw_topic,
+        attitude_topic=options.attitude_topic,
+        dynamic_pressure_topic=options.dynamic_pressure_topic,
         max_input_age_s=max_input_age_s,
     )
     if len(samples.q_pa) == 0:
@@ -242,7 +263,7 @@ def reduce_bags(
                 model,
                 settings,
                 sigma,
-                zero_drift,
+                options.zero_drift,
             )
         except ValueError as err:  # the mode
             raise ReduceError(str(err)) from None

@@ -175,13 +175,12 @@ def held_point(
     support,
     q_pa,
     settings: HoldSettings,
-    model: ModelDescription,
     tracker: TareTracker,
-    sigma_loads,
 ) -> HeldPoint:
     """The point of one hold from its samples (n, 6), (n, 3), (n,). Wind-off points go to the
-    tracker.
+    tracker; wind-on points are reduced with the tracker's model and load σ.
     """
+    model, sigma_loads = tracker.model, tracker.sigma_loads
     readings, support, q = (
         np.asarray(readings, float),
         np.asarray(support, float),
@@ -248,9 +247,7 @@ def reduce_run(
         if chosen is None:
             continue
         a, b = chosen
-        point = held_point(
-            index, a, readings[a:b], support[a:b], q[a:b], settings, model, tracker, sigma_loads
-        )
+        point = held_point(index, a, readings[a:b], support[a:b], q[a:b], settings, tracker)
         if tracker.tare is not None and (not tares or tracker.tare is not tares[-1]):
             tares.append(tracker.tare)
         points.append(point)

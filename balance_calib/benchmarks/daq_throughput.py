@@ -30,15 +30,8 @@ import time
 
 import numpy as np
 
-from .live_throughput import (
-    _machine_line,
-    _start,
-    _stop,
-    first_loss_rate,
-    Harness,
-    medians_at_1k,
-    zero_loss_rate,
-)
+from .dds_harness import Harness, machine_line, start_process, stop_process
+from .loss_summary import first_loss_rate, medians_at_1k, zero_loss_rate
 
 PRESETS = Path(__file__).resolve().parents[2] / 'config' / 'daq'
 UDP_RDT, TCP_LINES = 'balance_daq, udp RDT', 'balance_daq, tcp lines'
@@ -229,13 +222,13 @@ def throughput(udp_rates, tcp_rates, seconds: float, trials: int) -> dict:
                     else None
                 )
                 rates = relay_rates
-            process = None if command is None else _start(command, env)
+            process = None if command is None else start_process(command, env)
             try:
                 _measure(label, harness, process, rates, seconds, trials, summary)
             finally:
                 harness.close()
                 if process is not None:
-                    _stop(process)
+                    stop_process(process)
     finally:
         rclpy.try_shutdown()
     report(summary, ceilings, seconds, trials)
@@ -243,7 +236,7 @@ def throughput(udp_rates, tcp_rates, seconds: float, trials: int) -> dict:
 
 
 def report(summary: dict, ceilings: dict, seconds: float, trials: int) -> None:
-    print('\n' + _machine_line())
+    print('\n' + machine_line())
     print(
         f'{trials} trial(s) of {seconds:g} s per rate; device source alone, unpaced: '
         + ', '.join(

@@ -34,6 +34,8 @@ latency.
 
 `--refit BAG` measures what issue 12 asks of ~/refit: the calibrator's latency at 1 kHz while quiet
 and while ~/refit fits BAG (in its own process), p50/p99/max, and that no sample is lost.
+
+The harness is dds_harness.py, the summary's rules loss_summary.py.
 """
 
 from __future__ import annotations
@@ -41,300 +43,26 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
-import signal
-import subprocess
 import sys
 import threading
 import time
 
 import numpy as np
 
-QOS_DEPTH = 1000
-UNCERTAINTY_TOPIC = '/balance/wrench_uncertainty'
+from .dds_harness import (
+    Harness,
+    machine_line,
+    QOS_DEPTH,
+    raw_relay_main,
+    sink_main,
+    start_process,
+    stop_process,
+)
+from .loss_summary import cpu_budget, first_loss_rate, medians_at_1k, zero_loss_rate
+
 BOTH_TOPICS = 'raw relay, 2 topics'
 PURE_CORE = 'calibrator, pure core'
 WRENCH_ONLY = 'calibrator, wrench only'
-CDR_LE = b'\x00\x01\x00\x00'
-
-
-def raw_template(frame_id: str = 'LMC6522') -> bytearray:
-    from balance_calib.live.raw_codec import WrenchEncoder
-
-    encoder = WrenchEncoder(frame_id)
-    values = np.zeros((1, 6))
-    values[0, :3] = 0.1, 0.0, 0.2  # inside the calibrated envelope
-    return bytearray(encoder.encode(np.zeros(1, np.int64), values)[0])
-
-
-def stamped(template: bytearray, stamp_ns: int) -> bytes:
-    """A copy of a serialized WrenchStamped (little-endian CDR) with header.stamp set to
-    stamp_ns.
-    """
-    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
-    template[4:8] = sec.to_bytes(4, 'little', signed=True)
-    template[8:12] = nanosec.to_bytes(4, 'little')
-    return bytes(template)
-
-
-def _clock_ticks() -> float:
-    return float(os.sysconf('SC_CLK_TCK'))
-
-
-def _cpu_seconds(pid: int) -> float:
-    """Utime + stime of a process, s (Linux /proc)."""
-    with open(f'/proc/{pid}/stat') as handle:
-        fields = handle.read().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / _clock_ticks()
-
-
-def _thread_cpu(pid: int) -> dict:
-    """Per thread of a process: (group, utime + stime in ticks, voluntary context switches).
-
-    Groups: 'main' (the thread whose id is the pid: rclpy's executor), 'dds.<kind>' for Fast DDS's
-    threads (event, shm, udp, ...), 'other' for the rest (the node's own Python threads).
-    """
-    import glob
-
-    threads = {}
-    for task in glob.glob(f'/proc/{pid}/task/*'):
-        tid = int(task.rsplit('/', 1)[1])
-        try:
-            with open(f'{task}/stat') as handle:
-                fields = handle.read().rsplit(')', 1)[1].split()
-            with open(f'{task}/comm') as handle:
-                name = handle.read().strip()
-            with open(f'{task}/status') as handle:
-                switches = int(handle.read().split('voluntary_ctxt_switches:')[1].split()[0])
-        except (OSError, IndexError, ValueError):  # the thread ended meanwhile
-            continue
-        group = (
-            'main'
-            if tid == pid
-            else 'dds.' + name.split('.')[1]
-            if name.startswith('dds.')
-            else 'other'
-        )
-        threads[tid] = (group, int(fields[11]) + int(fields[12]), switches)
-    return threads
-
-
-def _thread_breakdown(before: dict, after: dict, samples: int) -> dict:
-    """CPU µs and wake-ups per sample by thread group, between two _thread_cpu snapshots."""
-    tick_us = 1e6 / _clock_ticks()
-    groups: dict = {}
-    for tid, (group, ticks, switches) in after.items():
-        old = before.get(tid, (group, 0, 0))
-        cpu, wakes = groups.get(group, (0.0, 0.0))
-        groups[group] = (
-            cpu + (ticks - old[1]) * tick_us / samples,
-            wakes + (switches - old[2]) / samples,
-        )
-    return dict(sorted(groups.items(), key=lambda item: -item[1][0]))
-
-
-class Harness:
-    """Source (pre-serialized, this process) and sink (bytes, stamp only, its own process).
-
-    The sink is `--node sink` of this module: a RawInput thread (the calibrator's reader) that
-    takes what is waiting as bytes and notes receive time minus stamp; it answers `reset`, `count
-    [K]`, `stats` (JSON), `publishers [K]` and `dump FILE` on stdin/stdout. In its own process it
-    neither competes with the source for the GIL nor is counted in the node's CPU. With a node
-    between, the same thread also counts balance/wrench_uncertainty (the calibrator computes it
-    only for subscribers): one reader thread, so no GIL is shared between readers, and one process,
-    so that the second topic costs the harness as little as it can on two cores (a second sink
-    process competed with the node for them).
-    """
-
-    def __init__(self, node, sink_topic: str, uncertainty: bool = True, dds_source: bool = True):
-        from geometry_msgs.msg import WrenchStamped
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
-
-        qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
-        self.node = node
-        # without: a subclass feeds the node another way (benchmarks/daq_throughput.py: a device)
-        self.publisher = (
-            node.create_publisher(WrenchStamped, '/balance/raw', qos) if dds_source else None
-        )
-        topics = [sink_topic] + (
-            [UNCERTAINTY_TOPIC] if sink_topic != '/balance/raw' and uncertainty else []
-        )
-        self.topics = len(topics)
-        self.sink = subprocess.Popen(
-            [sys.executable, '-m', 'balance_calib.benchmarks.live_throughput', '--node', 'sink']
-            + [a for topic in topics for a in ('--topic', topic)],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            text=True,
-            bufsize=1,
-        )
-        self.template = raw_template()
-
-    def ask(self, command: str) -> str:
-        self.sink.stdin.write(command + '\n')
-        self.sink.stdin.flush()
-        line = self.sink.stdout.readline()
-        if not line:
-            raise RuntimeError(f'the benchmark sink exited (code {self.sink.poll()})')
-        return line.strip()
-
-    def wait_uncertainty_connected(self, timeout_s: float = 10.0) -> None:
-        """For a node that publishes balance/wrench_uncertainty: until the sink's second
-        subscription is matched.
-        """
-        deadline = time.monotonic() + timeout_s
-        while (
-            self.topics > 1 and int(self.ask('publishers 1')) == 0 and time.monotonic() < deadline
-        ):
-            time.sleep(0.05)
-
-    def source_connected(self) -> bool:
-        return self.publisher.get_subscription_count() > 0
-
-    def wait_connected(self, timeout_s: float = 30.0) -> None:
-        deadline = time.monotonic() + timeout_s
-        while (
-            not self.source_connected() or int(self.ask('publishers')) == 0
-        ) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        # warm-up: discovery on the writer side and first allocations, not measured
-        for _ in range(100):
-            self.send()
-            time.sleep(0.005)
-        time.sleep(0.5)
-
-    def send(self) -> None:
-        self.publisher.publish(stamped(self.template, time.time_ns()))
-
-    def run(self, rate: float, seconds: float, pid: int | None) -> dict:
-        self.ask('reset')
-        total = int(rate * seconds)
-        cpu_before = _cpu_seconds(pid) if pid else 0.0
-        threads_before = _thread_cpu(pid) if pid else {}
-        source_before, sink_before = time.process_time(), _cpu_seconds(self.sink.pid)
-        start = time.monotonic()
-        for i in range(total):
-            delay = start + i / rate - time.monotonic()
-            if delay > 0.0005:
-                time.sleep(delay)
-            self.send()
-        achieved = total / (time.monotonic() - start)
-        settle = time.monotonic() + 3.0
-        while time.monotonic() < settle and int(self.ask('count')) < total:
-            time.sleep(0.02)
-        if self.topics > 1:
-            while time.monotonic() < settle and int(self.ask('count 1')) < total:
-                time.sleep(0.02)
-        cpu = (_cpu_seconds(pid) - cpu_before) if pid else float('nan')
-        threads = _thread_breakdown(threads_before, _thread_cpu(pid), total) if pid else {}
-        source, sink = (
-            time.process_time() - source_before,
-            _cpu_seconds(self.sink.pid) - sink_before,
-        )
-        stats = json.loads(self.ask('stats'))
-        if self.topics > 1:
-            stats['uncertainty_received'] = int(self.ask('count 1'))
-        return {
-            'rate': rate,
-            'achieved': achieved,
-            'sent': total,
-            **stats,
-            'cpu_us_per_sample': cpu / total * 1e6,
-            'threads': threads,
-            'source_us_per_sample': source / total * 1e6,
-            'sink_us_per_sample': sink / total * 1e6,
-        }
-
-    def close(self):
-        try:
-            self.sink.stdin.close()
-            self.sink.wait(timeout=10)
-        except (OSError, subprocess.TimeoutExpired):
-            self.sink.kill()
-        self.node.destroy_node()
-
-
-def sink_main(topics: list) -> None:
-    """The harness's sink: bytes in, stamp read, latency noted for the first topic, the others
-    counted; all read by one RawInput thread; commands on stdin (see Harness).
-    """
-    from geometry_msgs.msg import WrenchStamped
-    import rclpy
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-
-    from balance_calib.nodes._raw_input import RawInput
-
-    latencies_ns: list[int] = []
-    counts = [0] * len(topics)
-    lock = threading.Lock()
-
-    def on_batch(batch):
-        now = time.time_ns()
-        stamps = [
-            int.from_bytes(d[4:8], 'little', signed=True) * 1_000_000_000
-            + int.from_bytes(d[8:12], 'little')
-            for d in batch
-        ]
-        with lock:
-            latencies_ns.extend(now - s for s in stamps)
-
-    def counter(k):
-        def on_batch(batch):
-            with lock:
-                counts[k] += len(batch)
-
-        return on_batch
-
-    rclpy.init()
-    node = rclpy.create_node('benchmark_sink')
-    qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
-    reader = RawInput(node, WrenchStamped, topics[0], qos, on_batch)
-    subscriptions = [reader.subscription] + [
-        reader.also_read(topic, counter(k), qos) for k, topic in enumerate(topics) if k > 0
-    ]
-    reader.start()
-    try:
-        for line in sys.stdin:
-            command, _, argument = line.strip().partition(' ')
-            if command == 'reset':
-                with lock:
-                    latencies_ns.clear()
-                    counts[:] = [0] * len(topics)
-                answer = 'ok'
-            elif command == 'count':  # cheap: polled while the last samples arrive
-                k = int(argument or 0)
-                with lock:
-                    answer = str(counts[k] if k else len(latencies_ns))
-            elif command == 'publishers':
-                answer = str(subscriptions[int(argument or 0)].get_publisher_count())
-            elif command == 'stats':
-                with lock:
-                    latencies = np.array(latencies_ns, dtype=float) / 1e6
-                answer = json.dumps(
-                    {
-                        'received': len(latencies),
-                        'uncertainty_received': 0,
-                        'p50_ms': float(np.percentile(latencies, 50))
-                        if len(latencies)
-                        else float('nan'),
-                        'p99_ms': float(np.percentile(latencies, 99))
-                        if len(latencies)
-                        else float('nan'),
-                        'max_ms': float(latencies.max()) if len(latencies) else float('nan'),
-                    }
-                )
-            elif command == 'dump':  # latencies in arrival order, ms, one per line
-                with lock:
-                    latencies = np.array(latencies_ns, dtype=float) / 1e6
-                np.savetxt(argument, latencies, fmt='%.4f')
-                answer = 'ok'
-            else:
-                answer = f'unknown command {command!r}'
-            print(answer, flush=True)
-    finally:
-        reader.close()
-        node.destroy_node()
-        rclpy.try_shutdown()
 
 
 def calibration_with_covariance(directory: str) -> str:
@@ -388,155 +116,6 @@ def _node_commands(calibration_file: str):
     ]
 
 
-def raw_relay_main(both_topics: bool = False) -> None:
-    """Bytes in, bytes out, the calibrator's reader (nodes/_raw_input.py: own thread, batches):
-    rclpy's ceiling for a node that does nothing. both_topics: each sample also goes out on the
-    uncertainty topic, as the calibrator's do: the floor of any rclpy node with the calibrator's
-    topics, before it decodes, computes or encodes anything.
-    """
-    from geometry_msgs.msg import WrenchStamped
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-
-    from balance_calib.nodes._raw_input import RawInput
-
-    rclpy.init()
-    node = rclpy.create_node('raw_relay')
-    qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
-    publisher = node.create_publisher(WrenchStamped, '/balance/wrench', qos)
-    second = node.create_publisher(WrenchStamped, UNCERTAINTY_TOPIC, qos) if both_topics else None
-
-    def relay(batch):
-        publish = publisher.publish
-        for data in batch:
-            publish(data)
-        if second is not None:
-            publish = second.publish
-            for data in batch:
-                publish(data)
-
-    reader = RawInput(node, WrenchStamped, '/balance/raw', qos, relay)
-    reader.start()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        reader.close()
-        node.destroy_node()
-        rclpy.try_shutdown()
-
-
-def _start(command, env):
-    return subprocess.Popen(
-        command,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-
-
-def _stop(process):
-    os.killpg(process.pid, signal.SIGINT)
-    try:
-        process.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        os.killpg(process.pid, signal.SIGKILL)
-
-
-def _machine_line() -> str:
-    load = os.getloadavg()
-    return (
-        f'machine: {platform.machine()}, {os.cpu_count()} cores, Python '
-        f'{platform.python_version()}, '
-        f'{os.environ.get("RMW_IMPLEMENTATION", "default rmw")}; load average {load[0]:.1f} '
-        'over the last '
-        f"minute (the benchmark's own processes included)"
-    )
-
-
-def _whole(results: list, r: dict) -> bool:
-    """Every sample back on every topic (the second topic checked for a row that published on it at
-    all: see --calibrator-parameter), sent at >= 95 % of the rate aimed at.
-    """
-    two_topics = any(other['uncertainty_received'] for other in results)
-    return (
-        r['received'] == r['sent']
-        and r['achieved'] >= 0.95 * r['rate']
-        and (not two_topics or r['uncertainty_received'] == r['sent'])
-    )
-
-
-def _whole_rates(results: list) -> set:
-    """The rates at which every trial came back whole."""
-    return {
-        rate
-        for rate in {r['rate'] for r in results}
-        if all(_whole(results, r) for r in results if r['rate'] == rate)
-    }
-
-
-def zero_loss_rate(results: list) -> float:
-    """The highest rate at which every trial came back whole (0 if none did). A lower rate may have
-    lost samples in one of its trials (first_loss_rate says which): losses come from scheduling
-    stalls on two cores, not from a sharp ceiling.
-    """
-    lossless = _whole_rates(results)
-    return max(lossless) if lossless else 0.0
-
-
-def first_loss_rate(results: list) -> float:
-    """The lowest rate at which some trial lost a sample (NaN if none did)."""
-    lost = [r['rate'] for r in results if not _whole(results, r)]
-    return min(lost) if lost else float('nan')
-
-
-def medians_at_1k(results: list) -> dict | None:
-    """At 1 kHz: the median over the trials of CPU per sample, p50 and p99 (None if 1 kHz was
-    not run).
-    """
-    ones = [r for r in results if r['rate'] == 1000.0]
-    if not ones:
-        return None
-    return {
-        key: float(np.median([r[key] for r in ones]))
-        for key in ('cpu_us_per_sample', 'p50_ms', 'p99_ms')
-    }
-
-
-def cpu_budget(summary: dict, labels: tuple) -> tuple[float, dict] | None:
-    """The two cores' budget per sample: at the highest rate at which every trial of every row in
-    `labels` came back whole, the median over its trials of node, source and sink CPU per sample
-    (µs) and their total, per row. Were the two cores what runs out, a row's zero-loss rate would
-    go as 1 / total; at 10-12 kHz they are 1.0-1.5 cores busy and the losses come from stalls
-    (README), so the ratio of totals is evidence of where the CPU goes, not a prediction of the
-    rate. None if some row is missing or no rate is whole in all of them.
-    """
-    rows = [summary.get(label) for label in labels]
-    if any(not row for row in rows):
-        return None
-    common = set.intersection(*(_whole_rates(row) for row in rows))
-    if not common:
-        return None
-    rate = max(common)
-    budget = {}
-    for label, row in zip(labels, rows):
-        at = [r for r in row if r['rate'] == rate]
-        node, source, sink = (
-            float(np.median([r[key] for r in at]))
-            for key in ('cpu_us_per_sample', 'source_us_per_sample', 'sink_us_per_sample')
-        )
-        budget[label] = {
-            'node': node,
-            'source': source,
-            'sink': sink,
-            'total': node + source + sink,
-        }
-    return rate, budget
-
-
 def throughput(rates, seconds, only=None, calibrator_args=(), trials: int = 1) -> None:
     import tempfile
 
@@ -556,7 +135,7 @@ def throughput(rates, seconds, only=None, calibrator_args=(), trials: int = 1) -
             process = (
                 None
                 if command is None
-                else _start(
+                else start_process(
                     command,
                     {**env, 'BALANCE_CALIB_LONE_KERNEL': '0'} if label == PURE_CORE else env,
                 )
@@ -612,12 +191,12 @@ def throughput(rates, seconds, only=None, calibrator_args=(), trials: int = 1) -
             finally:
                 harness.close()
                 if process is not None:
-                    _stop(process)
+                    stop_process(process)
     finally:
         rclpy.try_shutdown()
 
     best, first_loss, at_1k = zero_loss_rate, first_loss_rate, medians_at_1k
-    print('\n' + _machine_line())
+    print('\n' + machine_line())
     if trials > 1:
         print(
             f'{trials} trials of {seconds:g} s per rate: zero-loss = every trial whole; at 1 '
@@ -731,7 +310,7 @@ def refit_latency(bag: str, seconds: float) -> None:
         '-p',
         f'report_dir:={workdir}/reports',
     ]
-    process = _start(command, dict(os.environ))
+    process = start_process(command, dict(os.environ))
     harness = Harness(rclpy.create_node('benchmark_refit'), '/balance/wrench')
     client = harness.node.create_client(Trigger, '/balance_calibrator/refit')
     from rclpy.executors import SingleThreadedExecutor
@@ -762,9 +341,9 @@ def refit_latency(bag: str, seconds: float) -> None:
     finally:
         executor.shutdown(timeout_sec=1.0)
         harness.close()
-        _stop(process)
+        stop_process(process)
         rclpy.try_shutdown()
-    print(_machine_line())
+    print(machine_line())
     print(
         f'quiet, 1 kHz {seconds:g} s: {quiet["received"]}/{quiet["sent"]} back, p50 '
         f'{quiet["p50_ms"]:.3f} ms, p99 {quiet["p99_ms"]:.3f} ms'

@@ -22,7 +22,8 @@ import time
 from ..live import lone_sample
 from ..live.parameters import PARAMETERS
 from ..live.session import CalibratorSession
-from .live_throughput import calibration_with_covariance, raw_template, stamped
+from .dds_harness import raw_template, stamped
+from .live_throughput import calibration_with_covariance
 
 BATCHES = (1, 2, 3, 10, 100, 1000)
 

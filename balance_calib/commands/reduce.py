@@ -105,7 +105,7 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from ..aero.held_points import HoldSettings
-    from ..aero.pipeline import reduce_bags, ReduceError
+    from ..aero.pipeline import reduce_bags, ReduceError, ReduceOptions
     from ..aero.report import write_outputs
     from ..bags.errors import BagError
     from ..config import ConfigError
@@ -132,10 +132,7 @@ def run(args) -> int:
                     f'--electrical-zero-mv {args.electrical_zero_mv!r}: give six numbers in mV, '
                     f'F_XV,F_YV,F_ZV,M_XV,M_YV,M_ZV'
                 )
-        reduction = reduce_bags(
-            args.bags,
-            args.calibration,
-            args.model,
+        options = ReduceOptions(
             compare=compare,
             calibration_model=args.calibration_model,
             installation=args.installation,
@@ -148,6 +145,7 @@ def run(args) -> int:
             electrical_zero_mv=zero,
             zero_drift=args.zero_drift,
         )
+        reduction = reduce_bags(args.bags, args.calibration, args.model, options)
     except (ReduceError, BagError, ConfigError, ValueError) as err:
         raise CommandError(str(err)) from None
     written = write_outputs(reduction, Path(args.out))

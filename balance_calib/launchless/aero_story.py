@@ -80,7 +80,7 @@ def run_story(
     from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from ..aero.pipeline import reduce_bags
+    from ..aero.pipeline import reduce_bags, ReduceOptions
     from ..aero.report import truth_by_point, write_outputs
 
     out_dir = Path(out_dir).resolve()
@@ -194,9 +194,11 @@ def run_story(
         [bag],
         'lmc6522',
         model,
-        compare=['linear', 'quadratic', 'cubic'],
-        estimate_weight=True,
-        installation=installation,
+        ReduceOptions(
+            compare=['linear', 'quadratic', 'cubic'],
+            estimate_weight=True,
+            installation=installation,
+        ),
     )
     write_outputs(reduction, out_dir / 'reduce')
     with open(out_dir / 'reduce' / 'coefficients.csv', newline='') as handle:

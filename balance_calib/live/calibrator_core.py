@@ -28,26 +28,22 @@ the bridges deliver calibration-axis outputs, so here it is `to_tunnel(model(V))
 Models with variables besides the bridge outputs (Calibration.requires(): 'temperature',
 'load_history') get them from the live inputs; when one is missing or stale the calibration's base
 model runs instead, and the result says why (`WrenchBatch.fallback_reason`).
+
+Beside it: the ~/zero and ~/tare windows (tare_window.py), the text of a load, zero and tare
+(load_text.py) and the /diagnostics reports (diagnostics_status.py).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import datetime as _dt
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..calibration_file import ConfigError
 from ..model.active_calibration import ActiveCalibration, six_axis_loads
 from ..model.balance_model import BalanceModel
-from ..model.inverse import InverseDidNotConverge
-from ..units import BRIDGE_OUTPUTS, COMPONENTS
-from .support_share import SupportShare
-
-UNITS = ('N', 'N', 'N', 'N·m', 'N·m', 'N·m')
-
-# diagnostic_msgs/DiagnosticStatus levels, repeated here so the core needs no ROS messages
-OK, WARN, ERROR, STALE = 0, 1, 2, 3
+from ..units import COMPONENTS
 
 
 # --- live extra inputs ------------------------------------------------------------------------
@@ -129,12 +125,17 @@ class WrenchBatch:
 
     @property
     def nonfinite(self) -> np.ndarray:
+        """(N,) True for the samples rejected as not finite (neither saturated nor unsolved)."""
         rejected = ~self.accepted & ~self.saturated
         return rejected if self.not_converged is None else rejected & ~self.not_converged
 
 
 def model_loads(
-    active: ActiveCalibration, outputs_mv, *, temperature_c=None, load_direction=None
+    active: ActiveCalibration,
+    outputs_mv: ArrayLike,
+    *,
+    temperature_c: ArrayLike | None = None,
+    load_direction: np.ndarray | None = None,
 ) -> tuple[np.ndarray, str, str]:
     """Balance-axis loads (N, 6) of finite outputs (N, 6); also the model used and why a
     fallback.
@@ -185,7 +186,7 @@ def _plain_loads(
     return design @ active.coefficients_six_t, design  # zero columns: components it lacks
 
 
-def _rows(outputs_mv) -> np.ndarray:
+def _rows(outputs_mv: ArrayLike) -> np.ndarray:
     """Samples as a float array (N, 6), without a copy when they are one already."""
     if type(outputs_mv) is np.ndarray and outputs_mv.ndim == 2 and outputs_mv.dtype == float:
         return outputs_mv
@@ -194,14 +195,14 @@ def _rows(outputs_mv) -> np.ndarray:
 
 def compute_wrench(
     active: ActiveCalibration,
-    outputs_mv,
+    outputs_mv: ArrayLike,
     *,
-    zero_mv=None,
-    tare_load=None,
-    temperature_c=None,
-    load_direction=None,
-    zero_temperature_c=None,
-    zero_direction=None,
+    zero_mv: ArrayLike | None = None,
+    tare_load: ArrayLike | None = None,
+    temperature_c: ArrayLike | None = None,
+    load_direction: np.ndarray | None = None,
+    zero_temperature_c: float | None = None,
+    zero_direction: np.ndarray | None = None,
 ) -> WrenchBatch:
     """Raw outputs (N, 6) mV -> wrench in tunnel axes (N, 6); see the module docstring.
 
@@ -224,15 +225,16 @@ def compute_wrench(
 
 
 def _compute_wrench(
-    active,
-    outputs,
-    zero_mv,
-    tare_load,
-    temperature_c,
-    load_direction,
-    zero_temperature_c,
-    zero_direction,
+    active: ActiveCalibration,
+    outputs: np.ndarray,
+    zero_mv: ArrayLike | None,
+    tare_load: ArrayLike | None,
+    temperature_c: ArrayLike | None,
+    load_direction: np.ndarray | None,
+    zero_temperature_c: float | None,
+    zero_direction: np.ndarray | None,
 ) -> WrenchBatch:
+    """compute_wrench on float rows (N, 6), floating-point warnings already silenced."""
     n = len(outputs)
     # the whole batch checked at once (at 1 kHz a batch is one sample): per-sample masks only
     # for a batch where some output is not finite or beyond the bridge's range
@@ -306,8 +308,17 @@ def _compute_wrench(
 
 
 def _loads_with_zero(
-    active, zeroed, temperature_c, load_direction, zero_mv, zero_temperature_c, zero_direction
-):
+    active: ActiveCalibration,
+    zeroed: np.ndarray,
+    temperature_c: ArrayLike | None,
+    load_direction: np.ndarray | None,
+    zero_mv: ArrayLike | None,
+    zero_temperature_c: float | None,
+    zero_direction: np.ndarray | None,
+) -> tuple[np.ndarray, str, str]:
+    """model_loads of the zeroed outputs (loads, model used, why a fallback); with a zero and a
+    model with temperature or direction terms, less what those terms gave when the zero was taken.
+    """
     loads, name, reason = model_loads(
         active, zeroed, temperature_c=temperature_c, load_direction=load_direction
     )
@@ -328,550 +339,8 @@ def _loads_with_zero(
     return loads, name, reason
 
 
-# --- tare and zero ----------------------------------------------------------------------------
-def tare_zero(outputs_mv) -> np.ndarray:
-    """The electrical zero: mean bridge outputs (6,) mV over a window (N, 6) with nothing on the
-    balance.
-    """
-    return np.mean(np.atleast_2d(np.asarray(outputs_mv, dtype=float)), axis=0)
-
-
-@dataclass(frozen=True)
-class Steadiness:
-    """Whether a window of samples holds one load, judged against the window's own noise."""
-
-    steady: bool
-    reason: str  # '' when steady; else one line naming the component
-    scatter_ratio: float  # worst std / noise over the components
-    step_ratio: float  # worst |mean(second half) - mean(first half)| / noise
-
-
-def check_steady(values, names, units, scale, max_ratio: float) -> Steadiness:
-    """Values (N, k): a window of loads (or outputs); scale (k,) full scale per column.
-
-    The noise σ of each column comes from successive differences (robust: 1.4826 x MAD / √2), which
-    a ramp or a single step barely moves; floor 1e-5 x scale so noise-free data has a scale too.
-    Not steady: std beyond max_ratio x σ (scatter), or the two halves' means apart by more than
-    max_ratio x σ (a step or a ramp inside the window). For white noise of n samples the std is σ
-    and the halves' difference has σ·2/√n, so a steady window passes at max_ratio = 3 or more.
-    """
-    values = np.atleast_2d(np.asarray(values, dtype=float))
-    n = values.shape[0]
-    scale = np.asarray(scale, dtype=float)
-    if n < 4:
-        return Steadiness(
-            False,
-            f'{n} samples cannot show whether the load is steady (at least 4)',
-            np.inf,
-            np.inf,
-        )
-    differences = np.diff(values, axis=0)
-    mad = np.median(np.abs(differences - np.median(differences, axis=0)), axis=0)
-    noise = np.maximum(
-        1.4826 * mad / np.sqrt(2.0), 1e-5 * np.where(np.isfinite(scale), scale, 1.0)
-    )
-    scatter = np.std(values, axis=0) / noise
-    step = np.abs(values[n // 2 :].mean(axis=0) - values[: n // 2].mean(axis=0)) / noise
-    worst_scatter, worst_step = int(np.argmax(scatter)), int(np.argmax(step))
-    if step[worst_step] > max_ratio:
-        k = worst_step
-        delta = values[n // 2 :, k].mean() - values[: n // 2, k].mean()
-        return Steadiness(
-            False,
-            f'{names[k]} moved by {delta:+.4g} {units[k]} within the window '
-            f'({step[k]:.0f}x its noise {noise[k]:.3g} {units[k]}): a load step or ramp',
-            float(scatter.max()),
-            float(step.max()),
-        )
-    if scatter[worst_scatter] > max_ratio:
-        k = worst_scatter
-        return Steadiness(
-            False,
-            f'{names[k]} scatters by {np.std(values[:, k]):.4g} {units[k]} '
-            f'({scatter[k]:.1f}x its sample-to-sample noise {noise[k]:.3g} {units[k]})',
-            float(scatter.max()),
-            float(step.max()),
-        )
-    return Steadiness(True, '', float(scatter.max()), float(step.max()))
-
-
-@dataclass
-class TareWindow:
-    """Collects the next `samples` accepted raw samples after ~/tare or ~/zero (kind 'tare' or
-    'zero').
-    """
-
-    samples: int
-    kind: str = 'tare'
-    outputs_mv: list = field(default_factory=list)
-    temperatures_c: list = field(default_factory=list)
-
-    def __post_init__(self):
-        if int(self.samples) < 1:
-            raise ValueError(f'tare needs at least one sample, not {self.samples}')
-
-    def add(self, outputs_mv, temperature_c: float | None = None) -> bool:
-        """Add accepted raw samples (N, 6) mV; True once the window is full (the rest is
-        ignored).
-        """
-        outputs = np.atleast_2d(np.asarray(outputs_mv, dtype=float))
-        taken = outputs[: max(0, self.samples - len(self.outputs_mv))]
-        self.outputs_mv.extend(taken)
-        if temperature_c is not None and len(taken):
-            self.temperatures_c.append(float(temperature_c))
-        return self.complete
-
-    @property
-    def complete(self) -> bool:
-        return len(self.outputs_mv) >= self.samples
-
-    @property
-    def zero_mv(self) -> np.ndarray:
-        return tare_zero(np.array(self.outputs_mv))
-
-    @property
-    def temperature_c(self) -> float | None:
-        return float(np.mean(self.temperatures_c)) if self.temperatures_c else None
-
-
-@dataclass(frozen=True)
-class TareResult:
-    ok: bool
-    message: str
-    zero_mv: np.ndarray | None = None  # for kind 'zero'
-    tare_load: np.ndarray | None = None  # for kind 'tare': balance axes, N / N·m
-    # standard uncertainty of that mean (scatter / √n), balance axes
-    tare_sigma: np.ndarray | None = None
-    # the window's mean raw outputs (6,) mV, before the zero: what another calibration re-reads
-    tare_outputs_mv: np.ndarray | None = None
-
-
-def evaluate_window(
-    window: TareWindow,
-    active: ActiveCalibration,
-    *,
-    max_ratio: float,
-    zero_mv=None,
-    zero_temperature_c=None,
-    zero_direction=None,
-    load_direction=None,
-) -> TareResult:
-    """The zero (output space) or tare load (load space) of a full window, or why it is refused."""
-    outputs = np.array(window.outputs_mv, dtype=float)
-    n = len(outputs)
-    if window.kind == 'zero':
-        names = active.calibration.bridge_outputs
-        columns = [BRIDGE_OUTPUTS.index(v) for v in names]
-        units = (active.calibration.output_unit,) * len(names)
-        steady = check_steady(
-            outputs[:, columns],
-            names,
-            units,
-            np.asarray(active.calibration.rated_output_mv, float),
-            max_ratio,
-        )
-        if not steady.steady:
-            return TareResult(
-                False, f'zero refused: the window of {n} samples is not steady: {steady.reason}'
-            )
-        zero = tare_zero(outputs)
-        if active.unused_inputs is not None:  # channels not read: no zero (finite, persisted)
-            zero[active.unused_inputs] = 0.0
-        return TareResult(
-            True,
-            f'zero: averaged {n} samples, steady (scatter {steady.scatter_ratio:.1f}x, step '
-            f'{steady.step_ratio:.1f}x noise); electrical zero now subtracted: '
-            f'{describe_zero(zero, active)}',
-            zero_mv=zero,
-        )
-    batch = compute_wrench(
-        active,
-        outputs,
-        zero_mv=zero_mv,
-        temperature_c=window.temperature_c,
-        load_direction=load_direction,
-        zero_temperature_c=zero_temperature_c,
-        zero_direction=zero_direction,
-    )
-    failed = int(np.count_nonzero(~np.isfinite(batch.loads_total).all(axis=1)))
-    if failed:  # an iterative model's Newton iteration did not converge (or outputs saturated)
-        return TareResult(
-            False,
-            f"tare refused: {failed} of the window's {n} samples give no load "
-            f"(the {batch.model_used} model's Newton iteration did not converge or a bridge "
-            f'saturated)',
-        )
-    components = active.calibration.components
-    columns = [COMPONENTS.index(c) for c in components]
-    loads = batch.loads_total[:, columns]
-    units = tuple(UNITS[COMPONENTS.index(c)] for c in components)
-    steady = check_steady(
-        loads, components, units, np.asarray(active.calibration.capacity, float), max_ratio
-    )
-    if not steady.steady:
-        return TareResult(
-            False, f'tare refused: the window of {n} samples is not steady: {steady.reason}'
-        )
-    tare_load = np.mean(batch.loads_total, axis=0)
-    mean_outputs = outputs.mean(axis=0)
-    return TareResult(
-        True,
-        f'tare: averaged {n} samples, steady (scatter {steady.scatter_ratio:.1f}x, step '
-        f'{steady.step_ratio:.1f}x noise); tare load now subtracted: '
-        f'{describe_tare(tare_load, active)}; mean wind-off outputs: '
-        + ', '.join(
-            f'{b}={output_text(mean_outputs[BRIDGE_OUTPUTS.index(b)], active)}'
-            for b in active.calibration.bridge_outputs
-        )
-        + (
-            ''
-            if zero_mv is not None
-            else '; no electrical zero taken (~/zero with nothing on the '
-            "balance): the calibration sees outputs measured from the bridges' own zero"
-        ),
-        tare_load=tare_load,
-        tare_sigma=np.std(batch.loads_total, axis=0, ddof=1) / np.sqrt(n),
-        tare_outputs_mv=mean_outputs,
-    )
-
-
-def output_text(value: float, active: ActiveCalibration) -> str:
-    """A bridge output with its unit: mV to 5 decimals; counts, -, mV/V to 6 digits."""
-    unit = active.calibration.output_unit
-    return f'{value:+.5f} mV' if unit == 'mV' else f'{value:+.6g} {unit}'
-
-
-def describe_loads(loads_balance, active: ActiveCalibration) -> str:
-    """A load (6,) in balance axes, written per component in the installation's tunnel axes."""
-    tunnel = active.installation.to_tunnel(np.asarray(loads_balance, dtype=float))
-    return ', '.join(f'{c}={v:+.3f} {u}' for c, v, u in zip(COMPONENTS, tunnel, UNITS))
-
-
-def describe_tare(tare_load, active: ActiveCalibration) -> str:
-    """The tare load subtracted, N and N·m, in tunnel axes."""
-    return (
-        f'{describe_loads(tare_load, active)} ({active.installation.name} tunnel axes, '
-        f'{active.model_name} model on the full outputs)'
-    )
-
-
-def describe_zero(zero_mv, active: ActiveCalibration) -> str:
-    """The zero subtracted, per bridge output in mV, and the load it stands for in tunnel axes."""
-    zero = np.asarray(zero_mv, dtype=float)
-    try:
-        equivalent = (
-            six_axis_loads(active.base_model, zero[None, :])[0]
-            if not active.base_model.extra_variables
-            else np.full(6, np.nan)
-        )
-    except InverseDidNotConverge:  # an iterative model without a solution there: no number
-        equivalent = np.full(6, np.nan)
-    names = active.calibration.bridge_outputs
-    outputs = ', '.join(
-        f'{c}={output_text(v, active)}'
-        for c, v in zip(names, zero[[BRIDGE_OUTPUTS.index(b) for b in names]])
-    )
-    return (
-        f'{outputs} (the load these outputs read as, {active.installation.name} tunnel axes, '
-        f'{active.base_name} model: {describe_loads(equivalent, active)})'
-    )
-
-
-# --- diagnostics ------------------------------------------------------------------------------
-@dataclass
-class InputCounters:
-    """Counts since start and since the last diagnostics report."""
-
-    received: int = 0
-    published: int = 0
-    rejected_nonfinite: int = 0
-    saturated: int = 0
-    out_of_envelope: int = 0
-    not_converged: int = 0  # iterative model: samples where Newton did not converge
-    period_received: int = 0
-    period_rejected: int = 0
-    period_saturated: int = 0
-    period_out_of_envelope: int = 0
-    period_not_converged: int = 0
-
-    def count(self, batch: WrenchBatch) -> None:
-        """Count a batch the pure core computed."""
-        n, ok = len(batch.accepted), int(np.count_nonzero(batch.accepted))
-        out = int(np.count_nonzero(batch.out_of_envelope))
-        if ok == n:  # every sample published: none saturated or failed (nor counted here)
-            self.add(n, ok, out=out)
-            return
-        saturated = 0 if batch.saturated is None else int(np.count_nonzero(batch.saturated))
-        failed = 0 if batch.not_converged is None else int(np.count_nonzero(batch.not_converged))
-        self.add(n, ok, saturated, failed, out)
-
-    def add(self, n: int, ok: int, saturated: int = 0, failed: int = 0, out: int = 0) -> None:
-        """N samples received, ok of them published, saturated / failed (Newton) not, out of the
-        envelope (published, flagged); the rest were rejected as not finite.
-        """
-        self.received += n
-        self.period_received += n
-        self.published += ok
-        if ok != n:  # at 1 kHz almost every call is one published sample
-            self.rejected_nonfinite += n - ok - saturated - failed
-            self.period_rejected += n - ok - saturated - failed
-            self.saturated += saturated
-            self.period_saturated += saturated
-            self.not_converged += failed
-            self.period_not_converged += failed
-        if out:
-            self.out_of_envelope += out
-            self.period_out_of_envelope += out
-
-    def start_period(self) -> None:
-        self.period_received = self.period_rejected = self.period_out_of_envelope = (
-            self.period_saturated
-        ) = 0
-        self.period_not_converged = 0
-
-
-@dataclass(frozen=True)
-class StatusReport:
-    """One diagnostic_msgs/DiagnosticStatus, as plain data."""
-
-    level: int
-    name: str
-    message: str
-    hardware_id: str
-    values: tuple[tuple[str, str], ...]
-
-
-@dataclass(frozen=True)
-class LiveState:
-    """What the node knows at a diagnostics tick."""
-
-    period_s: float
-    counters: InputCounters
-    last_sample_age_s: float | None  # None: no sample yet
-    stale_after_s: float
-    temperature_age_s: float | None
-    fallback_reason: str
-    tare_zero_mv: np.ndarray | None  # the electrical zero (None: none taken)
-    refit_running: bool = False
-    tare_load: np.ndarray | None = None  # balance axes, N / N·m (None: no tare)
-    tare_source: str = ''  # where the tare was persisted / restored from
-    tare_refused: str = ''  # why the persisted zero and tare were not restored
-    input_problems: tuple[tuple[str, int, int], ...] = ()  # (what, total, this period)
-    input_values: tuple[tuple[str, str], ...] = ()
-    overload: tuple[str, ...] | None = None  # components over the limit now (None = no overload)
-    overload_values: tuple[tuple[str, str], ...] = ()
-    lowpass_hz: float = 0.0
-    support: SupportShare | None = None  # the period's samples against the schedule's support
-
-
-def support_values(support: SupportShare | None) -> tuple[tuple[str, str], ...]:
-    """/diagnostics keys of the share outside the calibration's support (live/support_share.py):
-    outside_support_share (a number, or 'n/a: why'), the samples it judged and the components.
-    """
-    if support is None or support.share is None:
-        why = 'not judged' if support is None else support.reason
-        return (('outside_support_share', f'n/a: {why}'),)
-    return (
-        ('outside_support_share', f'{support.share:.4f}'),
-        ('outside_support_checked', f'{support.outside} of {support.checked} samples'),
-        ('outside_support_components', ', '.join(support.components) or 'none'),
-    )
-
-
-def count_key(what: str) -> str:
-    """The /diagnostics key stem of an input problem: 'samples lost (gaps in the stamps)' ->
-    'samples_lost' (with _last_period and _since_start: the count of this diagnostics period, the
-    count since the node started).
-    """
-    return what.split(' (')[0].replace(' ', '_')
-
-
-def diagnostics(
-    active: ActiveCalibration,
-    state: LiveState,
-    node_name: str = 'balance_calibrator',
-    now: _dt.datetime | None = None,
-) -> list[StatusReport]:
-    """Input health, calibration status and overload; levels OK / WARN / ERROR / STALE as
-    DiagnosticStatus.
-    """
-    c = state.counters
-    hardware = active.calibration.balance
-    rate = c.period_received / state.period_s if state.period_s > 0 else 0.0
-    level, problems = OK, []
-    if state.last_sample_age_s is None:
-        level, problems = STALE, ['no sample received yet']
-    elif state.last_sample_age_s > state.stale_after_s:
-        level, problems = STALE, [f'stale input: no sample for {state.last_sample_age_s:.1f} s']
-    if c.period_rejected:
-        level = max(level, WARN) if level != STALE else level
-        problems.append(f'{c.period_rejected} NaN/inf samples rejected')
-    if c.period_saturated:
-        level = ERROR
-        problems.append(
-            f'{c.period_saturated} samples saturated (an output beyond '
-            f'{", ".join(f"{v:.3g}" for v in active.output_range_mv)} '
-            f'{active.calibration.output_unit}): not published'
-        )
-    if c.period_not_converged:
-        level = ERROR
-        problems.append(
-            f"{c.period_not_converged} samples where the {active.model_name} model's Newton "
-            f'iteration (AIAA R-091) did not converge: not published'
-        )
-    if c.period_out_of_envelope:
-        level = max(level, WARN) if level != STALE else level
-        problems.append(f'{c.period_out_of_envelope} samples outside the calibrated envelope')
-    for what, total, period in state.input_problems:
-        if period:
-            level = max(level, WARN) if level != STALE else level
-            # both counts, named: this period's (as the other counts here) and the total
-            problems.append(
-                f'{period} {what} in the last {state.period_s:.1f} s ({total} since start)'
-            )
-    input_values = (
-        ('input_rate_hz', f'{rate:.1f}'),
-        (
-            'last_sample_age_s',
-            'never' if state.last_sample_age_s is None else f'{state.last_sample_age_s:.3f}',
-        ),
-        (
-            'stale',
-            str(state.last_sample_age_s is None or state.last_sample_age_s > state.stale_after_s),
-        ),
-        ('samples_received', str(c.received)),
-        ('wrenches_published', str(c.published)),
-        ('rejected_nonfinite', str(c.rejected_nonfinite)),
-        ('saturated', str(c.saturated)),
-        ('newton_not_converged', str(c.not_converged)),
-        ('out_of_envelope', str(c.out_of_envelope)),
-        ('envelope', ', '.join(f'{k}={v:.4g}' for k, v in zip(COMPONENTS, active.envelope))),
-        *(
-            (f'{count_key(what)}_{window}', str(count))
-            for what, total, period in state.input_problems
-            for window, count in (('last_period', period), ('since_start', total))
-        ),
-        *state.input_values,
-    )
-    reports = [
-        StatusReport(
-            level,
-            f'{node_name}: input',
-            '; '.join(problems) or f'{rate:.1f} Hz',
-            hardware,
-            input_values,
-        )
-    ]
-
-    cal = active.calibration
-    age = active.age_days(now)
-    sigma = ', '.join(f'{k}={float(v):.3f}' for k, v in cal.sigma_pct_fs.items()) or 'unknown'
-    inputs = []
-    for needed in active.requires:
-        if needed == 'temperature':
-            fresh = (
-                state.temperature_age_s is not None
-                and state.temperature_age_s <= state.stale_after_s
-            )
-            inputs.append(
-                (
-                    needed,
-                    'fresh'
-                    if fresh
-                    else 'missing'
-                    if state.temperature_age_s is None
-                    else f'stale ({state.temperature_age_s:.1f} s)',
-                )
-            )
-        else:
-            inputs.append((needed, 'fresh' if state.last_sample_age_s is not None else 'missing'))
-    support = state.support
-    outside_support = support is not None and bool(support.share)
-    cal_level = WARN if state.fallback_reason or state.tare_refused or outside_support else OK
-    absent = active.absent_components
-    message = (
-        f'{active.model_name} model, {active.installation.name} installation'
-        + (
-            f'; {6 - len(absent)}-component calibration: {", ".join(absent)} absent '
-            f'(published as 0, uncertainty NaN)'
-            if absent
-            else ''
-        )
-        + (
-            f'; FALLBACK to {active.base_name}: {state.fallback_reason}'
-            if state.fallback_reason
-            else ''
-        )
-    )
-    if outside_support:
-        assert support is not None and support.share is not None
-        message += (
-            f"; {100 * support.share:.1f} % of the last period's samples outside the "
-            f"calibration's support ({', '.join(support.components)}): extrapolated"
-        )
-    if state.tare_refused:
-        message += (
-            f'; zero and tare NOT restored ({state.tare_refused}): take ~/zero and ~/tare again'
-        )
-    zero = state.tare_zero_mv
-    cal_values = (
-        ('calibration_file', active.source),
-        ('model', active.model_name),
-        ('model_requested', active.requested_model),
-        ('model_in_use', active.base_name if state.fallback_reason else active.model_name),
-        ('fallback_reason', state.fallback_reason or 'none'),
-        ('installation', f'{active.installation.name} ({active.installation.spec})'),
-        ('components', ', '.join(cal.components)),
-        ('output_unit', cal.output_unit),
-        ('absent_components', ', '.join(absent) or 'none'),
-        ('fitted_at', cal.fitted_at or 'unknown (memo matrices)'),
-        ('age_days', 'unknown' if age is None else f'{age:.2f}'),
-        ('sigma_pct_fs', sigma),
-        ('requires', ', '.join(active.requires) or 'none'),
-        ('inputs', ', '.join(f'{k}: {v}' for k, v in inputs) or 'bridge outputs only'),
-        (
-            'zero_mv',
-            'none'
-            if zero is None
-            else ', '.join(
-                f'{b}={zero[BRIDGE_OUTPUTS.index(b)]:+.5f}' for b in cal.bridge_outputs
-            ),
-        ),
-        (
-            'tare_load',
-            'none'
-            if state.tare_load is None
-            else f'{describe_loads(state.tare_load, active)} (tunnel axes)',
-        ),
-        ('tare_file', state.tare_source or 'none'),
-        ('tare_not_restored', state.tare_refused or 'none'),
-        ('lowpass_hz', f'{state.lowpass_hz:g}' if state.lowpass_hz else 'off'),
-        ('refit_running', str(state.refit_running)),
-        *support_values(support),
-    )
-    reports.append(
-        StatusReport(cal_level, f'{node_name}: calibration', message, hardware, cal_values)
-    )
-    if state.overload is None:
-        reports.append(
-            StatusReport(
-                OK, f'{node_name}: overload', 'no overload', hardware, state.overload_values
-            )
-        )
-    else:
-        reports.append(
-            StatusReport(
-                ERROR,
-                f'{node_name}: overload',
-                f'OVERLOAD: {", ".join(state.overload)} beyond the rated load limit',
-                hardware,
-                state.overload_values,
-            )
-        )
-    return reports
-
-
 def parse_reliability(value: str) -> str:
+    """The input_reliability parameter as 'reliable' or 'best_effort'; ValueError otherwise."""
     key = str(value).strip().lower().replace('-', '_')
     if key not in ('reliable', 'best_effort'):
         raise ValueError(f'input_reliability must be reliable or best_effort, not {value!r}')

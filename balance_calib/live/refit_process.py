@@ -201,20 +201,31 @@ def _finish_in_background(process, deadline: float) -> None:
 # --- ~/refit as a job: what the node fixes when it is called, and what comes back
 # ------------------
 @dataclass(frozen=True)
-class RefitJob:
-    bags: tuple[Path, ...]
+class RefitSettings:
+    """What the node's parameters fix for ~/refit: the balance, the `model` parameter, how the
+    result is put in force (installation, envelope margin, output range factor) and how long the
+    refit may take.
+    """
+
     balance: str
-    out_dir: Path
     model: str  # the node's `model` parameter
     installation: Installation
     envelope_margin: float
     output_range_factor: float
     timeout_s: float
-    calibration_file: Path  # replaced by the result (unless it is a balance config)
 
     @property
     def base(self) -> str:
+        """The polynomial model the refit fits: the `model` parameter, or cubic for others."""
         return self.model if self.model in ('linear', 'quadratic', 'cubic') else 'cubic'
+
+
+@dataclass(frozen=True)
+class RefitJob:
+    bags: tuple[Path, ...]
+    out_dir: Path
+    calibration_file: Path  # replaced by the result (unless it is a balance config)
+    settings: RefitSettings
 
 
 _TOP_LEVEL_KEY = re.compile(r'^([A-Za-z_][\w-]*)\s*:', re.MULTILINE)
@@ -236,17 +247,7 @@ def is_balance_config(path) -> bool:
     return 'matrices' in keys and 'models' not in keys
 
 
-def make_refit_job(
-    bags,
-    balance: str,
-    report_dir,
-    model: str,
-    installation: Installation,
-    envelope_margin: float,
-    output_range_factor: float,
-    timeout_s: float,
-    calibration_file,
-) -> RefitJob:
+def make_refit_job(bags, report_dir, calibration_file, settings: RefitSettings) -> RefitJob:
     """ValueError (or OSError) saying what is wrong with the parameters, before any work."""
     bags = tuple(Path(b).expanduser() for b in bags if b)
     if not bags:
@@ -264,17 +265,7 @@ def make_refit_job(
         if not out_dir.exists():
             break
         out_dir = out_dir.with_name(f'{out_dir.name.split("+")[0]}+{k}')
-    return RefitJob(
-        bags,
-        balance,
-        out_dir,
-        model,
-        installation,
-        envelope_margin,
-        output_range_factor,
-        timeout_s,
-        Path(calibration_file),
-    )
+    return RefitJob(bags, out_dir, Path(calibration_file), settings)
 
 
 def _install(target: Path, calibration: Calibration, written: Path | None) -> None:
@@ -295,13 +286,14 @@ def run_refit_job(job: RefitJob, refit_function, progress: Callable[[str], None]
     pipeline in its own process. The calibration file is replaced atomically only after the new
     calibration has been checked (activate); a balance config is never overwritten.
     """
+    settings = job.settings
     try:
         if refit_function is not None:
             result = refit_function(
                 list(job.bags),
-                job.balance,
+                settings.balance,
                 job.out_dir,
-                model=job.base,
+                model=settings.base,
                 diagnose=True,
                 progress=progress,
             )
@@ -313,11 +305,11 @@ def run_refit_job(job: RefitJob, refit_function, progress: Callable[[str], None]
             )
             product = run_refit_in_process(
                 job.bags,
-                job.balance,
+                settings.balance,
                 job.out_dir,
-                job.base,
+                settings.base,
                 progress=progress,
-                timeout_s=job.timeout_s,
+                timeout_s=settings.timeout_s,
                 active_calibration=active_file,
             )
             calibration, summary, path = (
@@ -329,10 +321,10 @@ def run_refit_job(job: RefitJob, refit_function, progress: Callable[[str], None]
             raise TypeError(f'the refit returned {type(calibration).__name__}, not a Calibration')
         active = activate(
             calibration,
-            job.model,
-            job.installation,
-            job.envelope_margin,
-            output_range_factor=job.output_range_factor,
+            settings.model,
+            settings.installation,
+            settings.envelope_margin,
+            output_range_factor=settings.output_range_factor,
         )
     # RefitError, BagError, ConfigError: the message names the file
     except (RefitFailed, ValueError) as err:

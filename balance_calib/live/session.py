@@ -30,7 +30,13 @@ from .parameters import (
     load_calibration_checked,
 )
 from .raw_codec import decode_wrenches, WrenchEncoder
-from .refit_process import is_balance_config, make_refit_job, RefitJob, run_refit_job
+from .refit_process import (
+    is_balance_config,
+    make_refit_job,
+    RefitJob,
+    RefitSettings,
+    run_refit_job,
+)
 from .stream import LiveCalibrator, LiveSettings, Output
 from .tare_store import (
     calibration_sha256,
@@ -372,16 +378,16 @@ class CalibratorSession:
     def refit_job(self) -> RefitJob:
         """The job ~/refit runs; ValueError/OSError naming the parameter that stops it."""
         value, active = self.value, self.live.active
-        return make_refit_job(
-            value('calibration_bags') or [],
+        settings = RefitSettings(
             str(value('balance')),
-            value('report_dir'),
             str(value('model')),
             active.installation,
             float(value('envelope_margin')),
             float(value('output_range_factor')),
             float(value('refit_timeout_s')),
-            active.source,
+        )
+        return make_refit_job(
+            value('calibration_bags') or [], value('report_dir'), active.source, settings
         )
 
     def start_refit(

@@ -21,25 +21,13 @@ from ..model.r091 import IterativeModel
 from ..model.uncertainty import covariance_and_sigma, has_uncertainty, load_standard_uncertainty
 from ..units import COMPONENTS
 from . import lone_sample
-from .calibrator_core import (
-    _extra_variables,
-    _rows,
-    compute_wrench,
-    describe_loads,
-    describe_tare,
-    diagnostics,
-    evaluate_window,
-    InputCounters,
-    LiveState,
-    LoadHistory,
-    StatusReport,
-    TareResult,
-    TareWindow,
-    WrenchBatch,
-)
+from .calibrator_core import _extra_variables, _rows, compute_wrench, LoadHistory, WrenchBatch
+from .diagnostics_status import diagnostics, InputCounters, LiveState, StatusReport
+from .load_text import describe_loads, describe_tare
 from .raw_codec import WrenchEncoder
 from .support_share import SupportSampler, SupportShare
 from .tare_store import now_iso, TareState
+from .tare_window import evaluate_window, TareResult, TareWindow
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,7 @@ from balance_calib.calibration_file import load_calibration
 from balance_calib.config import ConfigError
 from balance_calib.tunnel_axes import parse_installation
 
+from ._messages import set_wrench
 from ._parameters import declare_table
 from ._qos import STREAM_QOS
 from ._run import run_node
@@ -68,14 +69,7 @@ def _wrench(stamp_ns: int, frame: str, values) -> WrenchStamped:
     msg = WrenchStamped()
     msg.header.stamp = Time(nanoseconds=stamp_ns).to_msg()
     msg.header.frame_id = frame
-    (
-        msg.wrench.force.x,
-        msg.wrench.force.y,
-        msg.wrench.force.z,
-        msg.wrench.torque.x,
-        msg.wrench.torque.y,
-        msg.wrench.torque.z,
-    ) = (float(v) for v in values)
+    set_wrench(msg.wrench, values)
     return msg
 
 

@@ -61,11 +61,14 @@ from balance_calib.simulation.replay import read_recorded_messages
 from balance_calib.simulation.wind_on import (
     aero_run_profile,
     aoa_sweep_profile,
+    BalanceEffects,
     csv_profile,
+    TunnelRun,
     wind_on_outputs,
 )
 from balance_calib.tunnel_axes import parse_installation
 
+from ._messages import set_wrench
 from ._parameters import declare_table
 from ._qos import STREAM_QOS
 from ._run import run_node
@@ -207,23 +210,12 @@ class BridgePublisher(Node):
         noise_mv = noise_mv_for_load_sigma(
             truth.without_constant(), config.capacity, noise
         ) * np.sqrt(samples_per_condition)
-        zero_mv = float(self._settings['electrical_zero_mv'])
         # the balance's own effects, wind-on too
-        effects = parse_effects(self._settings['effects'])
+        effects = self._balance_effects(profile.times_s, config)
         self._publisher(tl.TRUTH, WrenchStamped, '/balance/truth', STREAM_QOS)
 
         def build(cycle):
-            raw = wind_on_outputs(
-                truth,
-                profile.loads_balance,
-                electrical_zero_mv=zero_mv,
-                noise_mv=noise_mv,
-                seed=int(self._settings['seed']) + cycle,
-                effects=effects,
-                times_s=profile.times_s,
-                temperature_c=float(self._settings['temperature_c']),
-                rated_output_mv=config.rated_output_mv,
-            )
+            raw = self._wind_on_raw(truth, profile.loads_balance, noise_mv, effects, cycle)
             return tl.wind_on_timeline(
                 profile.times_s,
                 raw,
@@ -233,6 +225,26 @@ class BridgePublisher(Node):
             )
 
         return build
+
+    def _balance_effects(self, times_s, config) -> BalanceEffects:
+        """The `effects` parameter's effects of the balance at the `temperature_c` parameter."""
+        return BalanceEffects(
+            parse_effects(self._settings['effects']),
+            times_s,
+            float(self._settings['temperature_c']),
+            config.rated_output_mv,
+        )
+
+    def _wind_on_raw(self, truth, loads_balance, noise_mv, effects, cycle: int) -> np.ndarray:
+        """Raw outputs (S, 6) mV of the cycle-th pass of a wind-on run, electrical zero in."""
+        return wind_on_outputs(
+            truth,
+            loads_balance,
+            electrical_zero_mv=float(self._settings['electrical_zero_mv']),
+            noise_mv=noise_mv,
+            seed=int(self._settings['seed']) + cycle,
+            balance_effects=effects,
+        )
 
     def _aero_run(self, config, truth, noise, installation, rate):
         model = load_model(self._settings['aero_model'])
@@ -259,23 +271,20 @@ class BridgePublisher(Node):
             for r in self._settings['wind_off_rolls_deg']
             for a in self._settings['wind_off_alphas_deg']
         ]
-        profile = aero_run_profile(
-            model,
-            installation,
-            rate,
+        run = TunnelRun(
             q_pa=float(self._settings['dynamic_pressure_pa']),
-            weight_n=weight,
-            cg_m=cg,
+            rate_hz=rate,
             alphas_deg=alphas,
             hold_s=float(self._settings['hold_s']),
             wind_off_attitudes_deg=wind_off,
             wind_off_hold_s=float(self._settings['wind_off_hold_s']),
         )
+        profile = aero_run_profile(model, installation, run, weight_n=weight, cg_m=cg)
         samples_per_hold = max(1, round(float(self._settings['hold_s']) * rate))
         noise_mv = noise_mv_for_load_sigma(
             truth.without_constant(), config.capacity, noise
         ) * np.sqrt(samples_per_hold)
-        effects = parse_effects(self._settings['effects'])
+        effects = self._balance_effects(profile.times_s, config)
         self._publisher(tl.TRUTH, WrenchStamped, '/balance/truth', STREAM_QOS)
         self._publisher(ATTITUDE, Vector3Stamped, '/model/attitude', STREAM_QOS)
         self._publisher(DYNAMIC_PRESSURE, FluidPressure, '/tunnel/dynamic_pressure', STREAM_QOS)
@@ -284,17 +293,7 @@ class BridgePublisher(Node):
         wind_on = profile.q_pa > 0
 
         def build(cycle):
-            raw = wind_on_outputs(
-                truth,
-                profile.loads_balance,
-                electrical_zero_mv=float(self._settings['electrical_zero_mv']),
-                noise_mv=noise_mv,
-                seed=int(self._settings['seed']) + cycle,
-                effects=effects,
-                times_s=profile.times_s,
-                temperature_c=float(self._settings['temperature_c']),
-                rated_output_mv=config.rated_output_mv,
-            )
+            raw = self._wind_on_raw(truth, profile.loads_balance, noise_mv, effects, cycle)
             times = profile.times_s
             return tl.merge(
                 tl.wind_on_timeline(
@@ -460,14 +459,7 @@ class BridgePublisher(Node):
                 AERO_TRUTH: 'body',
                 AERO_TRUTH_WIND: 'wind',
             }.get(kind, 'tunnel')
-            (
-                msg.wrench.force.x,
-                msg.wrench.force.y,
-                msg.wrench.force.z,
-                msg.wrench.torque.x,
-                msg.wrench.torque.y,
-                msg.wrench.torque.z,
-            ) = (float(v) for v in values)
+            set_wrench(msg.wrench, values)
         elif kind in (tl.GRAVITY, ATTITUDE):
             msg = Vector3Stamped()
             msg.header.frame_id = 'balance' if kind == tl.GRAVITY else 'tunnel'

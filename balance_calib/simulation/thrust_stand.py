@@ -79,95 +79,123 @@ class ThrustStandSample:
         return outputs
 
 
+@dataclass(frozen=True)
+class StandBuild:
+    """The stand as built (SI; the defaults give about 3.4 N ideal thrust at p_G = 0.5 MPa).
+
+    nozzle: the manual's D_t 2.5 mm, D_e 3.3 mm, γ 1.402, R 287.1 by default; efficiency:
+    measured / ideal thrust during firing, < 1; calibration_slope_n_per_mv: the true sensitivity a
+    of the stand, N per mV; zero_offset_mv: the strain reading with nothing applied;
+    weight_masses_kg: the calibration weights in loading order (five of ~85 g); pan_mass_kg: pan
+    and thread, always hanging during a calibration step; hysteresis_fraction: the leaf spring's
+    set per load, a fraction of that load's reading; ring_frequency_hz, ring_damping_ratio: the
+    stand's ringing after a force step.
+    """
+
+    nozzle: Nozzle = Nozzle()
+    efficiency: float = 0.75
+    calibration_slope_n_per_mv: float = 5.0
+    zero_offset_mv: float = 0.05
+    weight_masses_kg: tuple[float, ...] = DEFAULT_WEIGHT_MASSES_KG
+    pan_mass_kg: float = 0.015
+    hysteresis_fraction: float = 0.01
+    ring_frequency_hz: float = 10.0
+    ring_damping_ratio: float = 0.15
+
+
+@dataclass(frozen=True)
+class FiringCycle:
+    """One cycle of the experiment (module docstring), SI.
+
+    firing_gauge_pa: the regulator fully open, p_G during firing and calibration; ambient_pa: p_a;
+    chamber_k: T_c, for the record (the thrust does not depend on it, eq. (5)); firings per cycle;
+    idle_s, firing_s, step_s: durations of idle/venting, of a firing and of each calibration step;
+    settle_s: time after a change before the reading counts as steady; pressure_rise_s,
+    pressure_decay_s: first-order time constants of p_G; repeat: True, the cycle repeats forever;
+    False, idle after its end.
+    """
+
+    firing_gauge_pa: float = 0.5e6
+    ambient_pa: float = STANDARD_ATMOSPHERE_PA
+    chamber_k: float = DEFAULT_CHAMBER_K
+    firings: int = 2
+    idle_s: float = 2.0
+    firing_s: float = 3.0
+    step_s: float = 2.0
+    settle_s: float = 0.5
+    pressure_rise_s: float = 0.1
+    pressure_decay_s: float = 0.6
+    repeat: bool = True
+
+
+@dataclass(frozen=True)
+class SignalNoise:
+    """White noise σ on the three signals: strain mV, chamber gauge and ambient pressure Pa."""
+
+    strain_noise_mv: float = 0.001
+    gauge_noise_pa: float = 1500.0
+    ambient_noise_pa: float = 10.0
+
+
 class ThrustStandSimulator:
     """The manual's stand: one strain channel, chamber and ambient pressure, in simulated time.
 
-    Keyword parameters (SI; defaults give about 3.4 N ideal thrust at p_G = 0.5 MPa):
-      nozzle                  Nozzle (default the manual's D_t 2.5 mm, D_e 3.3 mm, γ 1.402, R
-                              287.1)
-      efficiency              measured / ideal thrust during firing, < 1 (default 0.75)
-      calibration_slope_n_per_mv  true sensitivity a of the stand, N per mV (default 5.0)
-      zero_offset_mv          strain reading with nothing applied (default 0.05)
-      weight_masses_kg        the calibration weights in loading order (default five of ~85 g)
-      pan_mass_kg             pan and thread, always hanging during a calibration step (0.015)
-      hysteresis_fraction     leaf-spring set per load, fraction of that load's reading (0.01)
-      firing_gauge_pa         regulator fully open: p_G during firing and calibration (0.5e6)
-      ambient_pa              p_a (101325)
-      chamber_k               T_c, for the record; the thrust does not depend on it (eq. (5))
-      firings                 number of firings per cycle (2)
-      idle_s, firing_s, step_s  durations of idle/venting, firing and each calibration step (2, 3,
-                                2 s)
-      settle_s                time after a change before the reading counts as steady (0.5 s)
-      pressure_rise_s, pressure_decay_s  first-order time constants of p_G (0.1 s, 0.6 s)
-      ring_frequency_hz, ring_damping_ratio  the stand's ringing after a force step (10 Hz, 0.15)
-      strain_noise_mv, gauge_noise_pa, ambient_noise_pa  white noise σ (0.001 mV, 1500 Pa, 10 Pa)
-      repeat                  True: the cycle repeats forever; False: idle after its end
-      seed                    noise generator seed
+    stand: the stand as built (StandBuild); cycle: the experiment's sequence and timing
+    (FiringCycle); noise: the signals' white noise (SignalNoise); seed: the noise generator's seed.
     """
 
     def __init__(
         self,
         *,
-        nozzle: Nozzle = Nozzle(),
-        efficiency: float = 0.75,
-        calibration_slope_n_per_mv: float = 5.0,
-        zero_offset_mv: float = 0.05,
-        weight_masses_kg=DEFAULT_WEIGHT_MASSES_KG,
-        pan_mass_kg: float = 0.015,
-        hysteresis_fraction: float = 0.01,
-        firing_gauge_pa: float = 0.5e6,
-        ambient_pa: float = STANDARD_ATMOSPHERE_PA,
-        chamber_k: float = DEFAULT_CHAMBER_K,
-        firings: int = 2,
-        idle_s: float = 2.0,
-        firing_s: float = 3.0,
-        step_s: float = 2.0,
-        settle_s: float = 0.5,
-        pressure_rise_s: float = 0.1,
-        pressure_decay_s: float = 0.6,
-        ring_frequency_hz: float = 10.0,
-        ring_damping_ratio: float = 0.15,
-        strain_noise_mv: float = 0.001,
-        gauge_noise_pa: float = 1500.0,
-        ambient_noise_pa: float = 10.0,
-        repeat: bool = True,
+        stand: StandBuild = StandBuild(),
+        cycle: FiringCycle = FiringCycle(),
+        noise: SignalNoise = SignalNoise(),
         seed: int | None = 0,
-    ):
+    ) -> None:
+        efficiency, idle_s, firing_s, step_s, settle_s = (
+            stand.efficiency,
+            cycle.idle_s,
+            cycle.firing_s,
+            cycle.step_s,
+            cycle.settle_s,
+        )
         if not 0 < efficiency <= 1:
             raise ValueError(f'efficiency must be in (0, 1], got {efficiency}')
-        if calibration_slope_n_per_mv <= 0:
+        if stand.calibration_slope_n_per_mv <= 0:
             raise ValueError('calibration_slope_n_per_mv must be positive')
         if (
-            min(idle_s, firing_s, step_s, pressure_rise_s, pressure_decay_s) <= 0
+            min(idle_s, firing_s, step_s, cycle.pressure_rise_s, cycle.pressure_decay_s) <= 0
             or not 0 <= settle_s < step_s
         ):
             raise ValueError(
                 'durations and time constants must be positive, settle_s shorter than step_s'
             )
-        if firing_gauge_pa <= 0 or ambient_pa <= 0 or firings < 0:
+        if cycle.firing_gauge_pa <= 0 or cycle.ambient_pa <= 0 or cycle.firings < 0:
             raise ValueError('firing_gauge_pa and ambient_pa must be positive, firings >= 0')
-        self.nozzle = nozzle
+        self.nozzle = nozzle = stand.nozzle
         self.efficiency = float(efficiency)
-        self.calibration_slope_n_per_mv = float(calibration_slope_n_per_mv)
-        self.zero_offset_mv = float(zero_offset_mv)
-        self.weight_masses_kg = np.asarray(weight_masses_kg, dtype=float)
-        self.pan_mass_kg = float(pan_mass_kg)
-        self.hysteresis_fraction = float(hysteresis_fraction)
-        self.firing_gauge_pa = float(firing_gauge_pa)
-        self.ambient_pa = float(ambient_pa)
-        self.chamber_k = float(chamber_k)
+        self.calibration_slope_n_per_mv = float(stand.calibration_slope_n_per_mv)
+        self.zero_offset_mv = float(stand.zero_offset_mv)
+        self.weight_masses_kg = np.asarray(stand.weight_masses_kg, dtype=float)
+        self.pan_mass_kg = float(stand.pan_mass_kg)
+        self.hysteresis_fraction = float(stand.hysteresis_fraction)
+        self.firing_gauge_pa = float(cycle.firing_gauge_pa)
+        self.ambient_pa = float(cycle.ambient_pa)
+        self.chamber_k = float(cycle.chamber_k)
         self.settle_s = float(settle_s)
-        self.pressure_rise_s = float(pressure_rise_s)
-        self.pressure_decay_s = float(pressure_decay_s)
-        self.ring_frequency_hz = float(ring_frequency_hz)
-        self.ring_damping_ratio = float(ring_damping_ratio)
-        self.strain_noise_mv = float(strain_noise_mv)
-        self.gauge_noise_pa = float(gauge_noise_pa)
-        self.ambient_noise_pa = float(ambient_noise_pa)
-        self.repeat = bool(repeat)
+        self.pressure_rise_s = float(cycle.pressure_rise_s)
+        self.pressure_decay_s = float(cycle.pressure_decay_s)
+        self.ring_frequency_hz = float(stand.ring_frequency_hz)
+        self.ring_damping_ratio = float(stand.ring_damping_ratio)
+        self.strain_noise_mv = float(noise.strain_noise_mv)
+        self.gauge_noise_pa = float(noise.gauge_noise_pa)
+        self.ambient_noise_pa = float(noise.ambient_noise_pa)
+        self.repeat = bool(cycle.repeat)
         self._rng = np.random.default_rng(seed)
         self._shock_free_ratio = shock_free_ambient_ratio(nozzle.area_ratio, nozzle.gamma)
-        self.segments = self._schedule(int(firings), float(idle_s), float(firing_s), float(step_s))
+        self.segments = self._schedule(
+            int(cycle.firings), float(idle_s), float(firing_s), float(step_s)
+        )
         self.duration_s = self.segments[-1].end_s
         self._start_gauge_pa = self._segment_start_pressures()
         self._set_mv = self._segment_sets()

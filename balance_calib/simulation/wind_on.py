@@ -25,6 +25,7 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -37,6 +38,7 @@ from ..model.balance_model import BalanceModel
 from ..model.inverse import outputs_for_loads
 from ..tunnel_axes import Installation
 from ..units import COMPONENTS
+from .effects import Effect, SampleContext
 
 LONGITUDINAL_FRACTION = 0.5
 LATERAL_FRACTION = 0.05
@@ -163,29 +165,42 @@ DEFAULT_WIND_OFF_ATTITUDES_DEG = tuple(
 )
 
 
+@dataclass(frozen=True)
+class TunnelRun:
+    """How the tunnel drives a run (aero_run_profile): q∞ of the wind-on sweep (Pa), the sample
+    rate (Hz), the wind-on α sweep (degrees, φ = β = 0) and how long each of its attitudes is
+    held (s), the wind-off (φ, α) pairs (degrees) swept before and after it and their hold (s).
+    """
+
+    q_pa: float
+    rate_hz: float
+    alphas_deg: Sequence[float] | np.ndarray = tuple(range(-2, 23, 2))
+    hold_s: float = 0.5
+    wind_off_attitudes_deg: Sequence[tuple[float, float]] | np.ndarray = (
+        DEFAULT_WIND_OFF_ATTITUDES_DEG
+    )
+    wind_off_hold_s: float = 0.3
+
+
 def aero_run_profile(
     model: ModelDescription,
     installation: Installation,
-    rate_hz: float,
+    run: TunnelRun,
     *,
-    q_pa: float,
     weight_n: float,
     cg_m,
-    alphas_deg=tuple(range(-2, 23, 2)),
-    hold_s: float = 0.5,
-    wind_off_attitudes_deg=DEFAULT_WIND_OFF_ATTITUDES_DEG,
-    wind_off_hold_s: float = 0.3,
     aero: AeroModel = AeroModel(),
 ) -> AeroRunProfile:
     """A tunnel run: wind-off holds at (φ, α) pairs (degrees), the wind-on α sweep at q_pa (φ = β =
     0), then the same wind-off holds again (the tunnel shut down): the pre-run and post-run zeros
     that bracket the run, between which `reduce` interpolates a drifting zero. Each hold sampled at
-    rate_hz.
+    rate_hz (all of them as `run` says).
 
     The model's true attitude solves attitude = support + deflection(air + weight loads at that
     attitude) (aero/deflection.py); the air loads are the AeroModel's coefficients at the true α
     (about the model file's moment reference centre), the weight is weight_n at cg_m.
     """
+    q_pa, rate_hz, hold_s, wind_off_hold_s = run.q_pa, run.rate_hz, run.hold_s, run.wind_off_hold_s
     if rate_hz <= 0 or hold_s <= 0 or wind_off_hold_s <= 0:
         raise ValueError('rate_hz, hold_s and wind_off_hold_s must be positive')
     if not q_pa > 0 or not weight_n >= 0:
@@ -193,8 +208,8 @@ def aero_run_profile(
             f'dynamic pressure must be positive and weight not negative (q {q_pa} Pa, W '
             f'{weight_n} N)'
         )
-    off = np.radians(np.asarray(wind_off_attitudes_deg, float).reshape(-1, 2))
-    alphas = np.radians(np.asarray(alphas_deg, float))
+    off = np.radians(np.asarray(run.wind_off_attitudes_deg, float).reshape(-1, 2))
+    alphas = np.radians(np.asarray(run.alphas_deg, float))
     support_holds = np.vstack(
         [
             np.column_stack([off[:, 0], off[:, 1], np.zeros(len(off))]),
@@ -282,6 +297,20 @@ def csv_profile(path: str | Path, installation: Installation, rate_hz: float) ->
     )
 
 
+@dataclass(frozen=True)
+class BalanceEffects:
+    """The balance's own effects (simulation/effects.py) and what they depend on: the samples'
+    times (s; None: 0, 1, 2, ...), the temperature (°C, one or per sample), the rated outputs (6,)
+    mV (None: 1 each) and the reference temperature (°C).
+    """
+
+    effects: Sequence[Effect] = ()
+    times_s: np.ndarray | None = None
+    temperature_c: float | np.ndarray = 20.0
+    rated_output_mv: Sequence[float] | np.ndarray | None = None
+    reference_temperature_c: float = 20.0
+
+
 def wind_on_outputs(
     truth: BalanceModel,
     loads_balance,
@@ -289,20 +318,16 @@ def wind_on_outputs(
     electrical_zero_mv=0.04,
     noise_mv=0.0,
     seed: int = 0,
-    effects=(),
-    times_s=None,
-    temperature_c=20.0,
-    rated_output_mv=None,
-    reference_temperature_c: float = 20.0,
+    balance_effects: BalanceEffects = BalanceEffects(),
 ) -> np.ndarray:
     """Raw bridge outputs (S, 6) mV for loads (S, 6): inverse of the truth without constants
-    (§10.1), plus the effects the balance has (simulation/effects.py: temperature at
-    `temperature_c`, hysteresis from the load history, ...), the electrical zero and Gaussian noise
-    (σ noise_mv per bridge).
+    (§10.1), plus the effects the balance has (balance_effects: temperature, hysteresis from the
+    load history, ...), the electrical zero and Gaussian noise (σ noise_mv per bridge).
     """
     from ..simulation.balance_sim import _direction_history
-    from ..simulation.effects import SampleContext
 
+    conditions = balance_effects
+    effects = conditions.effects
     loads = np.atleast_2d(np.asarray(loads_balance, dtype=float))
     model = truth.without_constant()
     for effect in effects:
@@ -312,13 +337,17 @@ def wind_on_outputs(
     if effects:
         n = len(loads)
         ctx = SampleContext(
-            np.arange(n, dtype=float) if times_s is None else np.asarray(times_s, float),
-            np.broadcast_to(np.asarray(temperature_c, float), (n,)),
+            np.arange(n, dtype=float)
+            if conditions.times_s is None
+            else np.asarray(conditions.times_s, float),
+            np.broadcast_to(np.asarray(conditions.temperature_c, float), (n,)),
             loads,
             outputs,
             _direction_history(loads),
-            np.ones(6) if rated_output_mv is None else np.asarray(rated_output_mv, float),
-            reference_temperature_c,
+            np.ones(6)
+            if conditions.rated_output_mv is None
+            else np.asarray(conditions.rated_output_mv, float),
+            conditions.reference_temperature_c,
         )
         for effect in effects:
             outputs = effect.outputs(outputs, ctx)

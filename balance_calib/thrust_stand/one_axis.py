@@ -237,7 +237,7 @@ def examine_line(
         for family, names, before, after in effects
     ]
     repeatability, unexplained = _lack_of_fit(
-        x, y, direction, current, terms, sigma_x, sigma_y, full_scale, settings
+        _Points(x, y, direction, full_scale), current, terms, sigma_x, sigma_y, settings
     )
     if unexplained is not None:
         found.append(unexplained)
@@ -288,8 +288,28 @@ def _evidence(family, names, before, after, full_scale) -> str:
     )
 
 
-def _lack_of_fit(x, y, direction, fit, terms, sigma_x, sigma_y, full_scale, settings):
+@dataclass(frozen=True)
+class _Points:
+    """The points examined, in the order taken: readings x, values y, direction (+1 loading, -1
+    unloading) and the full scale FS = the largest |y|.
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    direction: np.ndarray
+    full_scale: float
+
+
+def _lack_of_fit(
+    points: _Points,
+    fit: ComponentFit,
+    terms: list[str],
+    sigma_x,
+    sigma_y,
+    settings: OneAxisSettings,
+) -> tuple[float | None, OneAxisEffect | None]:
     """(repeatability % FS or None, an 'unexplained' effect or None)."""
+    x, y, direction, full_scale = points.x, points.y, points.direction, points.full_scale
     residuals = fit.residuals
     if sigma_x is not None or sigma_y is not None:
         slope = fit.coefficients[terms.index('x')]
@@ -302,9 +322,7 @@ def _lack_of_fit(x, y, direction, fit, terms, sigma_x, sigma_y, full_scale, sett
             repeatability = float(np.sqrt(np.mean(variance)) / full_scale * 100.0)
             ratio = np.sqrt(chi2 / fit.dof)
             how = 'the given σ_x, σ_y'
-            return repeatability, _unexplained(
-                p, ratio, how, residuals, x, y, direction, full_scale, settings
-            )
+            return repeatability, _unexplained(p, ratio, how, residuals, points, settings)
     keys = np.round(y / full_scale, 9) * direction
     groups = [np.flatnonzero(keys == k) for k in np.unique(keys)]
     groups = [g for g in groups if len(g) >= 2]
@@ -319,18 +337,27 @@ def _lack_of_fit(x, y, direction, fit, terms, sigma_x, sigma_y, full_scale, sett
     f = (fit.rss - pure) / lof_dof / (pure / nu)
     p = float(scipy.stats.f.sf(f, lof_dof, nu))
     how = f'{nu} repeated points (same load, same direction)'
-    return repeatability, _unexplained(
-        p, np.sqrt(max(f, 0.0)), how, residuals, x, y, direction, full_scale, settings
-    )
+    return repeatability, _unexplained(p, np.sqrt(max(f, 0.0)), how, residuals, points, settings)
 
 
-def _unexplained(p, ratio, how, residuals, x, y, direction, full_scale, settings):
+def _unexplained(
+    p: float,
+    ratio: float,
+    how: str,
+    residuals: np.ndarray,
+    points: _Points,
+    settings: OneAxisSettings,
+) -> OneAxisEffect | None:
+    """The 'unexplained' effect when the residual is beyond the repeatability (lack of fit p below
+    settings.alpha_lack_of_fit), saying what it follows most strongly; else None.
+    """
     if not p < settings.alpha_lack_of_fit:
         return None
+    y, full_scale = points.y, points.full_scale
     trackers = {
         'point order': np.arange(len(y), dtype=float),
         'load': y,
-        'load history': direction,
+        'load history': points.direction,
         'load squared': (y / full_scale) ** 2,
     }
     best, r_best = 'nothing found', 0.0

@@ -132,14 +132,13 @@ def test_noisy_run_with_estimated_weight_is_within_its_propagated_uncertainty(
         == 0
     )
     header, values = read_csv(out / 'coefficients.csv')
-    from balance_calib.aero.pipeline import reduce_bags
+    from balance_calib.aero.pipeline import reduce_bags, ReduceOptions
 
     reduction = reduce_bags(
         [tmp_path / 'run'],
         'lmc6522',
         'euler_replica_lmc6522',
-        estimate_weight=True,
-        installation=installation.name,
+        ReduceOptions(estimate_weight=True, installation=installation.name),
     )
     u = np.array(
         [

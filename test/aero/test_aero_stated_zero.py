@@ -8,7 +8,7 @@ from aero_cases import CONFIG, simulated_run, START_NS
 import numpy as np
 
 from balance_calib.aero.bag_io import parse_zero_mv, write_run_bag
-from balance_calib.aero.pipeline import reduce_bags
+from balance_calib.aero.pipeline import reduce_bags, ReduceOptions
 from balance_calib.bags.messages import header, RELIABLE_QOS, typestore
 from balance_calib.bags.writer import BagWriter, qos_profiles_yaml
 from balance_calib.cli import main
@@ -90,7 +90,9 @@ def test_the_zero_of_the_bags_diagnostics_is_subtracted_as_if_given(tmp_path, ca
     assert np.allclose(reduction.electrical_zero_mv, ZERO_MV)
     assert "balance_calibrator's ~/zero" in reduction.electrical_zero_source
     assert not any('offsets' in w for w in reduction.main.result.warnings)
-    given = reduce_bags(bags, 'lmc6522', 'euler_replica_lmc6522', electrical_zero_mv=[ZERO_MV] * 6)
+    given = reduce_bags(
+        bags, 'lmc6522', 'euler_replica_lmc6522', ReduceOptions(electrical_zero_mv=[ZERO_MV] * 6)
+    )
     assert given.electrical_zero_source == '--electrical-zero-mv'
     ours = np.array([p.reduced.body for p in reduction.main.result.wind_on])
     by_hand = np.array([p.reduced.body for p in given.main.result.wind_on])

@@ -103,10 +103,12 @@ def _reduce(bag, out, *extra):
 
 
 def _errors_in_u(bag, zero_drift):
-    from balance_calib.aero.pipeline import reduce_bags
+    from balance_calib.aero.pipeline import reduce_bags, ReduceOptions
     from balance_calib.aero.report import point_uncertainties, point_values, truth_by_point
 
-    reduction = reduce_bags([bag], 'lmc6522', 'euler_replica_lmc6522', zero_drift=zero_drift)
+    reduction = reduce_bags(
+        [bag], 'lmc6522', 'euler_replica_lmc6522', ReduceOptions(zero_drift=zero_drift)
+    )
     points = reduction.main.result.wind_on
     values = np.array([point_values(p) for p in points])
     u = np.array([point_uncertainties(p) for p in points])

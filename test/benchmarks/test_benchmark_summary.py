@@ -1,10 +1,10 @@
-"""The live benchmark's summary (benchmarks/live_throughput.py): what counts as zero loss, worked
+"""The live benchmark's summary (benchmarks/loss_summary.py): what counts as zero loss, worked
 by hand on made-up steps, so that the README's rates mean what its text says they mean.
 """
 
 import math
 
-from balance_calib.benchmarks.live_throughput import (
+from balance_calib.benchmarks.loss_summary import (
     cpu_budget,
     first_loss_rate,
     medians_at_1k,

@@ -11,20 +11,17 @@ import pytest
 
 from balance_calib.calibration_file import load_calibration
 from balance_calib.config import CONFIG_DIR
-from balance_calib.live.calibrator_core import (
-    compute_wrench,
-    describe_tare,
-    describe_zero,
+from balance_calib.live.calibrator_core import compute_wrench, LoadHistory
+from balance_calib.live.diagnostics_status import (
     diagnostics,
     InputCounters,
     LiveState,
-    LoadHistory,
     OK,
     STALE,
-    tare_zero,
-    TareWindow,
     WARN,
 )
+from balance_calib.live.load_text import describe_tare, describe_zero
+from balance_calib.live.tare_window import tare_zero, TareWindow
 from balance_calib.model.active_calibration import activate
 from balance_calib.model.inverse import outputs_for_loads
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT

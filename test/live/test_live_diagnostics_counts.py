@@ -8,7 +8,7 @@ import re
 from live_cases import MEMO
 import numpy as np
 
-from balance_calib.live.calibrator_core import WARN
+from balance_calib.live.diagnostics_status import WARN
 from balance_calib.live.stream import LiveCalibrator
 from balance_calib.model.active_calibration import activate
 from balance_calib.tunnel_axes import UPRIGHT

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from balance_calib.calibration_file import load_calibration, save_calibration
-from balance_calib.live.calibrator_core import compute_wrench, diagnostics, ERROR, LiveState
+from balance_calib.live.calibrator_core import compute_wrench
+from balance_calib.live.diagnostics_status import diagnostics, ERROR, LiveState
 from balance_calib.live.stream import LiveCalibrator, LiveSettings
 from balance_calib.model.active_calibration import activate
 from balance_calib.model.inverse import InverseDidNotConverge
@@ -422,7 +423,8 @@ def test_uncertainty_of_a_model_with_a_temperature_input_uses_that_input():
 def test_tare_window_without_a_load_is_refused_and_a_zero_without_a_solution_is_described_as_nan(
     noise_free,
 ):
-    from balance_calib.live.calibrator_core import describe_zero, evaluate_window, TareWindow
+    from balance_calib.live.load_text import describe_zero
+    from balance_calib.live.tare_window import evaluate_window, TareWindow
 
     _, calibration, _ = noise_free
     folding_cal, folding = _folding_calibration(calibration)

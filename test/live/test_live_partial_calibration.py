@@ -22,7 +22,7 @@ from partial_cells import (
 import pytest
 
 from balance_calib.calibration_file import load_calibration
-from balance_calib.live.calibrator_core import diagnostics, InputCounters, LiveState, OK
+from balance_calib.live.diagnostics_status import diagnostics, InputCounters, LiveState, OK
 from balance_calib.live.raw_codec import WrenchEncoder
 from balance_calib.live.stream import LiveCalibrator, LiveSettings
 from balance_calib.model.active_calibration import activate

@@ -12,16 +12,15 @@ import pytest
 from balance_calib.calibration_file import save_calibration
 from balance_calib.config import CONFIG_DIR
 from balance_calib.live import refit_process
-from balance_calib.live.refit_process import make_refit_job, run_refit_job
+from balance_calib.live.refit_process import make_refit_job, RefitSettings, run_refit_job
 from balance_calib.tunnel_axes import UPRIGHT
 
 
 def _job(tmp_path, calibration_file):
     bag = tmp_path / 'bag'
     bag.mkdir()
-    return make_refit_job(
-        [bag], 'lmc6522', tmp_path / 'reports', 'cubic', UPRIGHT, 1.1, 1.0, 60.0, calibration_file
-    )
+    settings = RefitSettings('lmc6522', 'cubic', UPRIGHT, 1.1, 1.0, 60.0)
+    return make_refit_job([bag], tmp_path / 'reports', calibration_file, settings)
 
 
 @pytest.mark.parametrize('kind', ['calibration', 'balance_config'])

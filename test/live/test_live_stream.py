@@ -20,7 +20,8 @@ import pytest
 
 from balance_calib.calibration_file import ConfigError, load_calibration
 from balance_calib.config import CONFIG_DIR
-from balance_calib.live.calibrator_core import check_steady, compute_wrench, ERROR, OK, STALE
+from balance_calib.live.calibrator_core import compute_wrench
+from balance_calib.live.diagnostics_status import ERROR, OK, STALE
 from balance_calib.live.parameters import check_parameter, load_calibration_checked, PARAMETERS
 from balance_calib.live.stream import (
     InputMonitor,
@@ -30,6 +31,7 @@ from balance_calib.live.stream import (
     OverloadMonitor,
 )
 from balance_calib.live.tare_store import load_tare, save_tare, tare_file_for, TareState
+from balance_calib.live.tare_window import check_steady
 from balance_calib.model.active_calibration import activate
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
 

@@ -17,7 +17,7 @@ from support_cases import (
     supported_calibration,
 )
 
-from balance_calib.live.calibrator_core import OK, WARN
+from balance_calib.live.diagnostics_status import OK, WARN
 from balance_calib.live.raw_codec import decode_wrenches, WrenchEncoder
 from balance_calib.live.stream import LiveCalibrator
 from balance_calib.live.support_share import SupportSampler

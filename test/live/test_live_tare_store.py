@@ -11,7 +11,7 @@ from tare_cases import session, take_tare
 import yaml
 
 from balance_calib.calibration_file import save_calibration
-from balance_calib.live.calibrator_core import OK, WARN
+from balance_calib.live.diagnostics_status import OK, WARN
 from balance_calib.live.session import CalibratorSession
 from balance_calib.live.tare_store import calibration_sha256, restore_refusal, TareOwner
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT

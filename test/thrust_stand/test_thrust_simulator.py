@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from balance_calib.simulation.thrust_stand import ThrustStandSimulator
+from balance_calib.simulation.thrust_stand import SignalNoise, StandBuild, ThrustStandSimulator
 from balance_calib.thrust_stand.nozzle import Nozzle
 
 
 def test_steady_firing_thrust_is_efficiency_times_eq5():
-    simulator = ThrustStandSimulator(efficiency=0.7, seed=1)
+    simulator = ThrustStandSimulator(stand=StandBuild(efficiency=0.7), seed=1)
     ideal = Nozzle().performance(0.5e6 + 101325.0, 101325.0).thrust_n
     assert simulator.firing_thrust_n == pytest.approx(0.7 * ideal, rel=1e-12)
     start, end = simulator.firing_windows()[0]
@@ -19,7 +19,7 @@ def test_steady_firing_thrust_is_efficiency_times_eq5():
 
 def test_signals_follow_the_manuals_sequence():
     simulator = ThrustStandSimulator(
-        seed=2, strain_noise_mv=0.0, gauge_noise_pa=0.0, ambient_noise_pa=0.0
+        seed=2, noise=SignalNoise(strain_noise_mv=0.0, gauge_noise_pa=0.0, ambient_noise_pa=0.0)
     )
     kinds = [s.kind for s in simulator.segments]
     assert kinds[:5] == ['idle', 'firing', 'idle', 'firing', 'idle']
@@ -55,7 +55,9 @@ def test_applied_load_events_bracket_each_point_with_nan():
 
 
 def test_cycle_repeats():
-    simulator = ThrustStandSimulator(strain_noise_mv=0.0, gauge_noise_pa=0.0, ambient_noise_pa=0.0)
+    simulator = ThrustStandSimulator(
+        noise=SignalNoise(strain_noise_mv=0.0, gauge_noise_pa=0.0, ambient_noise_pa=0.0)
+    )
     t = np.array([3.3, 17.2, 30.1])
     first = simulator.sample(t)
     again = simulator.sample(t + simulator.duration_s)
