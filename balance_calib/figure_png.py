@@ -8,6 +8,7 @@ the same pixels as `savefig`, without its second pass and a third of its encodin
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -95,31 +96,33 @@ def decimated(x, y, limit: int = MAX_POINTS_PER_SERIES, columns: int = DECIMATIO
     return np.unique(finite[np.r_[order[starts], order[ends]]])
 
 
-def fixed_margins(
-    figure,
-    rows: int,
-    columns: int,
-    *,
-    left: float,
-    right: float,
-    bottom: float,
-    top: float,
-    row_gap: float,
-    column_gap: float,
-) -> None:
-    """Place a rows x columns grid of panels with margins and gaps in inches: the layout
-    tight_layout would find for known label sizes, without the extra drawing pass it costs.
+@dataclass(frozen=True)
+class Margins:
+    """A grid's margins around its panels and gaps between them, in inches."""
+
+    left: float
+    right: float
+    bottom: float
+    top: float
+    row_gap: float
+    column_gap: float
+
+
+def fixed_margins(figure, rows: int, columns: int, margins: Margins) -> None:
+    """Place a rows x columns grid of panels with `margins`: the layout tight_layout would find
+    for known label sizes, without the extra drawing pass it costs.
     """
+    m = margins
     width, height = figure.get_figwidth(), figure.get_figheight()
-    panel_width = (width - left - right - (columns - 1) * column_gap) / columns
-    panel_height = (height - bottom - top - (rows - 1) * row_gap) / rows
+    panel_width = (width - m.left - m.right - (columns - 1) * m.column_gap) / columns
+    panel_height = (height - m.bottom - m.top - (rows - 1) * m.row_gap) / rows
     figure.subplots_adjust(
-        left=left / width,
-        right=1.0 - right / width,
-        bottom=bottom / height,
-        top=1.0 - top / height,
-        wspace=column_gap / panel_width if columns > 1 else 0.2,
-        hspace=row_gap / panel_height if rows > 1 else 0.2,
+        left=m.left / width,
+        right=1.0 - m.right / width,
+        bottom=m.bottom / height,
+        top=1.0 - m.top / height,
+        wspace=m.column_gap / panel_width if columns > 1 else 0.2,
+        hspace=m.row_gap / panel_height if rows > 1 else 0.2,
     )
 
 

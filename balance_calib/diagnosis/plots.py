@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..figure_png import fixed_margins, save_png
+from ..figure_png import fixed_margins, Margins, save_png
 from .diagnose import Diagnosis, EffectFound
 
 if TYPE_CHECKING:
@@ -280,12 +280,14 @@ def plot_contrasts(diagnosis: Diagnosis, path, contrasts=None) -> Path | None:
         figure,
         rows,
         2,
-        left=0.65,
-        right=0.15,
-        bottom=0.45,
-        top=0.4 + 0.17 * (2 if missing else 1),
-        row_gap=0.7,
-        column_gap=0.75,
+        Margins(
+            left=0.65,
+            right=0.15,
+            bottom=0.45,
+            top=0.4 + 0.17 * (2 if missing else 1),
+            row_gap=0.7,
+            column_gap=0.75,
+        ),
     )
     return _save(figure, path)
 

@@ -53,7 +53,7 @@ class ResidualFigure:
         from matplotlib.figure import Figure
         from matplotlib.lines import Line2D
 
-        from ..figure_png import Backdrop, fixed_margins
+        from ..figure_png import Backdrop, fixed_margins, Margins
 
         self.components = list(components)
         rows = rows or int(np.ceil(len(self.components) / 2))
@@ -65,12 +65,7 @@ class ResidualFigure:
             figure,
             rows,
             2,
-            left=0.75,
-            right=0.15,
-            bottom=0.55,
-            top=1.05,
-            row_gap=0.75,
-            column_gap=0.95,
+            Margins(left=0.75, right=0.15, bottom=0.55, top=1.05, row_gap=0.75, column_gap=0.95),
         )
         self.figure = figure
         self.panels = []

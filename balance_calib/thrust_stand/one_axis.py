@@ -302,7 +302,7 @@ class _Points:
 
 def _lack_of_fit(
     points: _Points,
-    fit: ComponentFit,
+    fit: LeastSquares,
     terms: list[str],
     sigma_x,
     sigma_y,
