@@ -22,13 +22,13 @@ setup(
         ('share/' + package_name + '/config/daq', glob('config/daq/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.yaml')),
     ],
-    # the live calibrator's lone sample in C (live/lone_sample.py), the pure core's only
+    # the live calibrator's lone sample in C (live/sample_kernel.py), the pure core's only
     # accelerator, warning-free (-Wall -Werror); optional: without a C compiler the package
     # installs and every sample takes the pure core's path (the node says so at start-up)
     ext_modules=[
         Extension(
-            'balance_calib.live._lone_kernel',
-            ['balance_calib/live/_lone_kernel.c'],
+            'balance_calib.live._sample_kernel',
+            ['balance_calib/live/_sample_kernel.c'],
             extra_compile_args=['-O2', '-std=c99', '-Wall', '-Werror'],
             optional=True,
         )

@@ -1,6 +1,6 @@
 """The calibration points a calibration is fitted to, whatever they were read from.
 
-One value for what a bag or a table carries (issue 36, Deliver 1): applied loads, bridge outputs,
+One value for what a bag or a table carries: applied loads, bridge outputs,
 load series, gravity and times where known, the extra channels with their units and symbols, the
 load direction and the order of each point within its series. The table reader's side is
 `tables/table_points.points_from_table`, the bag reader's `refit/bag_points.read_bag_points`.

@@ -34,7 +34,7 @@ _balance_calib_setup_venv() (
   esac
   hash="$(cat "$BALANCE_CALIB_ROOT/requirements-run.txt" "$BALANCE_CALIB_ROOT/requirements-test.txt" \
                "$BALANCE_CALIB_ROOT/setup.py" "$BALANCE_CALIB_ROOT/pyproject.toml" \
-               "$BALANCE_CALIB_ROOT/balance_calib/live/_lone_kernel.c" | sha256sum | cut -d' ' -f1)"
+               "$BALANCE_CALIB_ROOT/balance_calib/live/_sample_kernel.c" | sha256sum | cut -d' ' -f1)"
   have="$(cat "$stamp" 2>/dev/null || true)"
   if [ ! -x "$venv/bin/python" ] || { [ "$have" != "$wanted:$hash" ] && [ "$have" != "test:$hash" ]; }; then
     echo "[balance_calib] setting up $venv from requirements-$wanted.txt (first use or requirements changed)..." >&2

@@ -1,4 +1,4 @@
-"""The memo's LMC6522 for the live calibrator's tests (test_live_*.py, test_lone_kernel,
+"""The memo's LMC6522 for the live calibrator's tests (test_live_*.py, test_sample_kernel,
 test_ros_calibrator*.py): its figures, a run of zero, wind-off and wind-on outputs with a model
 weight, windows fed to LiveCalibrator, and calibrations for special cases (a coefficient
 covariance, a temperature term, eight outputs).

@@ -17,7 +17,7 @@ each as a subprocess between the same source and sink (reliable, depth 1000 both
   balance/wrench_uncertainty: the floor of any rclpy node with the calibrator's topics, before it
   decodes, computes or encodes anything;
 - calibrator, pure core: the calibrator with its lone-sample C kernel switched off
-  (BALANCE_CALIB_LONE_KERNEL=0, live/lone_sample.py): the kernel's baseline, same run;
+  (BALANCE_CALIB_LONE_KERNEL=0, live/sample_kernel.py): the kernel's baseline, same run;
 - calibrator, wrench only: the same with publish_uncertainty:=false, one topic out as the relays:
   the calibrator's own rate without the second topic's cost (last, so as not to disturb the rest);
 - balance_calibrator: the memo's cubic matrix with a coefficient covariance, diagnostics at 1 Hz;
@@ -32,7 +32,7 @@ utime + stime over the samples of that step), split by thread (rclpy's executor,
 Python threads, Fast DDS's event and transport threads) with their wake-ups per sample, and p50/p99
 latency.
 
-`--refit BAG` measures what issue 12 asks of ~/refit: the calibrator's latency at 1 kHz while quiet
+`--refit BAG` measures what ~/refit must keep: the calibrator's latency at 1 kHz while quiet
 and while ~/refit fits BAG (in its own process), p50/p99/max, and that no sample is lost.
 
 The harness is dds_harness.py, the summary's rules loss_summary.py.

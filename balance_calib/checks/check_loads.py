@@ -310,10 +310,10 @@ def _point_variance(points, zero, point_variance_mv2) -> tuple[np.ndarray, list[
     """(P, n) variance (mV²) of each point's zeroed mean output: its own mean's and, interpolated
     in time, its bracketing zero points' (the tare's share). A point whose own scatter is unknown
     (fewer than two samples) takes the run's repeatability instead, from consecutive zero points
-    in one orientation (half the mean square of their differences: diagnosis/leftovers.py); with
+    in one orientation (half the mean square of their differences: diagnosis/lack_of_fit.py); with
     no such pair it counts as 0. Either is said.
     """
-    from ..diagnosis.leftovers import zero_point_pairs
+    from ..diagnosis.lack_of_fit import zero_point_pairs
 
     variance = (
         np.array(point_variance_mv2, dtype=float)

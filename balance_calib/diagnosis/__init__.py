@@ -1,4 +1,4 @@
-"""Residual diagnosis (issue 4): find the physical effects the base model lacks and add them."""
+"""Residual diagnosis: find the physical effects the base model lacks and add them."""
 
 from .candidates import EFFECT_NAMES
 from .diagnose import diagnose, Diagnosis, DiagnosisSettings, EffectFound

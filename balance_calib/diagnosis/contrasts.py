@@ -1,4 +1,4 @@
-"""Hysteresis and sign asymmetry told apart by the schedule's own structure (issue 24).
+"""Hysteresis and sign asymmetry told apart by the schedule's own structure.
 
 Both families fit a residual that differs between points of one load magnitude, so in a forward
 selection they compete for it. The schedule itself separates them where it repeats a load:
@@ -16,7 +16,7 @@ selection they compete for it. The schedule itself separates them where it repea
                         is odd in the load's sign there).
 
 r is the base model's residual in % FS. Each contrast is compared with the repeatability s of
-that component (leftovers.py): a difference of two points has variance 2 s², so
+that component (lack_of_fit.py): a difference of two points has variance 2 s², so
 ratio = mean(c²) / (2 s²), and the one-sided chi-square p-value of n · ratio with n pairs (pairs
 that share a point are not independent: the p-value is indicative; the figure is the evidence).
 """

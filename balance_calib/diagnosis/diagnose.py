@@ -1,4 +1,4 @@
-"""Residual diagnosis (issues 4, 11): which physical effect does the base model of TM-663 lack?
+"""Residual diagnosis: which physical effect does the base model of TM-663 lack?
 
 After the base fit (cubic, §2.3) of the corrected data (§5(4) zero points, §6-7 tare), the
 residuals of every component are examined against each candidate family of shapes (candidates.py,
@@ -24,7 +24,7 @@ excitation. Per round, for every family and component:
    separate"), not a second name.
 
 The best family is added (its terms only for its components), everything refitted, and the search
-repeats until no family passes. Then leftovers.py tests what remains against the repeatability of
+repeats until no family passes. Then lack_of_fit.py tests what remains against the repeatability of
 the points (lack of fit), and for a component's own load shape changing with time or with the
 gravity vector (directed tests), and reports structure no family explains as `unexplained`,
 dropping the families that fitted only part of it. The adopted fit keeps every term; the live model
@@ -49,11 +49,11 @@ from .candidates import (
 )
 from .effect_found import _effect_found
 from .families import _examine_excitation, _examine_family
-from .leftovers import examine_leftovers
+from .lack_of_fit import examine_lack_of_fit
 from .loop_or_sign import beside_its_partner, direction_pairs
 from .offered import families_offered
 from .result import Diagnosis, EffectFound
-from .retare import _examine_tare, _pairs_restored, _retare_passes
+from .retare import _complete_curvature_pairs, _examine_tare, _retare_passes
 from .search import (
     _cross_terms_only_where_lacking,
     _fitted_well,
@@ -82,7 +82,7 @@ def diagnose(
     """Examine the residuals of the base fit and add the effects they show.
 
     point_variance_mv2 (P, 6), point_samples (P,): the variance of each point's mean output from
-    its own samples and their number, when the samples are at hand (repeatability, leftovers.py);
+    its own samples and their number, when the samples are at hand (repeatability, lack_of_fit.py);
     without them the repeatability comes from consecutive zero points alone.
 
     reduction: the corrected data (zero points and tare done); temperature_c, times_s: per point
@@ -201,10 +201,10 @@ def diagnose(
     # numbers stay those of the first reading)
     reduced = problem.corrected
     state.fits, tare_reread = _retare_passes(state, effects)
-    if _pairs_restored(state, effects):
+    if _complete_curvature_pairs(state, effects):
         state.fits, again = _retare_passes(state, effects)
         tare_reread |= again
-    leftovers = examine_leftovers(state, effects)
+    leftovers = examine_lack_of_fit(state, effects)
     for k, dropped in leftovers.dropped.items():
         comp_terms[k] = [t for t in comp_terms[k] if t not in dropped]
         for entry in effects:
@@ -281,7 +281,7 @@ def diagnose(
         unexplained=leftovers.unexplained,
         repeatability_pct_fs=leftovers.repeatability_pct_fs,
         warnings=tuple(dict.fromkeys(warnings)),
-        leftovers=leftovers,
+        lack_of_fit=leftovers,
         tare_reread=tare_reread,
         residuals_named=np.column_stack([f.ols.residuals for f in named]),
         press_residuals_named=np.column_stack([f.ols.press_residuals for f in named]),

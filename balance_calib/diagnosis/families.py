@@ -175,7 +175,7 @@ def _settle_sign_shape(
             if p_values[weakest] > level:
                 group = (group[1 - weakest],)
         simpler.append(group)
-    moving = _moves(problem, k, terms, simpler, fit, settings, 'bidirectional')
+    moving = _coefficients_change(problem, k, terms, simpler, fit, settings, 'bidirectional')
     if simpler != chosen and not moving:
         chosen = simpler
     return _completed_while_moving(problem, k, terms, fit, offered, chosen, settings, family)
@@ -198,7 +198,7 @@ def _completed_while_moving(
     in seeds 3005 and 3007, which a second play completes; 3005 is then named right).
     """
     candidates, columns, groups = offered
-    if not _moves(problem, k, terms, chosen, fit, settings, family.name):
+    if not _coefficients_change(problem, k, terms, chosen, fit, settings, family.name):
         return list(chosen)
     current = list(chosen)
     while len(current) < family.max_groups:
@@ -216,7 +216,7 @@ def _completed_while_moving(
         if not step.steps:
             break
         current.append(tuple(groups[rest[step.groups[0]]]))
-        if not _moves(problem, k, terms, current, fit, settings, family.name):
+        if not _coefficients_change(problem, k, terms, current, fit, settings, family.name):
             return current
     return list(chosen)
 
@@ -259,7 +259,7 @@ def _flat(shape) -> list[str]:
     return [t for g in shape for t in g]
 
 
-def _moves(problem, k, terms, shape, fit, settings, family: str) -> bool:
+def _coefficients_change(problem, k, terms, shape, fit, settings, family: str) -> bool:
     """Do the groups `shape` added to component k's terms fit with coefficients that change over
     the campaign (_changes_over_campaign at settings.alpha_constancy)?
     """

@@ -1,4 +1,4 @@
-"""Hysteresis or sign asymmetry on a component: the direction contrast decides (issue 24).
+"""Hysteresis or sign asymmetry on a component: the direction contrast decides.
 
 Both families fit a residual that differs between points of one load magnitude, so the forward
 selection lets them compete for it. The schedule separates them where it repeats a load reached

@@ -1,4 +1,4 @@
-"""report.md's section on what the residuals show, for a wind-tunnel engineer (issue 11).
+"""report.md's section on what the residuals show, for a wind-tunnel engineer.
 
 The effects adopted with their evidence, the repeatability the points allow beside σ, what is left
 that no effect explains (nothing adopted for it), and the warnings in plain words. Works on

@@ -10,7 +10,7 @@ import numpy as np
 from ..config import CalibrationBody
 from ..model.balance_model import BalanceModel
 from ..tare.calibration_body import CorrectedData
-from .leftovers import Leftovers
+from .lack_of_fit import LackOfFit
 
 
 @dataclass(frozen=True)
@@ -82,10 +82,10 @@ class Diagnosis:
     press_residuals_before: np.ndarray
     press_residuals_after: np.ndarray
     skipped: Mapping[str, str]  # effects not examined, and why
-    unexplained: tuple = ()  # leftovers.Unexplained entries
+    unexplained: tuple = ()  # lack_of_fit.Unexplained entries
     repeatability_pct_fs: Mapping[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
-    leftovers: Leftovers | None = None  # the lack-of-fit numbers behind them
+    lack_of_fit: LackOfFit | None = None  # the lack-of-fit numbers behind them
     # the tare outputs were re-read through the adopted model after the search (_retare): σ after
     # includes it, the effects' own σ before/after (taken when each was adopted) do not
     tare_reread: bool = False

@@ -51,7 +51,7 @@ def _current_model(fits, comp_terms, components, outputs_names, outputs_only=Tru
 RETARE_PASSES = 4
 
 
-def _pairs_restored(state: SearchState, effects) -> bool:
+def _complete_curvature_pairs(state: SearchState, effects) -> bool:
     """After the tare is re-read through the adopted model (_retare_passes), a one-sided curvature
     pair that _settle_sign_shape reduced to one term is completed again where the pair now
     predicts the points better left out one at a time (a lower PRESS σ): the term was dropped for
@@ -142,7 +142,7 @@ def _retare(problem, fits, comp_terms, gravity, is_zero_point, components, outpu
     (0.23 after three passes). This is the memo's fit -> inverse -> refit (§7.1) again, with the
     adopted model, after the search: the search's tests judge the reduction's data (re-read in
     every round it made B660H loops' coefficients differ between the halves of the campaign);
-    the leftovers judge the re-read data (_retare_passes before examine_leftovers), since a tare
+    the leftovers judge the re-read data (_retare_passes before examine_lack_of_fit), since a tare
     bent by the loop leaves, along each orientation's block of points, structure the directed
     tests read as a load shape changing with time (B660H, Masing on every bridge, seed 3007: F_Y
     `unexplained`, load F_Y x time p = 0.001 before the re-read, 0.009 after). The adopted terms

@@ -7,7 +7,7 @@ from __future__ import annotations
 from .candidates import (
     GENERIC_FAMILIES,
 )
-from .leftovers import (
+from .lack_of_fit import (
     lacks_fit,
     linear_part,
     repeatability_variance,

@@ -22,7 +22,7 @@ class DiagnosisSettings:
     # effects on a component with structure left over must explain this fraction of its excess
     # variance, or none is adopted
     min_explained: float = 0.75
-    # per campaign: directed leftover tests (leftovers.slow_structure_bases)
+    # per campaign: directed leftover tests (lack_of_fit.slow_structure_bases)
     alpha_slow_structure: float = 0.001
     # Chow test of a static family's coefficients (first vs second half)
     alpha_constancy: float = 1e-4
@@ -30,7 +30,7 @@ class DiagnosisSettings:
     # separated" (a warning)
     equal_score: float = 0.8
     drift_oversampling: float = 2.0  # Fourier grid spacing = 1 / (oversampling x campaign span)
-    # Weighted Bonferroni (issue 24, small effects): a family's level α is split over its groups
+    # Weighted Bonferroni (small effects): a family's level α is split over its groups
     # in proportion to where a physical effect is expected, not flat; the levels still sum to α.
     # zero_drift: weight of frequency f ∝ f^-exponent (a random-walk zero: power ∝ f⁻²) x the
     # energy of its sine and cosine left after referring to the zero points and whitening (what

@@ -131,7 +131,7 @@ def table_outlier_gate(
     fit their series tare almost exactly and would shrink the scale until the ordinary scatter
     of loaded points looked like typing errors. The rule's `tail_quantile` and `alike` are on
     (outliers.py): many points of a load beyond the limit alike are structure, named by
-    odd_components.py, not refused here.
+    outlying_components.py, not refused here.
     """
     loaded = (
         np.ones(len(residuals), bool)

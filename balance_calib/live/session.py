@@ -21,7 +21,7 @@ import numpy as np
 from ..calibration_file import ConfigError
 from ..config import resolve_config_path
 from ..model.active_calibration import activate, ActiveCalibration
-from . import lone_sample
+from . import sample_kernel
 from .calibrator_core import parse_reliability
 from .parameters import (
     check_input_units,
@@ -145,10 +145,11 @@ class CalibratorSession:
         # /diagnostics until a new ~/zero or ~/tare
         self.tare_refused = ''
         self._restore_tare()
-        if not lone_sample.available:
+        if not sample_kernel.available:
             self.log(
                 'warning',
-                f'the C kernel for lone samples is not built ({lone_sample.unavailable_reason}): '
+                'the C kernel for lone samples is not built '
+                f'({sample_kernel.unavailable_reason}): '
                 "every sample takes the pure core's path (slower at low rates; reinstall with a C "
                 'compiler)',
             )

@@ -20,7 +20,7 @@ from ..model.balance_model import BalanceModel
 from ..model.r091 import IterativeModel
 from ..model.uncertainty import covariance_and_sigma, has_uncertainty, load_standard_uncertainty
 from ..units import COMPONENTS
-from . import lone_sample
+from . import sample_kernel
 from .calibrator_core import _extra_variables, _rows, compute_wrench, LoadHistory, WrenchBatch
 from .diagnostics_status import diagnostics, InputCounters, LiveState, StatusReport
 from .load_text import describe_loads, describe_tare
@@ -339,7 +339,7 @@ class LiveCalibrator:
         self.fallback_reason = ''
         self.overload_changed = False
         self.uncertainty_wanted = True
-        self._lone_plan, self._lone_plan_for = None, None
+        self._single_plan, self._single_plan_for = None, None
         self.support = SupportSampler()  # the share outside the calibration's support
 
     # --- configuration --------------------------------------------------------------------------
@@ -515,8 +515,8 @@ class LiveCalibrator:
         (Output), with the same state as process() on the decoded batch: the one call of the live
         path.
 
-        The C kernel (lone_sample.py), the pure core's only accelerator, takes the samples from the
-        first while it applies (no tare window, no low-pass, no overload held; a calibration it
+        The C kernel (sample_kernel.py), the pure core's only accelerator, takes the samples from
+        the first while it applies (no tare window, no low-pass, no overload held; a calibration it
         knows) and accepts them -- 2-3 µs a sample, where the vectorised path costs tens of µs a
         call, which at 1 kHz (one sample a wake-up) is every sample. The rest of the batch, from
         the first sample it declines (or the one that raised an overload), goes through process().
@@ -567,14 +567,14 @@ class LiveCalibrator:
         """
         self.overload_changed = False
         if (
-            not lone_sample.available
+            not sample_kernel.available
             or self.window is not None
             or self.lowpass.cutoff_hz > 0
             or self.overload.active
         ):
             return [], []
         # the plan, for (calibration, zero and tare, input scale, frame): made again on a change
-        made_for = self._lone_plan_for
+        made_for = self._single_plan_for
         if (
             made_for is None
             or made_for[0] is not self.active
@@ -582,12 +582,14 @@ class LiveCalibrator:
             or made_for[2] != input_scale
             or made_for[3] is not middle
         ):
-            self._lone_plan = lone_sample.make_plan(self.active, self.tare, input_scale, middle)
-            self._lone_plan_for = (self.active, self.tare, input_scale, middle)
-        plan = self._lone_plan
+            self._single_plan = sample_kernel.make_plan(
+                self.active, self.tare, input_scale, middle
+            )
+            self._single_plan_for = (self.active, self.tare, input_scale, middle)
+        plan = self._single_plan
         if plan is None:
             return [], []
-        overload, run = self.overload, lone_sample.run
+        overload, run = self.overload, sample_kernel.run
         want = uncertainty_wanted and self.settings.publish_uncertainty
         wrench, ready, stamps, frames, outside = [], [], [], [], 0
         for data in messages:

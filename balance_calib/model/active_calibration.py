@@ -130,7 +130,7 @@ class ActiveCalibration:
     @cached_property
     def one_sample_terms(self) -> tuple[tuple[int, ...], ...] | None:
         """Per term, the raw-output columns to multiply (with repetition): the C kernel's form
-        of the model (live/lone_sample.py), design_index without its padding; None when a term
+        of the model (live/sample_kernel.py), design_index without its padding; None when a term
         has an absolute value or a power beyond 3 (the kernel does not apply then), or for an
         iterative model.
         """

@@ -13,8 +13,8 @@ restored at start-up for the same calibration content, installation, namespace a
 qos_overrides./balance/raw.subscription.reliability:=best_effort.
 
 This node translates; live/session.py does the work (math in live/calibrator_core.py; each sample
-in one C call where it applies, live/lone_sample.py). balance/raw is read serialized by a thread of
-its own (nodes/_raw_input.py) in batches of what is waiting; the executor runs the services,
+in one C call where it applies, live/sample_kernel.py). balance/raw is read serialized by a thread
+of its own (nodes/_raw_input.py) in batches of what is waiting; the executor runs the services,
 parameters and timers and never wakes for a sample. ~/tare and ~/zero await a future that the
 reader completes once the window is full; ~/refit runs the pipeline in a separate process and the
 session swaps the new calibration in between two batches.

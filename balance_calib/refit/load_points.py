@@ -14,17 +14,17 @@ the points' time axis to one typical point spacing, so a campaign split over day
 unsplit one and nothing downstream grows with the length of a pause.
 
 Each point also keeps its own scatter, the repeatability yardstick of the residual diagnosis
-(diagnosis/leftovers.py): per bridge, the variance of the point's mean output (mV²) and the number
-of samples averaged. The estimator is the mean square successive difference of the samples kept,
-in time order (von Neumann): s² = Σ (v[j+1] - v[j])² / (2 (n - 1)), variance of the mean s² / n.
-A point's samples are not always stationary: the output settles or creeps after the weights are
-hung, the zero drifts; a trend of δ per sample adds only δ²/2 to this estimate, whereas it adds
-the trend's whole spread (Δ²/12 over the point) to the variance about the point mean and would
-make the yardstick too lenient for exactly the effects the diagnosis should flag. For white
-noise both estimate σ²; this one has fewer effective degrees of freedom (about 2 (n - 1)² /
-(3n - 4) instead of n - 1 per point), which over hundreds of points hardly moves the F-test.
-It sees noise within a point only: scatter slower than a point (the loading hardware, drift)
-shows in the zero points, which the diagnosis compares with it. Memory: two (P, n) arrays.
+(diagnosis/lack_of_fit.py): per bridge, the variance of the point's mean output (mV²) and the
+number of samples averaged. The estimator is the mean square successive difference of the samples
+kept, in time order (von Neumann): s² = Σ (v[j+1] - v[j])² / (2 (n - 1)), variance of the mean s² /
+n. A point's samples are not always stationary: the output settles or creeps after the weights are
+hung, the zero drifts; a trend of δ per sample adds only δ²/2 to this estimate, whereas it adds the
+trend's whole spread (Δ²/12 over the point) to the variance about the point mean and would make the
+yardstick too lenient for exactly the effects the diagnosis should flag. For white noise both
+estimate σ²; this one has fewer effective degrees of freedom (about 2 (n - 1)² / (3n - 4) instead
+of n - 1 per point), which over hundreds of points hardly moves the F-test. It sees noise within a
+point only: scatter slower than a point (the loading hardware, drift) shows in the zero points,
+which the diagnosis compares with it. Memory: two (P, n) arrays.
 """
 
 from __future__ import annotations

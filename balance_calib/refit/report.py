@@ -175,7 +175,7 @@ def build_report(config, points, reduction, fits, base_model, diagnosis, cut, so
         'sigma_pct_fs_crossval': {'before': _round(cv_before), 'after': _round(cv_after)},
         'effects': effects,
         'adopted': live is not None,
-        # what is left and what to check (issue 11): empty / unknown without a diagnosis
+        # what is left and what to check: empty / unknown without a diagnosis
         'unexplained': [u.to_report() for u in getattr(diagnosis, 'unexplained', ())],
         'repeatability_pct_fs': {
             c: v

@@ -43,7 +43,7 @@ from .model_selection import (
     terms_dropped,
     with_statistics,
 )
-from .odd_components import odd_components
+from .outlying_components import outlying_components
 from .table_report import (
     build_report,
     FormChoice,
@@ -272,7 +272,7 @@ def calibrate_table(
     if validation is not None:
         sets['validation'] = (validation, validations[chosen].residuals)
     report.update(signing_sections(table, fit, form, outputs, sets))
-    effects, odd = odd_components(chosen, base_fit, term_sets[chosen], table, outputs)
+    effects, odd = outlying_components(chosen, base_fit, term_sets[chosen], table, outputs)
     report['effects'] = report['effects'] + effects
     report['unexplained'] = report['unexplained'] + odd
     report['model_selection'] = {

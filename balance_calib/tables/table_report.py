@@ -199,7 +199,7 @@ def build_report(
 
 
 def signing_sections(table, fit, method: str, outputs: np.ndarray, residuals_sets: dict) -> dict:
-    """What a laboratory signs beside the σ (issue 20, Deliver 7): identification, rated loads,
+    """What a laboratory signs beside the σ: identification, rated loads,
     the largest residual of each load with its point id (per set), the adopted model's coefficients
     with standard errors, and the sensitivities (output change from zero to capacity of each load).
 

@@ -1,4 +1,4 @@
-"""Validation of a table calibration on points it was not fitted to (issue 20, Deliver 5).
+"""Validation of a table calibration on points it was not fitted to.
 
 A validation series the calibration has is the same setup: the calibration's tare is applied,
 never re-estimated. A series it lacks is another setup (another fixture orientation): its tare is

@@ -20,7 +20,7 @@ Negative curvature on every bridge of B660H (8/10 before) came in once the cross
 longer offered where a specific family left no lack of fit (seed 3004: MYV*MZV² on M_X,
 search._cross_terms_only_where_lacking) and a curvature pair reduced for leverage was completed
 after the tare's re-read where that lowers PRESS (F_Z cross-validated 1.18x -> 1.04x,
-retare._pairs_restored).
+retare._complete_curvature_pairs).
 The measured misses: load-path friction 0-5/10 (on this schedule every
 loaded point is reached rising, so it is mostly a sign step plus a sensitivity, which no family
 holds with the stick band); Preisach on every bridge of LMC6522 7/10 (M_X's play terms fit 70-72 %
@@ -179,7 +179,7 @@ def test_no_generic_family_where_the_specific_one_left_no_lack_of_fit():
     result = _named_alone('b660h', 'negative_curvature', 'all', 3004)
     assert result.effect_names == ('bidirectional',), result.effect_names
     assert not result.unexplained, [u.evidence for u in result.unexplained]
-    assert result.leftovers.lack_of_fit_p['MX'] > 0.001 / 6, result.leftovers.lack_of_fit_p
+    assert result.lack_of_fit.lack_of_fit_p['MX'] > 0.001 / 6, result.lack_of_fit.lack_of_fit_p
 
 
 def test_a_curvature_pair_reduced_for_leverage_is_completed_after_the_reread():

@@ -168,5 +168,5 @@ def test_a_calibration_body_rolled_from_its_declared_orientation_is_a_warning(lm
         on_unexcited='drop',
     )
     result = diagnose(retare_with_model(reduction, first.model), lmc6522)
-    assert abs(result.leftovers.roll_deg) == pytest.approx(0.66, abs=0.3)
+    assert abs(result.lack_of_fit.roll_deg) == pytest.approx(0.66, abs=0.3)
     assert any('rolled by' in w for w in result.warnings), result.warnings

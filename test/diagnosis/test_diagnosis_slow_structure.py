@@ -1,4 +1,4 @@
-"""The directed leftover tests (leftovers.slow_structure_bases): a component's own load shape
+"""The directed leftover tests (lack_of_fit.slow_structure_bases): a component's own load shape
 changing with time, with the gravity vector, or with both, left in the residual after the adopted
 model.
 
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from balance_calib.diagnosis import diagnose
-from balance_calib.diagnosis.leftovers import directed_lack_of_fit, slow_structure_bases
+from balance_calib.diagnosis.lack_of_fit import directed_lack_of_fit, slow_structure_bases
 from balance_calib.simulation.diagnosis_rates import (
     calibrated_parameter,
     shape_effects,

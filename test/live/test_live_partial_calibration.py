@@ -6,7 +6,6 @@ uncertainty NaN, the envelope, saturation and overload checks blind to the absen
 """
 
 from live_cases import take
-from lone_messages import lone_through_kernel, serialized
 import numpy as np
 from partial_cells import (
     ABSENT,
@@ -20,6 +19,7 @@ from partial_cells import (
     THREE,
 )
 import pytest
+from serialized_messages import serialized, single_through_kernel
 
 from balance_calib.calibration_file import load_calibration
 from balance_calib.live.diagnostics_status import diagnostics, InputCounters, LiveState, OK
@@ -145,11 +145,11 @@ def test_the_c_kernel_gives_the_pure_cores_wrench_and_nan_uncertainty(calibratio
     loads = rng.uniform(-0.9, 0.9, (12, 3)) * CAPACITY
     samples = raw_samples(rng, loads)
     stamps = 10**9 + np.arange(12) * 10**6
-    batch_live, lone_live = LiveCalibrator(active), LiveCalibrator(active)
+    batch_live, single_live = LiveCalibrator(active), LiveCalibrator(active)
     batch = batch_live.process(samples, stamps, ['cell-3'] * 12, now_s=0.0)
     messages = serialized(samples, stamps, 'cell-3')
-    wrench, uncertainty, by_kernel = lone_through_kernel(
-        lone_live, messages, 1.0, WrenchEncoder('tunnel')
+    wrench, uncertainty, by_kernel = single_through_kernel(
+        single_live, messages, 1.0, WrenchEncoder('tunnel')
     )
     assert all(by_kernel)  # a linear direct model of the bridges: the kernel's case
     np.testing.assert_allclose(
@@ -216,7 +216,7 @@ def test_nan_on_a_channel_the_calibration_does_not_read_changes_nothing(calibrat
         np.testing.assert_allclose(one.wrench, reference.wrench[k : k + 1], rtol=1e-12)
     assert lone.counters.published == 5 and lone.counters.rejected_nonfinite == 0
     stamps = np.arange(1, 7) * 10**6
-    wrench, uncertainty, by_kernel = lone_through_kernel(
+    wrench, uncertainty, by_kernel = single_through_kernel(
         kernel, serialized(holes, stamps), 1.0, WrenchEncoder('tunnel')
     )
     assert not any(by_kernel) and wrench[5] is None  # the kernel declines, the pure core takes

@@ -424,7 +424,7 @@ def test_published_uncertainty_is_the_calibrations_own_with_the_tare_scatter_add
     )  # the memo's matrices: no covariance
 
 
-def test_lone_samples_after_a_zero_and_a_tare_equal_the_batch_path_wrench_and_uncertainty():
+def test_sample_kernels_after_a_zero_and_a_tare_equal_the_batch_path_wrench_and_uncertainty():
     """At 1 kHz every sample comes alone and takes the one-sample path (design row reused for the
     uncertainty); it must give the batch path's numbers, flags and counts, with zero and tare
     applied.
@@ -441,11 +441,11 @@ def test_lone_samples_after_a_zero_and_a_tare_equal_the_batch_path_wrench_and_un
         live = LiveCalibrator(active)
         assert take(live, 'zero', zero).ok and take(live, 'tare', wind_off, 10**9).ok
         lives.append(live)
-    batch_live, lone_live = lives
+    batch_live, single_live = lives
     stamps = 2 * 10**9 + np.arange(len(samples)) * 10**6
     batch = batch_live.process(samples, stamps, now_s=0.0)
     lone = [
-        lone_live.process(samples[k : k + 1], stamps[k : k + 1], now_s=0.0)
+        single_live.process(samples[k : k + 1], stamps[k : k + 1], now_s=0.0)
         for k in range(len(samples))
     ]
     published = [k for k in range(len(samples)) if len(lone[k].indices)]
@@ -461,10 +461,10 @@ def test_lone_samples_after_a_zero_and_a_tare_equal_the_batch_path_wrench_and_un
     ] == batch.batch.out_of_envelope.tolist() and batch.batch.out_of_envelope[11]
     assert lone[0].batch.design_row is not None  # the one-sample path was taken
     for name in ('received', 'published', 'rejected_nonfinite', 'saturated', 'out_of_envelope'):
-        assert getattr(lone_live.counters, name) == getattr(batch_live.counters, name), name
-    assert lone_live.overload.active == batch_live.overload.active
+        assert getattr(single_live.counters, name) == getattr(batch_live.counters, name), name
+    assert single_live.overload.active == batch_live.overload.active
     np.testing.assert_allclose(
-        lone_live.overload.peak_fraction, batch_live.overload.peak_fraction, rtol=1e-12
+        single_live.overload.peak_fraction, batch_live.overload.peak_fraction, rtol=1e-12
     )
 
 

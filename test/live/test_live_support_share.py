@@ -8,9 +8,9 @@ that a sample is outside exactly when one of its loads is beyond 30 % + 2 % FS.
 """
 
 from live_cases import calibration_with_covariance
-from lone_messages import serialized
 import numpy as np
 import pytest
+from serialized_messages import serialized
 from support_cases import (
     loads_with_some_outside,
     outputs_of,

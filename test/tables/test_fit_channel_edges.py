@@ -1,6 +1,6 @@
 """`fit` on tables whose outputs are not the loads' own bridges: an 8-channel sensor with a term
 file of its outputs, with --validate and --axes, and --excitation-v on outputs it cannot convert
-(Deliver 2 and 3: the gaps found after the units and 8-output reader landed).
+(the gaps found after the units and 8-output reader landed).
 """
 
 from dataclasses import replace

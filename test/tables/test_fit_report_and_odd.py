@@ -1,5 +1,5 @@
 """What a laboratory signs and the odd component named with its points,
-with a term of its own channel offered when it removes the structure (Deliver 6).
+with a term of its own channel offered when it removes the structure.
 """
 
 import json

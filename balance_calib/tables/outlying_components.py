@@ -1,5 +1,5 @@
 """A component whose residuals stand out, named with its points, and a term of its own channel
-offered when it removes the structure (issue 20, Deliver 6; refit's closing of the loop).
+offered when it removes the structure (refit's closing of the loop).
 
 A load is odd when its cross-validated σ (% capacity) is more than ODD_RATIO times the median of
 the other loads', or when some of its leave-one-out residuals lie beyond ODD_ROBUST_SIGMAS robust
@@ -42,7 +42,7 @@ def _own_channel_terms(method: str, k: int, table, outputs: np.ndarray) -> list[
     ]
 
 
-def odd_components(
+def outlying_components(
     method: str, fit, terms: Sequence[Term], table, outputs: np.ndarray
 ) -> tuple[list[dict], list[dict]]:
     """(effects offered, unexplained entries) for the adopted fit, interfaces.md's keys."""

@@ -1,5 +1,5 @@
 """Live messages as rclpy serializes them, and the live path's one call fed one message at a time:
-what the C kernel's tests (test_lone_kernel, test_live_partial_calibration) compare with the pure
+what the C kernel's tests (test_sample_kernel, test_live_partial_calibration) compare with the pure
 core.
 """
 
@@ -52,7 +52,7 @@ def through_kernel(live, data, now_s, encoder, scale=1.0):
     return out.wrench[0], uncertainty[0] if uncertainty else None
 
 
-def lone_through_kernel(live, messages, scale, encoder):
+def single_through_kernel(live, messages, scale, encoder):
     """Each message alone through process_messages, 0.1 s apart; wrench/uncertainty per message
     (None: not published), and which ones the kernel took.
     """

@@ -1,15 +1,15 @@
 """The live calibrator's per-sample work in-process: the C kernel against the pure core, same
 process.
 
-    python -m balance_calib.benchmarks.lone_kernel [--repeats 3000]
+    python -m balance_calib.benchmarks.sample_kernel [--repeats 3000]
 
 CalibratorSession.on_samples (serialized samples in, serialized wrench and uncertainty out,
 counters, input monitor and overload included; no DDS) on the memo's cubic LMC6522 with a
 coefficient covariance, µs of thread CPU per sample:
 - batches of 1, 2, 3, 10, 100 and 1000 samples, back to back (warm caches), best of the repeats;
 - lone samples with 1 ms of sleep before each (caches gone cold, as at 1 kHz), mean.
-Each figure with the kernel and with the pure core (lone_sample.available switched off), and their
-ratio. The samples are serialized before timing; the timer's own cost is printed first.
+Each figure with the kernel and with the pure core (sample_kernel.available switched off), and
+their ratio. The samples are serialized before timing; the timer's own cost is printed first.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import os
 import tempfile
 import time
 
-from ..live import lone_sample
+from ..live import sample_kernel
 from ..live.parameters import PARAMETERS
 from ..live.session import CalibratorSession
 from .dds_harness import raw_template, stamped
@@ -43,14 +43,16 @@ def _session(directory: str) -> CalibratorSession:
 
 
 def measure(repeats: int) -> dict:
-    directory = tempfile.mkdtemp(prefix='lone_kernel_')
+    directory = tempfile.mkdtemp(prefix='sample_kernel_')
     results = {}
-    built = lone_sample.available
+    built = sample_kernel.available
     for label, kernel in (('kernel', True), ('pure core', False)):
         if kernel and not built:
-            print(f'the C kernel is not built ({lone_sample.unavailable_reason}): pure core only')
+            print(
+                f'the C kernel is not built ({sample_kernel.unavailable_reason}): pure core only'
+            )
             continue
-        lone_sample.available = kernel
+        sample_kernel.available = kernel
         try:
             session = _session(directory)
             stamp = time.time_ns()
@@ -74,7 +76,7 @@ def measure(repeats: int) -> dict:
                 total += time.thread_time_ns() - start
             results[(label, 'lone, 1 ms apart (cold)')] = total / len(lone) / 1e3
         finally:
-            lone_sample.available = built
+            sample_kernel.available = built
     return results
 
 

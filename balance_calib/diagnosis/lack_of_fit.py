@@ -69,7 +69,7 @@ class Unexplained:
 
 
 @dataclass(frozen=True)
-class Leftovers:
+class LackOfFit:
     repeatability_pct_fs: Mapping[str, float]
     pairs: int  # ν: pairs of consecutive zero points
     lack_of_fit_ratio: Mapping[str, float]
@@ -240,7 +240,7 @@ def directed_lack_of_fit(problem, k, terms, base_terms, bases, alpha, n_tests):
     None when none passes alpha. explained: the share the adopted terms beyond the base model took
     of all the structure the base fit leaves in their span and the basis's together (whitened RSS),
     (RSS_base - RSS_adopted) / (RSS_base - RSS_adopted+basis) -- the omnibus rule's "fraction of
-    the excess explained" (examine_leftovers), with the excess measured along the basis.
+    the excess explained" (examine_lack_of_fit), with the excess measured along the basis.
     """
     best = None
     for name, basis in bases.items():
@@ -353,7 +353,7 @@ def _unstable(problem, k, terms, fit, found, late, alpha) -> list[tuple[str, flo
     return out
 
 
-def examine_leftovers(state: SearchState, effects) -> Leftovers:
+def examine_lack_of_fit(state: SearchState, effects) -> LackOfFit:
     """What is left after the search (state: its fits, terms and data; effects: the adopted
     candidates): repeatability, lack of fit, unexplained structure, warnings.
     """
@@ -380,7 +380,7 @@ def examine_leftovers(state: SearchState, effects) -> Leftovers:
             f'only {len(pairs)} pair(s) of consecutive zero points in one orientation: the '
             'repeatability is unknown and the residuals were not tested for lack of fit'
         )
-        return Leftovers(nan, len(pairs), nan, nan, (), warnings, {}, roll)
+        return LackOfFit(nan, len(pairs), nan, nan, (), warnings, {}, roll)
     s2, nu, source, noted = repeatability_variance(
         points, linear, pairs, components, point_variance_mv2, point_samples
     )
@@ -519,6 +519,6 @@ def examine_leftovers(state: SearchState, effects) -> Leftovers:
                 residual,
             )
         )
-    return Leftovers(
+    return LackOfFit(
         repeatability, int(nu.min()), ratios, p_values, tuple(unexplained), warnings, dropped, roll
     )

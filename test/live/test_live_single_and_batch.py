@@ -79,7 +79,7 @@ CASES = {
 
 
 @pytest.mark.parametrize('case', list(CASES))
-def test_lone_samples_batches_of_three_and_a_whole_run_publish_the_same(case):
+def test_sample_kernels_batches_of_three_and_a_whole_run_publish_the_same(case):
     make, installation, settings, temperature_c = CASES[case]
     calibration = make()
     zero, wind_off, wind_on, _ = show_run(installation, samples_per_condition=3, seed=8)

@@ -1,10 +1,10 @@
 /* The live calibrator's lone sample in one C call: serialized balance/raw sample in, serialized
- * balance/wrench and balance/wrench_uncertainty out (live/lone_sample.py says when it applies).
+ * balance/wrench and balance/wrench_uncertainty out (live/sample_kernel.py says when it applies).
  *
  * The pure core's vectorised path (calibrator_core.compute_wrench, stream.wrench_uncertainty)
  * is the specification; this is its only accelerator, for one sample of a direct polynomial
  * model of the bridge outputs, the same steps in the same order (called by
- * stream.LiveCalibrator.process_messages for the samples it takes); test/test_lone_kernel.py
+ * stream.LiveCalibrator.process_messages for the samples it takes); test/test_sample_kernel.py
  * holds the two to 1e-12:
  *
  *   x      = outputs * input_scale - zero                     electrical zero, output space (TM-663 §5)
@@ -26,7 +26,7 @@
 #include <stdint.h>
 #include <string.h>
 
-#define CAPSULE_NAME "balance_calib.live._lone_kernel.Plan"
+#define CAPSULE_NAME "balance_calib.live._sample_kernel.Plan"
 
 typedef struct {
     double scale;
@@ -328,14 +328,14 @@ static PyMethodDef methods[] = {
      "beyond overload_fraction, wrench bytes, uncertainty bytes | None)"},
     {NULL, NULL, 0, NULL}};
 
-static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_lone_kernel",
-                                    "The live calibrator's lone sample in C (see live/lone_sample.py).", -1,
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_sample_kernel",
+                                    "The live calibrator's lone sample in C (see live/sample_kernel.py).", -1,
                                     methods, NULL, NULL, NULL, NULL};
 
-PyMODINIT_FUNC PyInit__lone_kernel(void)
+PyMODINIT_FUNC PyInit__sample_kernel(void)
 {
 #if defined(__BYTE_ORDER__) && __BYTE_ORDER__ != __ORDER_LITTLE_ENDIAN__
-    PyErr_SetString(PyExc_ImportError, "_lone_kernel reads little-endian CDR with memcpy: a little-endian host only");
+    PyErr_SetString(PyExc_ImportError, "_sample_kernel reads little-endian CDR with memcpy: a little-endian host only");
     return NULL;
 #endif
     return PyModule_Create(&module);

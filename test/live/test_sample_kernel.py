@@ -1,4 +1,4 @@
-"""The C kernel of the lone sample (live/_lone_kernel.c) against the pure core's batch path.
+"""The C kernel of the lone sample (live/_sample_kernel.c) against the pure core's batch path.
 
 Bytes in as rclpy serializes them, bytes out read back by rclpy: wrench, uncertainty, flags,
 counters, input monitor and overload must be the pure core's, to 1e-12, with a zero, a tare (and
@@ -7,13 +7,13 @@ pure core.
 """
 
 from live_cases import calibration_with_covariance, show_run, take
-from lone_messages import lone_through_kernel, serialized, six, through_kernel
 import numpy as np
 import pytest
+from serialized_messages import serialized, single_through_kernel, six, through_kernel
 
 from balance_calib.calibration_file import load_calibration
 from balance_calib.config import CONFIG_DIR
-from balance_calib.live import _lone_kernel, lone_sample  # noqa: F401  (an import error must fail)
+from balance_calib.live import _sample_kernel, sample_kernel  # noqa: F401  (an import error must fail)
 from balance_calib.live.raw_codec import decode_wrenches, WrenchEncoder
 from balance_calib.live.stream import LiveCalibrator, LiveSettings
 from balance_calib.model.active_calibration import activate
@@ -24,7 +24,7 @@ CAPACITY = MEMO.capacity
 
 
 @pytest.mark.parametrize('installation, scale', [(INVERTED, 1.0), (UPRIGHT, 2.5)])
-def test_kernel_lone_samples_equal_the_pure_core_after_a_zero_and_a_tare(installation, scale):
+def test_kernel_sample_kernels_equal_the_pure_core_after_a_zero_and_a_tare(installation, scale):
     calibration = calibration_with_covariance()
     active = activate(calibration, 'cubic', installation)
     zero, wind_off, wind_on, _ = show_run(installation, samples_per_condition=3, seed=7)
@@ -37,7 +37,7 @@ def test_kernel_lone_samples_equal_the_pure_core_after_a_zero_and_a_tare(install
         live = LiveCalibrator(active, LiveSettings(overload_fraction=2.0))
         assert take(live, 'zero', zero).ok and take(live, 'tare', wind_off, 10**9).ok
         lives.append(live)
-    batch_live, lone_live = lives
+    batch_live, single_live = lives
     stamps = 2 * 10**9 + np.arange(len(samples)) * 10**6
     stamps[20] = stamps[19]  # a duplicate stamp, counted by both
     frames = ['LMC6522'] * len(samples)
@@ -46,8 +46,8 @@ def test_kernel_lone_samples_equal_the_pure_core_after_a_zero_and_a_tare(install
     messages[30] = serialized(samples[30:31] / scale, stamps[30:31], 'B660H')[0]
     frames[30] = 'B660H'
     batch = batch_live.process(samples, stamps, frames, now_s=0.0)
-    wrench, uncertainty, by_kernel = lone_through_kernel(
-        lone_live, messages, scale, WrenchEncoder('tunnel')
+    wrench, uncertainty, by_kernel = single_through_kernel(
+        single_live, messages, scale, WrenchEncoder('tunnel')
     )
 
     published = [k for k, w in enumerate(wrench) if w is not None]
@@ -55,7 +55,7 @@ def test_kernel_lone_samples_equal_the_pure_core_after_a_zero_and_a_tare(install
     # the kernel declines the non-finite sample; the saturated bridge (30) raises the overload,
     # held for the rest of the run (1 s), and while it is held the pure core takes every sample
     assert by_kernel == [k != 9 and k < 30 for k in range(len(samples))]
-    assert lone_live.counters.out_of_envelope == 1 and lone_live.overload.active
+    assert single_live.counters.out_of_envelope == 1 and single_live.overload.active
     fs = np.abs(installation.to_tunnel(CAPACITY))
     np.testing.assert_allclose(
         np.vstack([wrench[k] for k in published]) / fs, batch.wrench / fs, rtol=0, atol=1e-12
@@ -65,11 +65,11 @@ def test_kernel_lone_samples_equal_the_pure_core_after_a_zero_and_a_tare(install
     )
     assert batch.batch.out_of_envelope[11]
     for name in ('received', 'published', 'rejected_nonfinite', 'saturated', 'out_of_envelope'):
-        assert getattr(lone_live.counters, name) == getattr(batch_live.counters, name), name
-    assert lone_live.inputs.problems() == batch_live.inputs.problems()
-    assert lone_live.inputs.foreign_frames == {'B660H'}
+        assert getattr(single_live.counters, name) == getattr(batch_live.counters, name), name
+    assert single_live.inputs.problems() == batch_live.inputs.problems()
+    assert single_live.inputs.foreign_frames == {'B660H'}
     np.testing.assert_allclose(
-        lone_live.overload.peak_fraction, batch_live.overload.peak_fraction, rtol=1e-12
+        single_live.overload.peak_fraction, batch_live.overload.peak_fraction, rtol=1e-12
     )
 
 
@@ -129,14 +129,14 @@ def test_what_the_kernel_does_not_take():
     data = serialized(np.full((1, 6), 0.1), [10**9])[0]
     done = through_kernel(memo_live, data, 0.0, encoder)
     assert done is not None and done[1] is None
-    plan = lone_sample.make_plan(memo_live.active, memo_live.tare, 1.0, encoder.middle)
+    plan = sample_kernel.make_plan(memo_live.active, memo_live.tare, 1.0, encoder.middle)
     big_endian = b'\x00\x00' + data[2:]
-    assert lone_sample.run(plan, big_endian, True, 1.0, np.zeros(6)) is None
-    assert lone_sample.run(plan, data[:-8], True, 1.0, np.zeros(6)) is None
+    assert sample_kernel.run(plan, big_endian, True, 1.0, np.zeros(6)) is None
+    assert sample_kernel.run(plan, data[:-8], True, 1.0, np.zeros(6)) is None
     filtered = LiveCalibrator(activate(MEMO, 'cubic', UPRIGHT), LiveSettings(lowpass_hz=10.0))
     assert through_kernel(filtered, data, 0.0, encoder) is None
     with pytest.raises(ValueError, match='covariance'):
-        _lone_kernel.plan(
+        _sample_kernel.plan(
             1.0,
             *[np.zeros(6)] * 5,
             np.arange(6),
@@ -151,11 +151,11 @@ def test_what_the_kernel_does_not_take():
             np.ones(6, np.int64),
             b'',
         )
-    plan = lone_sample.make_plan(memo_live.active, memo_live.tare, 1.0, encoder.middle)
+    plan = sample_kernel.make_plan(memo_live.active, memo_live.tare, 1.0, encoder.middle)
     with pytest.raises(ValueError, match='peak'):
-        lone_sample.run(plan, data, True, 1.0, np.zeros(5))
+        sample_kernel.run(plan, data, True, 1.0, np.zeros(5))
     with pytest.raises(TypeError):  # read-only: the peak is written in place
-        lone_sample.run(plan, data, True, 1.0, bytes(48))
+        sample_kernel.run(plan, data, True, 1.0, bytes(48))
 
 
 def test_a_batch_goes_through_the_kernel_until_it_declines_and_the_rest_through_the_pure_core(
@@ -181,7 +181,7 @@ def test_a_batch_goes_through_the_kernel_until_it_declines_and_the_rest_through_
     messages = serialized(batch, 10**9 + np.arange(12) * 10**6)
 
     def run(kernel: bool):
-        monkeypatch.setattr(lone_sample, 'available', kernel)
+        monkeypatch.setattr(sample_kernel, 'available', kernel)
         session = session_module.CalibratorSession(
             lambda name: values[name], 'test', lambda level, line: None
         )
@@ -205,14 +205,14 @@ def test_a_batch_goes_through_the_kernel_until_it_declines_and_the_rest_through_
 
 
 def test_the_in_process_benchmark_runs_both_paths():
-    """benchmarks/lone_kernel.py (figures in the README): every case measured for both paths (no
+    """benchmarks/sample_kernel.py (figures in the README): every case measured for both paths (no
     timing is asserted), and the kernel switched back on afterwards.
     """
-    from balance_calib.benchmarks.lone_kernel import BATCHES, measure
+    from balance_calib.benchmarks.sample_kernel import BATCHES, measure
 
     results = measure(30)
     assert len(results) == 2 * (len(BATCHES) + 1) and all(v > 0 for v in results.values())
-    assert lone_sample.available
+    assert sample_kernel.available
 
 
 def test_arbitrary_bytes_never_crash_the_kernel_and_what_it_takes_is_what_the_decoder_reads():
@@ -228,12 +228,12 @@ def test_arbitrary_bytes_never_crash_the_kernel_and_what_it_takes_is_what_the_de
     active = activate(MEMO, 'cubic', UPRIGHT)
     live = LiveCalibrator(active)
     encoder = WrenchEncoder('tunnel')
-    plan = lone_sample.make_plan(active, live.tare, 1.0, encoder.middle)
+    plan = sample_kernel.make_plan(active, live.tare, 1.0, encoder.middle)
     valid = serialized(np.full((1, 6), 0.2), [10**9])[0]
 
     def check(data: bytes) -> None:
         peak = np.zeros(6)
-        result = lone_sample.run(plan, data, True, 1.0, peak)
+        result = sample_kernel.run(plan, data, True, 1.0, peak)
         if result is None:
             return
         stamps, values, frames = decode_wrenches([data])
