@@ -11,6 +11,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 import pytest
 from ros_harness import new_domain_id
@@ -101,6 +102,14 @@ class HostProcess:
                 self.process.wait(timeout_s)
         self.log.close()
         return self.process.returncode
+
+
+def _wait_for_line(log, text: str, timeout_s: float) -> None:
+    """Wait until the log file holds `text` (a node's line saying it is ready), or fail."""
+    deadline = time.monotonic() + timeout_s
+    while text not in log.read_text():
+        assert time.monotonic() < deadline, f'no "{text}" in {log} after {timeout_s:g} s'
+        time.sleep(0.1)
 
 
 CHECKER = r"""
@@ -203,6 +212,10 @@ def test_three_hosts_over_a_bridge_lose_nothing_at_1_khz_and_refit_through_the_s
                 text=True,
                 start_new_session=True,
             )
+            # the recorder subscribes to a topic once it has discovered its publisher: the
+            # wind-on run starts only when it records the calibrator's wrench (discovery across
+            # the bridge can take seconds on a busy machine)
+            _wait_for_line(tmp_path / 'recorder.log', 'recording /balance/wrench', timeout_s=60.0)
             processes['publisher'] = HostProcess(
                 network,
                 'daq',
