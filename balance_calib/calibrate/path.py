@@ -1,12 +1,15 @@
 """The one calibration path: points in, a calibration (and its record on disk) out.
 
 `calibrate(points, settings)` is what `balance-calib refit` and `~/refit` (from_bags.run_refit),
-`balance-calib simulate` and `balance-calib fit` run. It dispatches on what the points carry: a
-bag's (or a simulation's) record goes to the TM-663 fits of the bag side (refit/pipeline.py:
-linear, quadratic and cubic fits §2-3, the residual diagnosis, the acceptance gates); a table's
-rows to the series-tare fits of the table side (tables/calibrate.py: both model forms, method
-choice, validation). Either way the result is signed (record.py) and, when settings.out is
-given, written by the one record writer (write_record.py).
+`balance-calib simulate` and `balance-calib fit` run. Whatever the points were read from, it
+runs them in one order (calibration_stages.run_stages): screen gates -> model selection and fit
+-> data gates -> diagnosis -> fit gates after the diagnosis -> calibration and report. What
+the points carry chooses the stages: a bag's (or a simulation's) record the TM-663 fits of
+refit/pipeline.BagStages (linear, quadratic and cubic §2-3, the residual diagnosis, the refit's
+gates); a table's rows the series-tare fits of tables/calibrate.TableStages (both model forms,
+method choice, validation, the loop closed on the table, the table's gates). Either way the
+result is signed (record.py) and, when settings.out is given, written by the one record writer
+(write_record.py).
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from typing import TYPE_CHECKING, Union
 
 from ..calibration_points import CalibrationPoints
 from ..calibration_settings import CalibrationSettings
+from ..calibration_stages import run_stages
 from .records import bag_record, table_record
 from .write_record import Record, write_record
 
@@ -36,14 +40,21 @@ def calibrate(points: CalibrationPoints, settings: CalibrationSettings) -> Calib
     result: Calibrated
     record: Record
     if points.bag is not None:
-        from ..refit.pipeline import calibrate_bag
+        from ..refit.pipeline import BagStages
 
-        result = calibrate_bag(points, settings)
+        result = run_stages(BagStages(points, settings), settings.force, settings.progress)
         if settings.out is None:
             return result
         record = bag_record(result)
     elif points.table is not None:
-        result = _calibrate_table(points, settings)
+        from ..tables.calibrate import TableStages
+
+        table = run_stages(
+            TableStages(points.table, settings.table, statistics=True),
+            settings.force,
+            settings.progress,
+        )
+        result = _signed(table, settings)
         if settings.out is None:
             return result
         record = table_record(result)
@@ -59,28 +70,17 @@ def calibrate(points: CalibrationPoints, settings: CalibrationSettings) -> Calib
     return result
 
 
-def _calibrate_table(points: CalibrationPoints, settings: CalibrationSettings) -> TableCalibration:
-    """calibrate_table of the table the points carry, its report's record signed (record.py)."""
+def _signed(result: TableCalibration, settings: CalibrationSettings) -> TableCalibration:
+    """A table's calibration with its report's record signed (record.py)."""
     from ..record import signed_record
-    from ..tables.calibrate import calibrate_table
 
-    options = settings.table
-    result = calibrate_table(
-        points.table,
-        method=options.method,
-        terms=options.terms,
-        validation=options.validation,
-        excitation_v=options.excitation_v,
-        select=options.select,
-        force=settings.force,
-    )
     if settings.serial:
         result.calibration.extra['serial'] = settings.serial  # type: ignore[index]
     result.report['record'] = signed_record(
         balance=result.report['balance'],
         serial=settings.serial,
         operator=settings.operator,
-        inputs=list(options.inputs),
+        inputs=list(settings.table.inputs),
         calibration=result.calibration,
     )
     return result

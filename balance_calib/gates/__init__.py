@@ -4,7 +4,7 @@ A calibration is written only when its data and its result look like one (interf
 report.json `acceptance` / `gates`). One Gate type and report (gate.py), one outlier rule
 (outliers.py); the modules are split by what each gate judges:
 
-    gate.py               Gate, ModelResiduals, failed, first_failure, gates_report
+    gate.py               Gate, ModelResiduals, gates_report, refusal and the priorities
     limits.py             the config's `acceptance:` limits over the defaults
     outputs.py            output_range, clipping, channels: the bridge outputs themselves
     sensitivity.py        sensitivity, active_calibration: the fitted sensitivities

@@ -60,16 +60,48 @@ def _plain(value):
     return value
 
 
-# a table calibration's refusal names the most specific cause first (commands/fit.py)
+# the order a refusal names failed gates in, the most specific cause first: a unit error also
+# spoils σ, not the other way round (a bag calibration's gates, then a table calibration's)
+BAG_PRIORITY = (
+    'marker_order',
+    'clipping',
+    'output_range',
+    'sensitivity',
+    'active_calibration',
+    'capacity',
+    'body_weight',
+    'zero_points',
+    'schedule',
+    'outliers',
+    'sigma',
+)
 TABLE_PRIORITY = ('channels', 'sensitivity', 'outliers', 'overfit', 'condition')
 
 
-def first_failure(gates: Sequence[Gate], priority: Sequence[str]) -> Gate | None:
-    """The failed gate named first in a refusal: the earliest of `priority` (the most specific
-    cause: a unit error also spoils σ, not the other way round), then any gate it does not name.
+def refusal(
+    where: str, gates: Sequence[Gate], priority: Sequence[str], names_others: bool
+) -> str | None:
+    """The one line refusing a calibration for its failed `gates` (None when all passed): the
+    source, the first failure by `priority` and its reason, and with names_others the other
+    failed gates.
     """
-    bad = sorted(
+    bad = _by_priority(gates, priority)
+    if not bad:
+        return None
+    also = (
+        f' (also failed: {", ".join(g.name for g in bad[1:])})'
+        if names_others and len(bad) > 1
+        else ''
+    )
+    return (
+        f'{where}: refused by acceptance gate {bad[0].name}: {bad[0].reason}{also}; '
+        'nothing written (--force writes it anyway)'
+    )
+
+
+def _by_priority(gates: Sequence[Gate], priority: Sequence[str]) -> list[Gate]:
+    """The failed gates, those `priority` names first in its order (a stable sort)."""
+    return sorted(
         failed(gates),
         key=lambda g: priority.index(g.name) if g.name in priority else len(priority),
     )
-    return bad[0] if bad else None

@@ -10,10 +10,11 @@ report says so).
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 import time
-from typing import Any, Callable, cast, Mapping, Sequence, TYPE_CHECKING
+from typing import Any, Callable, cast, Iterator, Mapping, Sequence, TYPE_CHECKING
 
 import numpy as np
 
@@ -21,9 +22,11 @@ from ..accuracy.sigma import sigma_by_component
 from ..calibration_file import ConfigError
 from ..calibration_points import CalibrationPoints, CutSummary
 from ..calibration_settings import CalibrationSettings
+from ..calibration_stages import run_stages
 from ..config import BalanceConfig
 from ..fit.crossval import press_residuals
 from ..fit.least_squares import fit_model, FitResult, UnexcitedTermsError
+from ..gates.gate import BAG_PRIORITY, Gate
 from ..model.calibration import Calibration
 from ..model.inverse import InverseDidNotConverge
 from ..model.tm663 import MODEL_ORDERS, tm663_terms
@@ -138,174 +141,225 @@ def check_model(model: str) -> None:
 
 def calibrate_bag(points: CalibrationPoints, settings: CalibrationSettings) -> CalibrationResult:
     """Everything after the zero points and tare of a bag's (or a simulation's) points; pure
-    (writes nothing). Returns the fits, the diagnosis, the calibration and its report.
-
-    Raises RefitError when an acceptance gate fails (gates/), unless settings.force;
-    settings.active is the calibration in use, whose sensitivities the new one must stay near;
-    the points must cover the balance config's schedule; settings.serial (default the config's
-    `serial`) and operator go into the signed record (record.py).
+    (writes nothing): BagStages run in the path's one order (calibration_stages.run_stages).
     """
-    from ..gates.bags import base_model_residuals, data_gates, fit_gates
-    from ..gates.gate import failed, gates_report, ModelResiduals
-    from ..gates.limits import acceptance_limits
-    from ..gates.outputs import output_range_gate
+    return run_stages(BagStages(points, settings), settings.force, settings.progress)
 
-    bag = points.bag
-    if bag is None or bag.reduction is None or bag.config is None:
-        raise ValueError(f'{points.source}: no reduced bag points to calibrate')
-    say = settings.progress or (lambda message: None)
-    config, reduction, cut, sources = bag.config, bag.reduction, bag.cut, bag.files
-    base_model, force = settings.model, settings.force
-    check_model(base_model)
-    try:
-        range_gate = output_range_gate(config, reduction)
-        _refuse_unless_forced([range_gate], force, sources, say)
-        orders = [
-            o
-            for o in MODEL_ORDERS
-            if MODEL_ORDERS.index(o) <= max(MODEL_ORDERS.index(base_model), 2)
-        ]
-        fits = _fit_all(reduction, config, orders)
-        # tare outputs from the fitted model's inverse instead of the linear eqs. (32)-(37), then
-        # refit
-        reduction = retare_with_model(reduction, fits[base_model].fit.model)
-        fits = _fit_all(reduction, config, orders)
-        limits = acceptance_limits(config, base_model)
-    except (ZeroPointError, InverseDidNotConverge, LoadPointError, ConfigError, RefitError) as err:
-        raise RefitError(_named(str(err), sources)) from None
-    except (np.linalg.LinAlgError, FloatingPointError, ValueError) as err:
-        # absurd numbers that survived the edges (a flipped exponent bit): say so, never a
-        # traceback
-        raise RefitError(
-            f'{_where(sources)}: the load points cannot be fitted ({" ".join(str(err).split())})'
-        ) from None
-    loaded = bag.load_points  # the gates judge the points as cut
-    gates = [range_gate] + data_gates(
-        config, loaded, reduction, fits, cut, settings.active, limits, None
-    )
-    if not settings.diagnose:
-        gates += fit_gates(
-            config, loaded, base_model_residuals(reduction, fits[base_model]), limits
+
+class BagStages:
+    """The stages (calibration_stages.py) of a bag's (or a simulation's) points: the TM-663
+    fits, the residual diagnosis and the refit's gates. Returns the fits, the diagnosis, the
+    calibration and its report.
+
+    A failed acceptance gate (gates/) is a RefitError, unless settings.force; settings.active is
+    the calibration in use, whose sensitivities the new one must stay near; the points must cover
+    the balance config's schedule; settings.serial (default the config's `serial`) and operator
+    go into the signed record (record.py).
+    """
+
+    priority = BAG_PRIORITY
+    names_others = True
+
+    def __init__(self, points: CalibrationPoints, settings: CalibrationSettings) -> None:
+        bag = points.bag
+        if bag is None or bag.reduction is None or bag.config is None:
+            raise ValueError(f'{points.source}: no reduced bag points to calibrate')
+        check_model(settings.model)
+        self.bag, self.settings = bag, settings
+        self.config, self.reduction, self.cut = bag.config, bag.reduction, bag.cut
+        self.sources: Sequence[str] = bag.files
+        self.where = _where(self.sources)
+        self.loaded = bag.load_points  # the gates judge the points as cut
+        self.say = settings.progress or (lambda message: None)
+        self.diagnosis: Diagnosis | None = None
+
+    def refused(self, message: str) -> Exception:
+        return RefitError(message)
+
+    def screen(self) -> list[Gate]:
+        """The output range, before any fit."""
+        from ..gates.outputs import output_range_gate
+
+        with self._named_errors():
+            return [output_range_gate(self.config, self.reduction)]
+
+    def fit(self) -> None:
+        """The base model's orders up to cubic, the tare from the fitted model's inverse, and
+        the fits again.
+        """
+        from ..gates.limits import acceptance_limits
+
+        base_model = self.settings.model
+        with self._named_errors():
+            self.orders = [
+                o
+                for o in MODEL_ORDERS
+                if MODEL_ORDERS.index(o) <= max(MODEL_ORDERS.index(base_model), 2)
+            ]
+            fits = _fit_all(self.reduction, self.config, self.orders)
+            # tare outputs from the fitted model's inverse instead of the linear eqs. (32)-(37),
+            # then refit
+            self.reduction = retare_with_model(self.reduction, fits[base_model].fit.model)
+            self.fits = _fit_all(self.reduction, self.config, self.orders)
+            self.limits = acceptance_limits(self.config, base_model)
+
+    def data_gates(self) -> list[Gate]:
+        """The campaign's gates; the fit's too when no diagnosis follows."""
+        from ..gates.bags import base_model_residuals, data_gates, fit_gates
+
+        gates = data_gates(
+            self.config,
+            self.loaded,
+            self.reduction,
+            self.fits,
+            self.cut,
+            self.settings.active,
+            self.limits,
+            None,
         )
-    _refuse_unless_forced(gates, force, sources, say)
-    say(
-        'fits: '
-        + ', '.join(
-            f'{o} σFX {fits[o].sigma_pct_fs[config.components[0]]:.3f} % FS' for o in orders
-        )
-    )
-
-    diagnosis = None
-    if settings.diagnose:
-        diagnosis = _run_diagnosis(reduction, config, base_model, fits[base_model], say, cut)
-        if diagnosis is not None:
-            # σ and outliers of the model that will be adopted (effects found included)
-            from ..diagnosis.coherence import diagnosis_structure
-
-            unexplained = {c: u.tracks for u in diagnosis.unexplained for c in u.components}
-            extra = fit_gates(
-                config,
-                loaded,
-                ModelResiduals(
-                    diagnosis.sigma_pct_fs['after'],
-                    diagnosis.residuals_after,
-                    diagnosis.press_residuals_after,
-                    'adopted model' if diagnosis.effects else 'base model',
-                ),
-                limits,
-                unexplained,
-                diagnosis_structure(diagnosis, loaded, config),
+        if not self.settings.diagnose:
+            gates += fit_gates(
+                self.config,
+                self.loaded,
+                base_model_residuals(self.reduction, self.fits[self.settings.model]),
+                self.limits,
             )
-        else:
-            extra = fit_gates(
-                config, loaded, base_model_residuals(reduction, fits[base_model]), limits
+        return gates
+
+    def diagnose(self) -> None:
+        """The diagnosis of the base model's residuals, when asked for."""
+        first = self.config.components[0]
+        self.say(
+            'fits: '
+            + ', '.join(
+                f'{o} σ{first} {self.fits[o].sigma_pct_fs[first]:.3f} % FS' for o in self.orders
             )
-        _refuse_unless_forced(extra, force, sources, say)
-        gates += extra
-
-    from .report import build_calibration, build_report
-
-    calibration = build_calibration(config, reduction, fits, base_model, diagnosis, sources)
-    report = build_report(config, loaded, reduction, fits, base_model, diagnosis, cut, sources)
-    from ..record import signed_record
-
-    serial = settings.serial or config.serial
-    if serial:
-        cast(dict, calibration.extra)['serial'] = serial
-    # the lab's record first, then the numbers the report adds to it (report_sections.py)
-    report['record'] = {
-        **signed_record(
-            balance=config.name,
-            serial=serial,
-            operator=settings.operator,
-            inputs=sources,
-            calibration=calibration,
-        ),
-        **report['record'],
-    }
-    report['acceptance'] = gates_report(gates, forced=force)
-    report['warnings'] = list(report.get('warnings', [])) + _missing_points_warning(gates)
-    if cut is not None:
-        report['sessions'] = {
-            'count': len(cut.pauses_s) + 1,
-            'pauses_s': [round(p, 1) for p in cut.pauses_s],
-        }
-    bad = failed(gates)
-    if bad:
-        cast(dict, calibration.extra)['acceptance'] = {
-            'forced': True,
-            'failed': [g.name for g in bad],
-        }
-    if bag.integrity is not None:
-        report['bag_integrity'] = dict(bag.integrity)
-    if bag.started_s is not None:
-        report['wall_time_s'] = round(time.monotonic() - bag.started_s, 3)
-    if bag.clock is not None and 'record' in report:
-        # the stamps are a simulator's clock: the report must not date a campaign by them
-        report['record']['campaign']['clock'] = bag.clock
-    return CalibrationResult(
-        config,
-        loaded,
-        reduction,
-        fits,
-        base_model,
-        diagnosis,
-        calibration,
-        report,
-        cut,
-        tuple(gates),
-    )
-
-
-def _refuse_unless_forced(gates, force: bool, sources: Sequence[str], say: Progress) -> None:
-    from ..gates.gate import failed
-
-    for gate in gates:
-        say(f'gate {gate.name}: {"ok" if gate.passed else "FAILED"}: {gate.reason}')
-    # the most specific cause first: a unit error also spoils σ, not the other way round
-    priority = (
-        'marker_order',
-        'clipping',
-        'output_range',
-        'sensitivity',
-        'active_calibration',
-        'capacity',
-        'body_weight',
-        'zero_points',
-        'schedule',
-        'outliers',
-        'sigma',
-    )
-    bad = sorted(
-        failed(gates),
-        key=lambda g: priority.index(g.name) if g.name in priority else len(priority),
-    )
-    if bad and not force:
-        also = f' (also failed: {", ".join(g.name for g in bad[1:])})' if len(bad) > 1 else ''
-        raise RefitError(
-            f'{_where(sources)}: refused by acceptance gate {bad[0].name}: {bad[0].reason}{also}; '
-            f'nothing written (--force writes it anyway)'
         )
+        if self.settings.diagnose:
+            model = self.settings.model
+            self.diagnosis = _run_diagnosis(
+                self.reduction, self.config, model, self.fits[model], self.say, self.cut
+            )
+
+    def fit_gates(self) -> list[Gate]:
+        """σ and outliers of the model that will be adopted (effects found included)."""
+        from ..gates.bags import base_model_residuals, fit_gates
+        from ..gates.gate import ModelResiduals
+
+        if not self.settings.diagnose:
+            return []
+        diagnosis = self.diagnosis
+        if diagnosis is None:
+            return fit_gates(
+                self.config,
+                self.loaded,
+                base_model_residuals(self.reduction, self.fits[self.settings.model]),
+                self.limits,
+            )
+        from ..diagnosis.coherence import diagnosis_structure
+
+        unexplained = {c: u.tracks for u in diagnosis.unexplained for c in u.components}
+        return fit_gates(
+            self.config,
+            self.loaded,
+            ModelResiduals(
+                diagnosis.sigma_pct_fs['after'],
+                diagnosis.residuals_after,
+                diagnosis.press_residuals_after,
+                'adopted model' if diagnosis.effects else 'base model',
+            ),
+            self.limits,
+            unexplained,
+            diagnosis_structure(diagnosis, self.loaded, self.config),
+        )
+
+    def result(self, gates: Sequence[Gate], forced: bool) -> CalibrationResult:
+        """The calibration and its report, signed, with the gates' verdicts."""
+        from ..gates.gate import failed, gates_report
+        from ..record import signed_record
+        from .report import build_calibration, build_report
+
+        config, reduction, fits, cut, sources = (
+            self.config,
+            self.reduction,
+            self.fits,
+            self.cut,
+            self.sources,
+        )
+        base_model, diagnosis, bag, settings = (
+            self.settings.model,
+            self.diagnosis,
+            self.bag,
+            self.settings,
+        )
+        loaded = self.loaded
+        calibration = build_calibration(config, reduction, fits, base_model, diagnosis, sources)
+        report = build_report(config, loaded, reduction, fits, base_model, diagnosis, cut, sources)
+        serial = settings.serial or config.serial
+        if serial:
+            cast(dict, calibration.extra)['serial'] = serial
+        # the lab's record first, then the numbers the report adds to it (report_sections.py)
+        report['record'] = {
+            **signed_record(
+                balance=config.name,
+                serial=serial,
+                operator=settings.operator,
+                inputs=sources,
+                calibration=calibration,
+            ),
+            **report['record'],
+        }
+        report['acceptance'] = gates_report(gates, forced=forced)
+        report['warnings'] = list(report.get('warnings', [])) + _missing_points_warning(gates)
+        if cut is not None:
+            report['sessions'] = {
+                'count': len(cut.pauses_s) + 1,
+                'pauses_s': [round(p, 1) for p in cut.pauses_s],
+            }
+        bad = failed(gates)
+        if bad:
+            cast(dict, calibration.extra)['acceptance'] = {
+                'forced': True,
+                'failed': [g.name for g in bad],
+            }
+        if bag.integrity is not None:
+            report['bag_integrity'] = dict(bag.integrity)
+        if bag.started_s is not None:
+            report['wall_time_s'] = round(time.monotonic() - bag.started_s, 3)
+        if bag.clock is not None and 'record' in report:
+            # the stamps are a simulator's clock: the report must not date a campaign by them
+            report['record']['campaign']['clock'] = bag.clock
+        return CalibrationResult(
+            config,
+            loaded,
+            reduction,
+            fits,
+            base_model,
+            diagnosis,
+            calibration,
+            report,
+            cut,
+            tuple(gates),
+        )
+
+    @contextmanager
+    def _named_errors(self) -> Iterator[None]:
+        """A fit's failure as a RefitError naming the campaign's files, never a traceback."""
+        try:
+            yield
+        except (
+            ZeroPointError,
+            InverseDidNotConverge,
+            LoadPointError,
+            ConfigError,
+            RefitError,
+        ) as err:
+            raise RefitError(_named(str(err), self.sources)) from None
+        except (np.linalg.LinAlgError, FloatingPointError, ValueError) as err:
+            # absurd numbers that survived the edges (a flipped exponent bit): say so
+            raise RefitError(
+                f'{self.where}: the load points cannot be fitted ({" ".join(str(err).split())})'
+            ) from None
 
 
 def _missing_points_warning(gates) -> list[str]:
