@@ -464,11 +464,13 @@ def _names_a_file(text: str, mutant: Mutant) -> bool:
 
 def judge_in_process(mutant: Mutant, out_dir: Path) -> tuple[str, str]:
     """(verdict, detail) for one mutant through run_refit in this process."""
-    from ..calibrate.from_bags import run_refit
+    from ..calibrate.from_bags import RefitSettings, run_refit
     from ..refit.errors import RefitError
 
     try:
-        result = run_refit(mutant.paths, mutant.balance, out_dir, diagnose=False, plots=False)
+        result = run_refit(
+            mutant.paths, mutant.balance, out_dir, RefitSettings(diagnose=False, plots=False)
+        )
     except RefitError as error:
         text = str(error)
         if '\n' in text or not text:
@@ -568,10 +570,10 @@ def run_mutants(
 _MEMORY_CHILD = r"""
 import json, resource, sys, time
 from pathlib import Path
-from balance_calib.calibrate.from_bags import run_refit
+from balance_calib.calibrate.from_bags import RefitSettings, run_refit
 paths = sys.argv[3:]
 started = time.monotonic()
-result = run_refit(paths, sys.argv[1], Path(sys.argv[2]), plots=False)
+result = run_refit(paths, sys.argv[1], Path(sys.argv[2]), RefitSettings(plots=False))
 def peak_mb():
     # VmHWM is this program's own peak; ru_maxrss also counts the parent's pages before exec
     try:

@@ -34,7 +34,7 @@ def main(argv=None) -> None:
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import get_typestore, Stores
 
-    from balance_calib.calibrate.from_bags import run_refit
+    from balance_calib.calibrate.from_bags import RefitSettings, run_refit
     from balance_calib.config import load_balance_config
     from balance_calib.simulation.balance_sim import (
         simulate_campaign,
@@ -82,13 +82,14 @@ def main(argv=None) -> None:
                 [bag],
                 'lmc6522',
                 Path(tmp) / 'out',
-                written=lambda _: written.append(time.perf_counter() - start),
+                RefitSettings(written=lambda _: written.append(time.perf_counter() - start)),
             )
 
         t_refit = _best_of(refit_with_figures, args.repeat)
         t_written = min(written)
         t_refit_noplots = _best_of(
-            lambda: run_refit([bag], 'lmc6522', Path(tmp) / 'out2', plots=False), args.repeat
+            lambda: run_refit([bag], 'lmc6522', Path(tmp) / 'out2', RefitSettings(plots=False)),
+            args.repeat,
         )
 
     print(

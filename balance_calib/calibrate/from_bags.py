@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from pathlib import Path
 import time
-from typing import Any, Callable, cast, Sequence
+from typing import Callable, cast, Sequence
 
 from ..calibration_file import ConfigError
 from ..calibration_settings import CalibrationSettings, Progress, RecordOptions
@@ -55,11 +55,10 @@ def run_refit(
     balance: str | Path,
     out_dir: str | Path,
     settings: RefitSettings | None = None,
-    **options: Any,
 ) -> RefitResult:
     """Refit from bags and write calibration.yaml, report.json, report.md and plots into out_dir.
 
-    settings (or its fields as keyword options): every input error, integrity failure
+    settings (default RefitSettings()): every input error, integrity failure
     (bags/reader.py) and failed acceptance gate raises RefitError with one line naming the file;
     `out_dir` is checked before any work. force writes a calibration that failed a gate (marked in
     the report); salvage reads what is intact of a damaged bag and the report says what was lost;
@@ -73,7 +72,7 @@ def run_refit(
     report.md are in out_dir, before the figures are drawn (~/refit replies then); run_refit
     returns after the figures.
     """
-    given = replace(settings or RefitSettings(), **options)
+    given = settings or RefitSettings()
     say = given.progress or (lambda message: None)
     started = time.monotonic()
     paths = [Path(p) for p in bag_paths]

@@ -86,7 +86,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..calibrate.from_bags import run_refit
+    from ..calibrate.from_bags import RefitSettings, run_refit
     from ..refit.errors import RefitError
     from .errors import CommandError
 
@@ -99,17 +99,19 @@ def run(args) -> int:
             args.bags,
             args.balance,
             Path(args.out),
-            model=args.model,
-            diagnose=not args.no_diagnosis,
-            estimate_body=not args.declared_body,
-            progress=progress,
-            force=args.force,
-            salvage=args.salvage,
-            active_calibration=args.active,
-            schedule=args.schedule,
-            overwrite=args.overwrite,
-            serial=args.serial,
-            operator=args.operator,
+            RefitSettings(
+                model=args.model,
+                diagnose=not args.no_diagnosis,
+                estimate_body=not args.declared_body,
+                progress=progress,
+                force=args.force,
+                salvage=args.salvage,
+                active_calibration=args.active,
+                schedule=args.schedule,
+                overwrite=args.overwrite,
+                serial=args.serial,
+                operator=args.operator,
+            ),
         )
     except RefitError as err:
         raise CommandError(_one_line(str(err))) from None

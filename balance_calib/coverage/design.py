@@ -32,6 +32,7 @@ from ..config import BalanceConfig, LoadSchedule
 from ..fit.svd import unscaled_covariance
 from ..model.balance_model import BalanceModel
 from ..model.inverse import outputs_for_loads
+from ..model.leverage import leverage_of_rows
 from ..model.uncertainty import load_standard_uncertainty, with_covariance
 from ..tare.calibration_body import tare_loads
 from ..units import STANDARD_GRAVITY_M_S2
@@ -193,9 +194,10 @@ def _exchange(
     """
 
     def gains(inverse):
+        # c A cᵀ / (1 + h), h = c M⁻¹ cᵀ the candidate's leverage in the design so far
         a = inverse @ weight @ inverse
         return np.einsum('ij,jk,ik->i', candidate_rows, a, candidate_rows) / (
-            1.0 + np.einsum('ij,jk,ik->i', candidate_rows, inverse, candidate_rows)
+            1.0 + leverage_of_rows(candidate_rows, inverse)
         )
 
     def add(inverse, row):

@@ -4,7 +4,8 @@
   number, the vertical axis fixed at ±0.5 % FS as in the memo; points beyond it are drawn on the
   edge as open triangles so that nothing disappears silently.
 - `plot_effect`: per effect found, the residual with that effect put back (partial residual)
-  against the variable that explains it, with the fitted contribution.
+  against the variable that explains it, with the fitted contribution (`draw_partial_residual`,
+  which refit/plots.py's effect figure also draws with).
 - `plot_unexplained`: per unexplained leftover, the residual against what it tracks and against
   point number, with the repeatability in the title.
 
@@ -85,6 +86,40 @@ def plot_residuals(
     return _save(figure, path)
 
 
+def draw_partial_residual(
+    axes,
+    x: np.ndarray,
+    partial: np.ndarray,
+    contribution: np.ndarray,
+    *,
+    sizes: tuple[float, float] = (2.5, 3),
+    colors: tuple[str, str] = ('C0', 'C3'),
+) -> None:
+    """Draw on `axes` an effect's partial residual (residual + effect) against the variable x that
+    explains it as dots, and the fitted effect in the order of x (marker sizes and colours: the
+    partial residual's, then the effect's); returns nothing. Shared with refit/plots.py.
+    """
+    axes.plot(
+        x,
+        partial,
+        linestyle='none',
+        marker='o',
+        markersize=sizes[0],
+        color=colors[0],
+        label='residual + effect',
+    )
+    order = np.argsort(x, kind='stable')
+    axes.plot(
+        x[order],
+        contribution[order],
+        linestyle='none',
+        marker='.',
+        markersize=sizes[1],
+        color=colors[1],
+        label='fitted effect',
+    )
+
+
 def plot_effect(diagnosis: Diagnosis, effect: EffectFound, path) -> Path:
     """Partial residual (final residual + this effect's contribution, % FS) vs its explaining
     variable.
@@ -101,25 +136,7 @@ def plot_effect(diagnosis: Diagnosis, effect: EffectFound, path) -> Path:
         contribution = np.asarray(effect.contribution[component]) * scale
         partial = diagnosis.residuals_after[:, k] * scale + contribution
         axes = figure.add_subplot(1, len(components), i + 1)
-        axes.plot(
-            x,
-            partial,
-            linestyle='none',
-            marker='o',
-            markersize=2.5,
-            color='C0',
-            label='residual + effect',
-        )
-        order = np.argsort(x, kind='stable')
-        axes.plot(
-            x[order],
-            contribution[order],
-            linestyle='none',
-            marker='.',
-            markersize=3,
-            color='C3',
-            label='fitted effect',
-        )
+        draw_partial_residual(axes, x, partial, contribution)
         axes.set_xlabel(effect.explaining_variable[component])
         axes.set_ylabel(f'{component} residual (% FS)')
         axes.set_title(

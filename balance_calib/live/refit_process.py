@@ -63,6 +63,7 @@ def _child(connection, bags, balance, out_dir, model, parent_pid, active=None) -
         pass
     replied: list[bool] = []  # after the reply the caller reads no more from the pipe
     try:
+        from balance_calib.calibrate.from_bags import RefitSettings as PipelineSettings
         from balance_calib.calibrate.from_bags import run_refit
 
         def reply(result) -> None:
@@ -82,11 +83,13 @@ def _child(connection, bags, balance, out_dir, model, parent_pid, active=None) -
             list(bags),
             balance,
             out_dir,
-            model=model,
-            diagnose=True,
-            active_calibration=active,
-            progress=lambda line: replied or connection.send(('progress', str(line))),
-            written=reply,
+            PipelineSettings(
+                model=model,
+                diagnose=True,
+                active_calibration=active,
+                progress=lambda line: replied or connection.send(('progress', str(line))),
+                written=reply,
+            ),
         )
         if not replied:
             reply(result)
@@ -289,13 +292,14 @@ def run_refit_job(job: RefitJob, refit_function, progress: Callable[[str], None]
     settings = job.settings
     try:
         if refit_function is not None:
+            # imported here: the node's process runs the pipeline in another (run_refit_in_process)
+            from ..calibrate.from_bags import RefitSettings as PipelineSettings
+
             result = refit_function(
                 list(job.bags),
                 settings.balance,
                 job.out_dir,
-                model=settings.base,
-                diagnose=True,
-                progress=progress,
+                PipelineSettings(model=settings.base, diagnose=True, progress=progress),
             )
             calibration, summary = result.calibration, getattr(result, 'summary', '') or 'done'
             path = getattr(result, 'calibration_path', None)

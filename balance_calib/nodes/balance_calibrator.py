@@ -26,7 +26,7 @@ from functools import partial
 import gc
 import sys
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -47,6 +47,7 @@ from balance_calib.live.parameters import check_parameter, PARAMETERS
 from balance_calib.live.raw_codec import wrench_arrays
 from balance_calib.live.session import CalibratorSession
 
+from ._messages import diagnostic_array
 from ._parameters import declare_table, value_getter
 from ._qos import STREAM_QOS
 from ._raw_input import RawInput
@@ -227,19 +228,9 @@ class BalanceCalibrator(Node):
             )
 
     def _on_diagnostics(self):
-        array = DiagnosticArray()
-        array.header.stamp = self.get_clock().now().to_msg()
-        array.status = [
-            DiagnosticStatus(
-                level=bytes([r.level]),
-                name=r.name,
-                message=r.message,
-                hardware_id=r.hardware_id,
-                values=[KeyValue(key=k, value=v) for k, v in r.values],
-            )
-            for r in self.session.report()
-        ]
-        self._diagnostics_pub.publish(array)
+        self._diagnostics_pub.publish(
+            diagnostic_array(self.get_clock().now().to_msg(), self.session.report())
+        )
 
 
 def _before_spin(node) -> None:

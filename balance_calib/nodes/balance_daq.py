@@ -19,7 +19,7 @@ from __future__ import annotations
 import sys
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from rclpy.time import Time
@@ -32,6 +32,7 @@ from balance_calib.daq.samples import Samples
 from balance_calib.live.raw_codec import WrenchEncoder
 from balance_calib.parameter_table import ParameterError
 
+from ._messages import diagnostic_array
 from ._parameters import declare_table
 from ._qos import STREAM_QOS
 from ._run import run_node
@@ -87,18 +88,7 @@ class BalanceDaq(Node):
     def _on_diagnostics(self) -> None:
         counts, connected, last_sample_s = self._reader.snapshot()
         status = self._health.status(counts, connected, time.monotonic(), last_sample_s)
-        array = DiagnosticArray()
-        array.header.stamp = self.get_clock().now().to_msg()
-        array.status = [
-            DiagnosticStatus(
-                level=bytes([status.level]),
-                name=status.name,
-                message=status.message,
-                hardware_id=status.hardware_id,
-                values=[KeyValue(key=k, value=v) for k, v in status.values],
-            )
-        ]
-        self._diagnostics.publish(array)
+        self._diagnostics.publish(diagnostic_array(self.get_clock().now().to_msg(), [status]))
 
     def destroy_node(self):
         self._reader.close()  # stop_request sent, link closed (the thread ends before the node)

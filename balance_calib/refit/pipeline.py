@@ -14,7 +14,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 import time
-from typing import Any, Callable, cast, Iterator, Mapping, Sequence, TYPE_CHECKING
+from typing import Callable, cast, Iterator, Mapping, Sequence, TYPE_CHECKING
 
 import numpy as np
 
@@ -114,19 +114,20 @@ def calibrate_points(
     points: LoadPoints,
     config: BalanceConfig,
     cut: CutSummary | None = None,
-    **options: Any,
+    settings: CalibrationSettings | None = None,
+    *,
+    estimate_body: bool = True,
+    sources: Sequence[str] = (),
 ) -> CalibrationResult:
     """calibrate_bag of load points cut elsewhere (a simulation, a test): the bag branch of
-    calibrate/path.calibrate, which writes nothing here.
+    calibrate/path.calibrate, which writes nothing here. Returns the fits, the diagnosis, the
+    calibration and its report.
 
-    options: CalibrationSettings' fields, and estimate_body (default True: the calibration body
-    from the zero points) and sources (the files the points came from, named in errors).
+    settings: what the calibration is asked to do (default CalibrationSettings()); estimate_body:
+    the calibration body from the zero points (else the declared one); sources: the files the
+    points came from, named in errors.
     """
-    estimate_body = options.pop('estimate_body', True)
-    sources = options.pop('sources', ())
-    if 'base_model' in options:  # the name this function's option had
-        options['model'] = options.pop('base_model')
-    settings = CalibrationSettings(**options)
+    settings = settings or CalibrationSettings()
     check_model(settings.model)
     record = load_points_record(points, cut, sources)
     reading = BagReading(estimate_body=estimate_body, progress=settings.progress)

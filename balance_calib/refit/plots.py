@@ -260,6 +260,8 @@ def effect_figure(
     """
     from matplotlib.figure import Figure
 
+    from ..diagnosis.plots import draw_partial_residual
+
     chosen = list(effect.components)
     columns = min(2, len(chosen))
     rows = int(np.ceil(len(chosen) / columns))
@@ -275,24 +277,8 @@ def effect_figure(
         contribution = np.asarray(effect.contribution[component], dtype=float) * scale
         partial = residuals_after[:, k] * scale + contribution
         axes = figure.add_subplot(rows, columns, i + 1)
-        axes.plot(
-            x,
-            partial,
-            linestyle='none',
-            marker='o',
-            markersize=3,
-            color='tab:blue',
-            label='residual + effect',
-        )
-        order = np.argsort(x, kind='stable')
-        axes.plot(
-            x[order],
-            contribution[order],
-            linestyle='none',
-            marker='.',
-            markersize=4,
-            color='tab:red',
-            label='fitted effect',
+        draw_partial_residual(
+            axes, x, partial, contribution, sizes=(3, 4), colors=('tab:blue', 'tab:red')
         )
         words, unit = describe_variable(variable)
         axes.set_xlabel(f'{words} ({unit})' if unit else words, fontsize=9)

@@ -107,6 +107,7 @@ def test_memo_balance_six_loads_at_once_the_uncertainty_says_the_fit_errs_there(
     covariance stored in the calibration makes u grow by the same order, so the error stays
     covered.
     """
+    from balance_calib.calibration_settings import CalibrationSettings
     from balance_calib.config import load_balance_config
     from balance_calib.model.inverse import outputs_for_loads
     from balance_calib.refit.pipeline import calibrate_points, campaign_points
@@ -125,7 +126,9 @@ def test_memo_balance_six_loads_at_once_the_uncertainty_says_the_fit_errs_there(
         slow_drift_mv_per_hour=0.0,
     )
     calibration = calibrate_points(
-        campaign_points(simulate_campaign(config, settings=settings)), config, diagnose=False
+        campaign_points(simulate_campaign(config, settings=settings)),
+        config,
+        settings=CalibrationSettings(diagnose=False),
     ).calibration
     model = calibration.model('cubic').without_constant()
     truth = config.matrices['cubic'].without_constant()

@@ -125,14 +125,17 @@ def test_refit_record_serial_operator_inputs_and_signature_lines(campaigns, tmp_
 
 
 def test_the_serial_comes_from_the_balance_config(campaigns, tmp_path):
-    from balance_calib.calibrate.from_bags import run_refit
+    from balance_calib.calibrate.from_bags import RefitSettings, run_refit
 
     assert load_balance_config('lmc6522').serial is None
     config = tmp_path / 'lmc6522_s.yaml'
     config.write_text(resolve_config_path('lmc6522').read_text() + '\nserial: LMC-0042\n')
     assert load_balance_config(config).serial == 'LMC-0042'
     result = run_refit(
-        [campaigns.bag(recipe='bag')], config, tmp_path / 'out', diagnose=False, plots=False
+        [campaigns.bag(recipe='bag')],
+        config,
+        tmp_path / 'out',
+        RefitSettings(diagnose=False, plots=False),
     )
     assert result.report['record']['serial'] == 'LMC-0042'
     assert result.report['record']['operator'] is None

@@ -47,7 +47,9 @@ def _check_record(out, result):
 
 def test_one_writer_for_a_bag_and_a_table_calibration(tmp_path, campaigns, lmc6522):
     told = []
-    bag = calibrate_points(campaigns.points(seed=5), lmc6522, diagnose=False)
+    bag = calibrate_points(
+        campaigns.points(seed=5), lmc6522, settings=CalibrationSettings(diagnose=False)
+    )
     out = write_record(
         bag_record(bag),
         RecordOptions(tmp_path / 'bag', written=lambda result, out: told.append((result, out))),
@@ -66,7 +68,9 @@ def test_one_writer_for_a_bag_and_a_table_calibration(tmp_path, campaigns, lmc65
 
 
 def test_a_failed_write_leaves_the_previous_calibration(tmp_path, campaigns, lmc6522):
-    result = calibrate_points(campaigns.points(seed=5), lmc6522, diagnose=False)
+    result = calibrate_points(
+        campaigns.points(seed=5), lmc6522, settings=CalibrationSettings(diagnose=False)
+    )
     out = tmp_path / 'out'
     write_record(bag_record(result), RecordOptions(out, plots=False))
     before = {p.name: p.read_bytes() for p in out.iterdir()}

@@ -25,6 +25,7 @@ import pytest
 import scipy.stats
 
 from balance_calib.calibration_file import save_calibration
+from balance_calib.calibration_settings import CalibrationSettings
 from balance_calib.checks.check_loads import bag_readings, CheckReadings, judge, table_readings
 from balance_calib.checks.compare import compare_calibrations
 from balance_calib.model.inverse import linear_part, outputs_for_loads
@@ -47,7 +48,9 @@ def changed(campaign, gain: float = GAIN):
 
 
 def _calibration(config, campaign):
-    return calibrate_points(campaign_points(campaign), config, diagnose=False).calibration
+    return calibrate_points(
+        campaign_points(campaign), config, settings=CalibrationSettings(diagnose=False)
+    ).calibration
 
 
 @pytest.fixture(scope='module')

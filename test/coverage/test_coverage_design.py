@@ -13,6 +13,7 @@ import pytest
 from sting_envelope import envelope
 
 from balance_calib.calibration_file import load_calibration
+from balance_calib.calibration_settings import CalibrationSettings
 from balance_calib.cli import main
 from balance_calib.config import ConfigError, load_balance_config
 from balance_calib.coverage.design import (
@@ -44,7 +45,9 @@ def refit(schedule, seed, noise, config=LMC):
     campaign = simulate_campaign(
         config, schedule=schedule, settings=SimulationSettings(seed=seed, noise_sigma_pct_fs=noise)
     )
-    return calibrate_points(campaign_points(campaign), config, diagnose=False).calibration
+    return calibrate_points(
+        campaign_points(campaign), config, settings=CalibrationSettings(diagnose=False)
+    ).calibration
 
 
 def write_loads(path, loads):

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from balance_calib.bags.reader import read_bags
-from balance_calib.calibrate.from_bags import run_refit
+from balance_calib.calibrate.from_bags import RefitSettings, run_refit
+from balance_calib.calibration_settings import CalibrationSettings
 from balance_calib.config import load_balance_config
 from balance_calib.diagnosis.coherence import diagnosis_structure
 from balance_calib.gates.bags import fit_gates
@@ -53,7 +54,9 @@ def _calibrated(campaign, balance, tmp_path):
     points, cut = cut_load_points(
         read_bags([bag], required=('raw', 'applied_load', 'gravity')), load_balance_config(balance)
     )
-    return calibrate_points(points, load_balance_config(balance), cut=cut, force=True)
+    return calibrate_points(
+        points, load_balance_config(balance), cut=cut, settings=CalibrationSettings(force=True)
+    )
 
 
 def _gate(result, name='outliers'):
@@ -88,7 +91,10 @@ def test_a_campaign_whose_only_fault_is_a_hysteresis_loop_passes_the_gates(
         assert 'not a weight or marker error' in outliers.reason
     # through the pipeline, without --force, and the report says what the gate saw
     refit = run_refit(
-        [write_campaign_bag(campaign, tmp_path / 'again')], balance, tmp_path / 'out', plots=False
+        [write_campaign_bag(campaign, tmp_path / 'again')],
+        balance,
+        tmp_path / 'out',
+        RefitSettings(plots=False),
     )
     gates = {g['name']: g for g in refit.report['acceptance']['gates']}
     assert refit.report['acceptance']['passed'] and gates['outliers']['passed']
@@ -181,7 +187,7 @@ def test_a_point_individually_wrong_is_still_refused_naming_it(mistake, effects,
             [write_campaign_bag(campaign, tmp_path / 'bag')],
             balance,
             tmp_path / 'out',
-            plots=False,
+            RefitSettings(plots=False),
         )
     message = str(refused.value)
     assert 'acceptance gate outliers' in message, message
@@ -244,7 +250,7 @@ def test_a_wrong_point_beside_a_loop_and_a_sign_step_is_still_refused(mistake, t
             [write_campaign_bag(campaign, tmp_path / 'bag')],
             balance,
             tmp_path / 'out',
-            plots=False,
+            RefitSettings(plots=False),
         )
     message = str(refused.value)
     assert 'acceptance gate outliers' in message, message

@@ -27,7 +27,7 @@ from balance_calib.benchmarks.refit_reliability import (
     small_campaign,
     write_mcap,
 )
-from balance_calib.calibrate.from_bags import run_refit
+from balance_calib.calibrate.from_bags import RefitSettings, run_refit
 from balance_calib.calibration_file import load_calibration
 from balance_calib.config import load_balance_config
 from balance_calib.refit.pipeline import RefitError
@@ -47,7 +47,10 @@ def _refit(tmp_path, events, *, balance='lmc6522', force=False, **kwargs):
     tmp_path.mkdir(parents=True, exist_ok=True)
     bag = write_mcap(events, tmp_path / 'campaign.mcap')
     return run_refit(
-        [bag], balance, tmp_path / 'out', diagnose=False, plots=False, force=force, **kwargs
+        [bag],
+        balance,
+        tmp_path / 'out',
+        RefitSettings(diagnose=False, plots=False, force=force, **kwargs),
     )
 
 
@@ -242,8 +245,7 @@ def test_scatter_beyond_the_sigma_limit_is_refused(tmp_path, campaigns):
             [write_mcap(events, tmp_path / 'noisy.mcap', frame='B660H')],
             'b660h',
             tmp_path / 'out',
-            diagnose=False,
-            plots=False,
+            RefitSettings(diagnose=False, plots=False),
         )
 
 
@@ -318,7 +320,9 @@ def test_a_campaign_split_by_hours_refits_like_the_unsplit_one_in_the_same_memor
     campaign, events = clean
     whole = write_mcap(events, tmp_path / 'whole.mcap')
     unsplit, unsplit_peak = _peak_bytes(
-        lambda: run_refit([whole], 'lmc6522', tmp_path / 'o', diagnose=False, plots=False)
+        lambda: run_refit(
+            [whole], 'lmc6522', tmp_path / 'o', RefitSettings(diagnose=False, plots=False)
+        )
     )
     at = _load_events(events)[170]
     for hours in (1, 16):
@@ -329,7 +333,10 @@ def test_a_campaign_split_by_hours_refits_like_the_unsplit_one_in_the_same_memor
         ]
         split, split_peak = _peak_bytes(
             lambda: run_refit(
-                paths, 'lmc6522', tmp_path / f'o{hours}', diagnose=False, plots=False
+                paths,
+                'lmc6522',
+                tmp_path / f'o{hours}',
+                RefitSettings(diagnose=False, plots=False),
             )
         )
         assert split.report['sessions']['count'] == 2
@@ -372,9 +379,12 @@ def test_salvage_refits_what_is_intact_and_the_report_says_what_was_lost(clean, 
     with pytest.raises(
         RefitError, match=f'campaign.mcap: damaged data at byte offset {victim.chunk_start_offset}'
     ):
-        run_refit([bag], 'lmc6522', tmp_path / 'out', diagnose=False, plots=False)
+        run_refit([bag], 'lmc6522', tmp_path / 'out', RefitSettings(diagnose=False, plots=False))
     result = run_refit(
-        [bag], 'lmc6522', tmp_path / 'out', diagnose=False, plots=False, salvage=True
+        [bag],
+        'lmc6522',
+        tmp_path / 'out',
+        RefitSettings(diagnose=False, plots=False, salvage=True),
     )
     lost = result.report['bag_integrity']['lost']
     assert result.report['bag_integrity']['salvaged'] is True

@@ -59,9 +59,9 @@ class BlockingRefit:
             MEMO, models={**MEMO.models, 'cubic': doubled}, fitted_at='2026-11-20T00:00:00Z'
         )
 
-    def __call__(self, bag_paths, balance, out_dir, *, model, diagnose, progress):
-        self.calls.append((list(bag_paths), balance, Path(out_dir), model))
-        progress('reading bags')
+    def __call__(self, bag_paths, balance, out_dir, settings):
+        self.calls.append((list(bag_paths), balance, Path(out_dir), settings.model))
+        settings.progress('reading bags')
         self.started.set()
         assert self.release.wait(30.0), 'the test never released the refit'
         if self.error is not None:

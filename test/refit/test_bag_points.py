@@ -14,7 +14,8 @@ from balance_calib.benchmarks.refit_reliability import (
     small_campaign,
     write_mcap,
 )
-from balance_calib.calibrate.from_bags import run_refit
+from balance_calib.calibrate.from_bags import RefitSettings, run_refit
+from balance_calib.calibration_settings import CalibrationSettings
 from balance_calib.cli import main
 from balance_calib.config import load_balance_config
 from balance_calib.reduction import reduce_points
@@ -33,7 +34,9 @@ def test_the_reader_gives_the_points_the_refit_fits(campaigns):
     config = load_balance_config('lmc6522')
     bag = campaigns.bag(seed=11, recipe='bag')
     load_points, cut = _cut(bag, config)
-    refit = calibrate_points(load_points, config, cut=cut, diagnose=False, force=True)
+    refit = calibrate_points(
+        load_points, config, cut=cut, settings=CalibrationSettings(diagnose=False, force=True)
+    )
     final = refit.reduction.corrected  # after the refit's tare through its fitted cubic
 
     points = read_bag_points([bag], config, BagReading(tare_model='cubic'))
@@ -81,7 +84,7 @@ def test_export_table_needs_no_gate(tmp_path):
     events[loads[which]].values[component] *= 1.1
     bag = write_mcap(events, tmp_path / 'campaign.mcap')
     with pytest.raises(RefitError, match='refused by acceptance gate'):
-        run_refit([bag], 'lmc6522', tmp_path / 'refit', diagnose=False, plots=False)
+        run_refit([bag], 'lmc6522', tmp_path / 'refit', RefitSettings(diagnose=False, plots=False))
     out = tmp_path / 'campaign.csv'
     assert main(['export-table', str(bag), '--balance', 'lmc6522', '--out', str(out)]) == 0
     config = load_balance_config('lmc6522')

@@ -10,14 +10,16 @@ import numpy as np
 from balance_calib.calibrate.records import bag_record
 from balance_calib.calibrate.write_record import write_record
 from balance_calib.calibration_file import load_calibration
-from balance_calib.calibration_settings import RecordOptions
+from balance_calib.calibration_settings import CalibrationSettings, RecordOptions
 from balance_calib.figure_png import decimated, draw_figures
 from balance_calib.refit import plots
 from balance_calib.refit.pipeline import calibrate_points
 
 
 def _result(campaigns, lmc6522):
-    return calibrate_points(campaigns.points(seed=5), lmc6522, diagnose=False)
+    return calibrate_points(
+        campaigns.points(seed=5), lmc6522, settings=CalibrationSettings(diagnose=False)
+    )
 
 
 def test_record_is_written_before_the_figures(campaigns, lmc6522, tmp_path):

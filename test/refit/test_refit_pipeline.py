@@ -9,7 +9,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from balance_calib.calibrate.from_bags import run_refit
+from balance_calib.calibrate.from_bags import RefitSettings, run_refit
 from balance_calib.calibration_file import load_calibration
 from balance_calib.config import load_balance_config
 from balance_calib.model.inverse import outputs_for_loads
@@ -76,7 +76,9 @@ def test_refit_command_writes_the_promised_files(campaign_bag, tmp_path):
 def test_refit_recovers_the_truth_matrix_within_its_standard_errors(campaign_bag, tmp_path):
     bag, campaign = campaign_bag
     config = load_balance_config('lmc6522')
-    result = run_refit([bag], 'lmc6522', tmp_path / 'out', diagnose=False, plots=False)
+    result = run_refit(
+        [bag], 'lmc6522', tmp_path / 'out', RefitSettings(diagnose=False, plots=False)
+    )
     fitted = result.calibration.model('cubic').without_constant()
     truth = config.matrices['cubic'].without_constant()
     # compare what matters: the loads both give inside the calibrated envelope (the schedule's
@@ -114,7 +116,7 @@ def test_a_schedule_that_cannot_determine_the_cubic_terms_is_refused_by_name(tmp
         RefitError,
         match=r'does not excite \d+ term\(s\) of the (quadratic|cubic) model: .*MYV\*MZV',
     ):
-        run_refit([bag], 'lmc6522', tmp_path / 'out', diagnose=False)
+        run_refit([bag], 'lmc6522', tmp_path / 'out', RefitSettings(diagnose=False))
     assert not (tmp_path / 'out' / 'calibration.yaml').exists()
 
 
@@ -122,6 +124,8 @@ def test_a_campaign_split_over_two_bags_refits_as_one(tmp_path, campaigns):
     first = campaigns.bag('b660h', seed=4, points=slice(0, 200))
     second = campaigns.bag('b660h', seed=4, points=slice(200, None))
     bare = next(second.glob('*.mcap'))
-    result = run_refit([first, bare], 'b660h', tmp_path / 'out', diagnose=False, plots=False)
+    result = run_refit(
+        [first, bare], 'b660h', tmp_path / 'out', RefitSettings(diagnose=False, plots=False)
+    )
     assert result.report['points'] == 332
     assert max(result.report['sigma_pct_fs']['before'].values()) < 0.07

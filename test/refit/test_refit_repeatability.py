@@ -12,7 +12,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from balance_calib.calibrate.from_bags import run_refit
+from balance_calib.calibrate.from_bags import RefitSettings, run_refit
 from balance_calib.config import load_balance_config
 from balance_calib.model.inverse import linear_part
 from balance_calib.model.tm663 import tm663_terms
@@ -63,7 +63,7 @@ def test_repeatability_from_a_bag_is_the_point_noise_propagated_to_loads(tmp_pat
     ramp = (elapsed / 1.0)[:, None] * 3.0 * sigma_sample_mv[None, :]
     campaign = replace(campaign, raw_mv=campaign.raw_mv + ramp)
     bag = write_campaign_bag(campaign, tmp_path / 'bag')
-    report = run_refit([bag], 'lmc6522', tmp_path / 'out', plots=False).report
+    report = run_refit([bag], 'lmc6522', tmp_path / 'out', RefitSettings(plots=False)).report
 
     # first principles: σ_s / √n on each point mean, through the linear sensitivity, in % FS
     expected = _propagated_pct_fs(config, sigma_sample_mv**2 / n)
@@ -113,7 +113,7 @@ def test_an_effect_outside_every_family_is_unexplained_and_nothing_is_named(
         effects=effects,
     )
     bag = write_campaign_bag(campaign, tmp_path / 'bag')
-    report = run_refit([bag], balance, tmp_path / 'out', plots=False).report
+    report = run_refit([bag], balance, tmp_path / 'out', RefitSettings(plots=False)).report
     assert report['effects'] == [], [e['name'] for e in report['effects']]
     assert component in [c for u in report['unexplained'] for c in u['components']], report[
         'unexplained'
@@ -131,7 +131,7 @@ def test_a_clean_bag_has_nothing_unexplained_and_the_repeatability_of_its_noise(
     noise = table17_noise(config)  # per point mean, as load σ in % FS per component
     campaign = simulate_campaign(config, settings=_settings(8, seed, noise_sigma_pct_fs=noise))
     bag = write_campaign_bag(campaign, tmp_path / 'bag')
-    report = run_refit([bag], balance, tmp_path / 'out', plots=False).report
+    report = run_refit([bag], balance, tmp_path / 'out', RefitSettings(plots=False)).report
     assert report['effects'] == [] and report['unexplained'] == [] and report['warnings'] == []
     measured = np.array([report['repeatability_pct_fs'][c] for c in config.components])
     assert np.all(np.abs(measured / noise - 1.0) < 0.2), measured / noise
@@ -191,7 +191,7 @@ def test_a_refusal_for_outliers_names_the_unexplained_structure_on_that_componen
     )
     bag = write_campaign_bag(campaign, tmp_path / 'bag')
     with pytest.raises(RefitError) as refused:
-        run_refit([bag], 'lmc6522', tmp_path / 'out', plots=False)
+        run_refit([bag], 'lmc6522', tmp_path / 'out', RefitSettings(plots=False))
     reason = str(refused.value)
     assert 'outliers' in reason and 'its MX load' in reason
     assert 'left unexplained on MX' in reason and 'an effect the model lacks?' in reason

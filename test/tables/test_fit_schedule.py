@@ -71,14 +71,14 @@ def test_too_few_points_and_nothing_determinable_say_so_in_one_line(tmp_path):
 
 
 def test_export_table_fitted_with_defaults_equals_the_refit_cubic(tmp_path, capsys, campaigns):
-    from balance_calib.calibrate.from_bags import run_refit
+    from balance_calib.calibrate.from_bags import RefitSettings, run_refit
     from balance_calib.calibration_file import load_calibration
     from balance_calib.config import load_balance_config
 
     config = load_balance_config('lmc6522')
     bag = campaigns.bag(seed=29, recipe='bag')
     cubic = run_refit(
-        [bag], 'lmc6522', tmp_path / 'refit', diagnose=False, plots=False
+        [bag], 'lmc6522', tmp_path / 'refit', RefitSettings(diagnose=False, plots=False)
     ).calibration.models['cubic']
     table_path = tmp_path / 'campaign.csv'
     assert main(['export-table', str(bag), '--balance', 'lmc6522', '--out', str(table_path)]) == 0

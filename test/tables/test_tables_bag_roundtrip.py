@@ -5,7 +5,7 @@ series tare takes the place of the cubic's constant terms.
 
 import numpy as np
 
-from balance_calib.calibrate.from_bags import run_refit
+from balance_calib.calibrate.from_bags import RefitSettings, run_refit
 from balance_calib.cli import main
 from balance_calib.config import load_balance_config
 from balance_calib.tables.balfit_reader import read_table
@@ -15,7 +15,9 @@ from balance_calib.tables.calibrate import calibrate_table
 def test_bag_to_table_to_fit_equals_bag_to_refit(tmp_path, capsys, campaigns):
     config = load_balance_config('lmc6522')
     bag = campaigns.bag(seed=23, recipe='bag')
-    refit = run_refit([bag], 'lmc6522', tmp_path / 'refit', diagnose=False, plots=False)
+    refit = run_refit(
+        [bag], 'lmc6522', tmp_path / 'refit', RefitSettings(diagnose=False, plots=False)
+    )
     cubic = refit.calibration.models['cubic']
 
     table_path = tmp_path / 'campaign.csv'
@@ -55,7 +57,7 @@ def test_refit_calibration_carries_the_covariance_the_live_uncertainty_needs(tmp
 
     config = load_balance_config('lmc6522')
     bag = campaigns.bag(seed=24, recipe='bag')
-    run_refit([bag], 'lmc6522', tmp_path / 'refit', diagnose=False, plots=False)
+    run_refit([bag], 'lmc6522', tmp_path / 'refit', RefitSettings(diagnose=False, plots=False))
     calibration = load_calibration(tmp_path / 'refit' / 'calibration.yaml')
     outputs = np.diag(config.rated_output_mv) * 0.5  # one bridge at half its rated output
     u = load_standard_uncertainty(calibration, outputs, model='cubic')

@@ -90,13 +90,16 @@ def warned(answer: Answer, *names: str) -> None:
 def fitted(tmp_path_factory) -> Path:
     """A calibration.yaml as refit writes it (with its covariance), of the LMC6522."""
     from balance_calib.calibration_file import save_calibration
+    from balance_calib.calibration_settings import CalibrationSettings
     from balance_calib.config import load_balance_config
     from balance_calib.refit.pipeline import calibrate_points, campaign_points
     from balance_calib.simulation.balance_sim import simulate_campaign, SimulationSettings
 
     config = load_balance_config('lmc6522')
     campaign = simulate_campaign(config, settings=SimulationSettings(seed=5))
-    calibration = calibrate_points(campaign_points(campaign), config, diagnose=False).calibration
+    calibration = calibrate_points(
+        campaign_points(campaign), config, settings=CalibrationSettings(diagnose=False)
+    ).calibration
     path = tmp_path_factory.mktemp('fitted') / 'calibration.yaml'
     save_calibration(path, calibration)
     return path

@@ -288,7 +288,7 @@ def test_a_simulated_bag_is_not_dated_as_a_campaign(tmp_path):
         small_campaign,
         write_mcap,
     )
-    from balance_calib.calibrate.from_bags import run_refit
+    from balance_calib.calibrate.from_bags import RefitSettings, run_refit
     from balance_calib.simulation.campaign_bag import write_campaign_bag
 
     config = load_balance_config('lmc6522')
@@ -296,13 +296,13 @@ def test_a_simulated_bag_is_not_dated_as_a_campaign(tmp_path):
         seed=2, samples_per_point=2, noise_sigma_pct_fs=table17_noise(config)
     )
     bag = write_campaign_bag(simulate_campaign(config, settings=settings), tmp_path / 'bag')
-    run_refit([bag], 'lmc6522', tmp_path / 'out', diagnose=False, plots=False)
+    run_refit([bag], 'lmc6522', tmp_path / 'out', RefitSettings(diagnose=False, plots=False))
     line = _campaign_line(tmp_path / 'out' / 'report.md')
     assert "stamps are the simulation's clock" in line and 'not the date of a campaign' in line
     # a bag without the simulation's note (as a recorder writes one) is dated as it is
     recorded = write_mcap(
         campaign_events(small_campaign('lmc6522', seed=2)), tmp_path / 'recorded.mcap'
     )
-    run_refit([recorded], 'lmc6522', tmp_path / 'out2', diagnose=False, plots=False)
+    run_refit([recorded], 'lmc6522', tmp_path / 'out2', RefitSettings(diagnose=False, plots=False))
     line = _campaign_line(tmp_path / 'out2' / 'report.md')
     assert 'UTC' in line and 'simulation' not in line
