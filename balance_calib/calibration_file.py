@@ -296,11 +296,12 @@ def save_calibration(path: str | Path, calibration: Calibration) -> None:
         f'# {calibration.balance} calibration written by balance_calib; loads in N, N·m from '
         f'outputs in {calibration.output_unit}.\n'
     )
-    write_text_atomically(
-        path,
-        header
-        + yaml.safe_dump(_channel_keys_to_top(calibration.to_dict()), sort_keys=False, width=160),
+    # libyaml's safe dumper when built in: 4-5x faster on a campaign's calibration, same text
+    dumper = getattr(yaml, 'CSafeDumper', yaml.SafeDumper)
+    text = yaml.dump(
+        _channel_keys_to_top(calibration.to_dict()), Dumper=dumper, sort_keys=False, width=160
     )
+    write_text_atomically(path, header + text)
 
 
 def now_iso() -> str:
