@@ -74,7 +74,7 @@ def _listed_files(metadata: Path) -> list[str]:
     if metadata.stat().st_size > _METADATA_MAX_BYTES:
         raise BagError(f'{metadata}: {metadata.stat().st_size} bytes, too large for bag metadata')
     try:
-        info = yaml.safe_load(metadata.read_text(encoding='utf-8'))['rosbag2_bagfile_information']
+        info = _yaml(metadata.read_text(encoding='utf-8'))['rosbag2_bagfile_information']
         storage = info.get('storage_identifier', 'mcap')
         names = [str(p) for p in (info.get('relative_file_paths') or [])]
     except (
@@ -92,3 +92,17 @@ def _listed_files(metadata: Path) -> list[str]:
     if storage != 'mcap':
         raise BagError(f'{metadata}: storage {storage!r}; only MCAP bags are read')
     return names
+
+
+def _yaml(text: str):
+    """The document of a YAML text, read by libyaml's safe loader when built in (~10x faster
+    than the pure-Python one, same result); the pure-Python loader's yaml.YAMLError (and its
+    wording) when the text does not parse.
+    """
+    loader = getattr(yaml, 'CSafeLoader', None)
+    if loader is not None:
+        try:
+            return yaml.load(text, Loader=loader)
+        except yaml.YAMLError:
+            pass  # the error as the pure-Python loader words it
+    return yaml.safe_load(text)

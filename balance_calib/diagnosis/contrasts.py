@@ -24,6 +24,7 @@ that share a point are not independent: the p-value is indicative; the figure is
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 import scipy.stats
@@ -62,16 +63,32 @@ def pairs_of(
     applied (N, 6) applied loads N, N·m; orientation (N,); direction (N, 6) ±1 raw load history;
     is_zero_point (N,); capacity (6,).
     """
+    return pairs_of_components(applied, orientation, direction, is_zero_point, capacity, [k])[0]
+
+
+def pairs_of_components(
+    applied: np.ndarray,
+    orientation: np.ndarray,
+    direction: np.ndarray,
+    is_zero_point: np.ndarray,
+    capacity: np.ndarray,
+    components: Sequence[int],
+) -> list[tuple[list[tuple[int, int]], list[tuple[int, int]]]]:
+    """pairs_of for each component index in `components`, in that order: the comparisons of
+    every point with every other (the same for all components) made once.
+    """
     applied = np.asarray(applied, dtype=float)
     orientation = np.asarray(orientation)
     direction = np.asarray(direction)
     capacity = np.asarray(capacity, dtype=float)
     candidates = np.flatnonzero(~np.asarray(is_zero_point, bool))
-    strong = np.abs(applied[:, k]) >= MIN_SIGN_LOAD * capacity[k]
-    sign = np.sign(applied[:, k])
+    strong = np.abs(applied) >= MIN_SIGN_LOAD * capacity  # (N, 6)
+    sign = np.sign(applied)
     # every pair (i, j) of candidates with i before j, a block of rows i at a time, in the order
     # of the loop over i then j the rule reads as (np.nonzero is row-major)
-    direction_pairs, sign_pairs = [], []
+    found: list[tuple[list[tuple[int, int]], list[tuple[int, int]]]] = [
+        ([], []) for _ in components
+    ]
     n = len(candidates)
     rows = max(1, 200_000 // max(n, 1))
     for first in range(0, n, rows):
@@ -80,29 +97,34 @@ def pairs_of(
         later = np.arange(first, min(first + rows, n))[:, None] < np.arange(n)[None, :]
         same = later & (orientation[i] == orientation[j])
         close = np.abs(applied[i] - applied[j]) <= EQUAL_LOAD * capacity  # (r, n, 6)
-        equal = close.all(axis=2)
-        close[:, :, k] = True
-        equal_but_k = close.all(axis=2)
-        # equal load, any size on k itself (the loop is widest at zero): opposite history
-        opposite_history = same & (direction[i, k] != direction[j, k]) & equal
-        opposite_sign = (
-            same
-            & ~opposite_history
-            & strong[i]
-            & strong[j]
-            & (sign[i] == -sign[j])
-            & (np.abs(np.abs(applied[i, k]) - np.abs(applied[j, k])) <= EQUAL_LOAD * capacity[k])
-            & equal_but_k
-            # both moving away from zero: a loop's offset is then odd in the sign
-            & (direction[i, k] * sign[i] == direction[j, k] * sign[j])
-        )
-        for a, b in zip(*np.nonzero(opposite_history)):
-            p, q = int(i[a, 0]), int(j[0, b])
-            direction_pairs.append((p, q) if direction[p, k] < 0 else (q, p))
-        for a, b in zip(*np.nonzero(opposite_sign)):
-            p, q = int(i[a, 0]), int(j[0, b])
-            sign_pairs.append((p, q) if applied[p, k] > 0 else (q, p))
-    return direction_pairs, sign_pairs
+        n_close = np.count_nonzero(close, axis=2)
+        equal = n_close == close.shape[2]
+        for (direction_pairs, sign_pairs), k in zip(found, components):
+            # equal on every component but k (any load on k)
+            equal_but_k = n_close - close[:, :, k] == close.shape[2] - 1
+            # equal load, any size on k itself (the loop is widest at zero): opposite history
+            opposite_history = same & (direction[i, k] != direction[j, k]) & equal
+            opposite_sign = (
+                same
+                & ~opposite_history
+                & strong[i, k]
+                & strong[j, k]
+                & (sign[i, k] == -sign[j, k])
+                & (
+                    np.abs(np.abs(applied[i, k]) - np.abs(applied[j, k]))
+                    <= EQUAL_LOAD * capacity[k]
+                )
+                & equal_but_k
+                # both moving away from zero: a loop's offset is then odd in the sign
+                & (direction[i, k] * sign[i, k] == direction[j, k] * sign[j, k])
+            )
+            for a, b in zip(*np.nonzero(opposite_history)):
+                p, q = int(i[a, 0]), int(j[0, b])
+                direction_pairs.append((p, q) if direction[p, k] < 0 else (q, p))
+            for a, b in zip(*np.nonzero(opposite_sign)):
+                p, q = int(i[a, 0]), int(j[0, b])
+                sign_pairs.append((p, q) if applied[p, k] > 0 else (q, p))
+    return found
 
 
 def _contrast(component, kind, pairs, values, load_fraction, labels, repeatability) -> Contrast:
@@ -135,10 +157,16 @@ def schedule_contrasts(
     residual_pct = residual / capacity * 100.0
     is_zero = np.all(np.abs(applied) <= EQUAL_LOAD * capacity, axis=1)
     out = {}
+    pairs = pairs_of_components(
+        applied,
+        diagnosis.orientation,
+        diagnosis.load_direction,
+        is_zero,
+        capacity,
+        range(len(diagnosis.components)),
+    )
     for k, component in enumerate(diagnosis.components):
-        direction_pairs, sign_pairs = pairs_of(
-            applied, diagnosis.orientation, diagnosis.load_direction, is_zero, capacity, k
-        )
+        direction_pairs, sign_pairs = pairs[k]
         s = float(diagnosis.repeatability_pct_fs.get(component, float('nan')))
         c_dir = [residual_pct[f, k] - residual_pct[r, k] for f, r in direction_pairs]
         x_dir = [abs(applied[f, k]) / capacity[k] for f, _ in direction_pairs]

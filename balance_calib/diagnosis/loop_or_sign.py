@@ -33,7 +33,7 @@ from typing import Sequence
 import numpy as np
 import scipy.stats
 
-from .contrasts import EQUAL_LOAD, pairs_of
+from .contrasts import EQUAL_LOAD, pairs_of_components
 
 # A direction contrast counts as a loop with at least this many pairs, ratio mean(c²) / (2 σ²)
 # at least LOOP_RATIO and its chi-square p-value below LOOP_P_VALUE; σ² is the smaller residual
@@ -58,10 +58,10 @@ def direction_pairs(corrected, orientation, direction, capacity) -> list[list[tu
     applied = np.asarray(corrected.loads, float) - np.asarray(corrected.tare_loads, float)
     capacity = np.asarray(capacity, float)
     is_zero = np.all(np.abs(applied) <= EQUAL_LOAD * capacity, axis=1)
-    return [
-        pairs_of(applied, orientation, direction, is_zero, capacity, k)[0]
-        for k in range(applied.shape[1])
-    ]
+    found = pairs_of_components(
+        applied, orientation, direction, is_zero, capacity, range(applied.shape[1])
+    )
+    return [direction_pairs for direction_pairs, _ in found]
 
 
 def shows_loop(

@@ -50,37 +50,60 @@ class _Problem:
         self.outputs = np.asarray(corrected.bridge_outputs_mv, dtype=float)
         self.loads = np.asarray(corrected.loads, dtype=float)
         self.loads_white = self.whiten(self.loads)
-        self.cache: dict[str, np.ndarray] = {}
-        self.cache_white: dict[str, np.ndarray] = {}
+        # the columns computed so far, plain and whitened, side by side: index[name] is a
+        # term's column in both (room for more kept at the right)
+        self.index: dict[str, int] = {}
+        self.store = np.empty((len(self.outputs), 0))
+        self.store_white = np.empty((self.n_white, 0))
+
+    def _add(self, names: Sequence[str]) -> None:
+        """Compute the columns of the names not yet in the store and keep them there."""
+        missing = [n for n in dict.fromkeys(names) if n not in self.index]
+        if not missing:
+            return
+        # term by term (a product of a few factors): the general design_matrix raises every
+        # variable to every term's power, which costs N x terms x variables with the hundreds
+        # of time-basis variables here
+        outputs = {name: self.outputs[:, i] for i, name in enumerate(self.outputs_names)}
+        matrix = np.ones((len(self.outputs), len(missing)))
+        for j, term in enumerate(parse_terms(missing)):
+            for factor in term.factors:
+                value = (
+                    outputs[factor.variable]
+                    if factor.variable in outputs
+                    else self.variables[factor.variable]
+                )
+                matrix[:, j] *= factor.evaluate(np.asarray(value, dtype=float))
+        white = self.whiten(matrix)
+        used = len(self.index)
+        if used + len(missing) > self.store.shape[1]:
+            room = max(2 * (used + len(missing)), 64)
+            self.store = _widened(self.store, used, room)
+            self.store_white = _widened(self.store_white, used, room)
+        self.store[:, used : used + len(missing)] = matrix
+        self.store_white[:, used : used + len(missing)] = white
+        for j, name in enumerate(missing):
+            self.index[name] = used + j
 
     def columns(self, names: Sequence[str]) -> np.ndarray:
-        missing = [n for n in dict.fromkeys(names) if n not in self.cache]
-        if missing:
-            # term by term (a product of a few factors): the general design_matrix raises every
-            # variable to every term's power, which costs N x terms x variables with the hundreds
-            # of time-basis variables here
-            outputs = {name: self.outputs[:, i] for i, name in enumerate(self.outputs_names)}
-            matrix = np.ones((len(self.outputs), len(missing)))
-            for j, term in enumerate(parse_terms(missing)):
-                for factor in term.factors:
-                    value = (
-                        outputs[factor.variable]
-                        if factor.variable in outputs
-                        else self.variables[factor.variable]
-                    )
-                    matrix[:, j] *= factor.evaluate(np.asarray(value, dtype=float))
-            white = self.whiten(matrix)
-            for j, name in enumerate(missing):
-                self.cache[name], self.cache_white[name] = matrix[:, j], white[:, j]
-        if not names:
-            return np.zeros((len(self.outputs), 0))
-        return np.column_stack([self.cache[n] for n in names])
+        """(N, len(names)) the terms' columns over all points (a new array)."""
+        self._add(names)
+        return self._taken(self.store, names)
 
     def white_columns(self, names: Sequence[str]) -> np.ndarray:
-        self.columns(names)
+        """(N_loaded, len(names)) the terms' whitened columns over the loaded points (a new
+        array).
+        """
+        self._add(names)
+        return self._taken(self.store_white, names)
+
+    def _taken(self, store: np.ndarray, names: Sequence[str]) -> np.ndarray:
+        """The names' columns of store, C-contiguous as np.column_stack made them (the products
+        with them round the same).
+        """
         if not names:
-            return np.zeros((self.n_white, 0))
-        return np.column_stack([self.cache_white[n] for n in names])
+            return np.zeros((store.shape[0], 0))
+        return np.take(store, [self.index[n] for n in names], axis=1)
 
     def white_residuals(self, terms_per_component: Sequence[Sequence[str]]) -> list[np.ndarray]:
         """Whitened residuals of every component; one QR per distinct term list."""
@@ -103,6 +126,13 @@ class _Problem:
             fit_columns(self.columns(terms), self.loads[:, k]),
             fit_columns(self.white_columns(terms), self.loads_white[:, k]),
         )
+
+
+def _widened(store: np.ndarray, used: int, columns: int) -> np.ndarray:
+    """A (rows, columns) array holding store's first `used` columns."""
+    wider = np.empty((store.shape[0], columns))
+    wider[:, :used] = store[:, :used]
+    return wider
 
 
 @dataclass(frozen=True)

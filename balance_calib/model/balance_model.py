@@ -153,11 +153,11 @@ class BalanceModel:
         variables = as_variables(self.inputs, outputs, extra)
         jac = np.empty((n, len(self.components), len(self.inputs)))
         for i, name in enumerate(self.inputs):
-            d_design = (
-                np.column_stack([t.derivative(name, variables, n) for t in self.terms])
-                if self.terms
-                else np.zeros((n, 0))
-            )
+            # a term without the input has a zero derivative: only the others are evaluated
+            d_design = np.zeros((n, len(self.terms)))
+            for j, term in enumerate(self.terms):
+                if name in term.variables:
+                    d_design[:, j] = term.derivative(name, variables, n)
             jac[:, :, i] = d_design @ self.coefficients.T
         return jac
 

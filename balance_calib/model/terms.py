@@ -18,7 +18,7 @@ six bridges, six bridges plus temperature, or the one channel of a thrust stand.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
 import re
 from typing import Iterable, Mapping, Sequence
 
@@ -60,7 +60,16 @@ class Term:
 
     @classmethod
     def parse(cls, name: str) -> 'Term':
-        """Parse a term name ("1", "FXV", "FXV*FXV", "FXV^3", "dT*|FYV|"); raises ValueError."""
+        """Parse a term name ("1", "FXV", "FXV*FXV", "FXV^3", "dT*|FYV|"); raises ValueError.
+
+        A name already parsed returns the same (immutable) Term: the diagnosis parses the same
+        few hundred names thousands of times a refit.
+        """
+        return _parsed_term(name) if cls is Term else cls._parse(name)
+
+    @classmethod
+    def _parse(cls, name: str) -> 'Term':
+        """The Term a name reads as (Term.parse without its cache); raises ValueError."""
         text = name.replace(' ', '').replace('**', '^')
         if text in ('1', ''):
             return cls(())
@@ -79,7 +88,7 @@ class Term:
             tuple(Factor(var, powers[(var, absolute)], absolute) for var, absolute in order)
         )
 
-    @property
+    @cached_property
     def name(self) -> str:
         return '*'.join(f.name for f in self.factors) if self.factors else '1'
 
@@ -120,6 +129,12 @@ class Term:
 
     def __str__(self) -> str:
         return self.name
+
+
+@lru_cache(maxsize=4096)
+def _parsed_term(name: str) -> Term:
+    """Term._parse(name), kept for the next time the name is read."""
+    return Term._parse(name)
 
 
 def parse_terms(names: Iterable[str]) -> tuple[Term, ...]:

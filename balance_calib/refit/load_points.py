@@ -82,6 +82,29 @@ def successive_difference_variance(samples: np.ndarray) -> np.ndarray:
     return np.sum(steps**2, axis=0) / (2.0 * len(steps))
 
 
+def _medians_and_scales(values: np.ndarray, rows: list[np.ndarray]) -> tuple:
+    """Per point, the median of its samples and their robust scale (MAD x 1.4826; NaN with fewer
+    than 5 samples): two (P, n) arrays, NaN for a point without samples.
+
+    values (S, n) mV; rows[p] the indices into values of point p's samples. The points with as
+    many samples as each other are taken together (one np.median for all of them: a campaign's
+    points mostly have the same count).
+    """
+    medians = np.full((len(rows), values.shape[1]), np.nan)
+    scales = np.full((len(rows), values.shape[1]), np.nan)
+    lengths = np.array([len(r) for r in rows], dtype=int)
+    for length in np.unique(lengths):
+        if length == 0:
+            continue
+        points = np.flatnonzero(lengths == length)
+        blocks = values[np.stack([rows[p] for p in points])]  # (points, length, n)
+        medians[points] = np.median(blocks, axis=1)
+        if length >= 5:
+            deviations = np.abs(blocks - medians[points][:, None, :])
+            scales[points] = np.median(deviations, axis=1) * 1.4826
+    return medians, scales
+
+
 def _flat_tops(values: np.ndarray, point_of_sample: np.ndarray, bridges) -> tuple:
     """Bridges whose samples pile up on one extreme value in several points: a clipped amplifier.
 
@@ -244,25 +267,17 @@ def cut_load_points(
     # small by chance, and rejecting ordinary noise (5 % of the samples at 8 a point over six
     # bridges) truncates the points' scatter and biases the repeatability low. A spike is far
     # beyond either.
-    medians = np.full((len(point_index), values.shape[1]), np.nan)
-    scales = np.full((len(point_index), values.shape[1]), np.nan)
-    for p, (a, b) in enumerate(zip(starts, ends)):
-        block = values[a:b]
-        block = block[np.all(np.isfinite(block) & (np.abs(block) <= plausible_mv), axis=1)]
-        if len(block):
-            medians[p] = np.median(block, axis=0)
-            if len(block) >= 5:
-                scales[p] = np.median(np.abs(block - medians[p]), axis=0) * 1.4826
+    # a finite but absurd output (a flipped exponent bit) is as unusable as a NaN
+    usable = np.all(np.isfinite(values) & (np.abs(values) <= plausible_mv), axis=1)
+    rows = [a + np.flatnonzero(usable[a:b]) for a, b in zip(starts, ends)]
+    medians, scales = _medians_and_scales(values, rows)
     typical_scale = (
         np.nanmedian(scales, axis=0) if np.any(np.isfinite(scales)) else np.zeros(values.shape[1])
     )
     for p, (a, b) in enumerate(zip(starts, ends)):
-        block = values[a:b]
-        # a finite but absurd output (a flipped exponent bit) is as unusable as a NaN
-        finite = np.all(np.isfinite(block) & (np.abs(block) <= plausible_mv), axis=1)
-        nans += int(np.count_nonzero(~finite))
-        block = block[finite]
-        block_stamps = stamps[a:b][finite]
+        nans += int(b - a - len(rows[p]))
+        block = values[rows[p]]
+        block_stamps = stamps[rows[p]]
         inside_values.append(block)
         inside_points.append(np.full(len(block), p))
         if len(block) == 0:

@@ -171,9 +171,12 @@ class ResidualFigure:
             axes.relim()
             axes.autoscale_view(scalex=True, scaley=False)
             clipped = f'; {beyond} beyond ±{CLIP_PCT:g} %' if beyond else ''
+            # y given: matplotlib then leaves the title where it is instead of measuring every
+            # tick label at each draw to lift it above them (nothing is above the axes here)
             axes.set_title(
                 f'{_nice(component)}: σ = {sigma:.3f} %, 2σ = {2 * sigma:.3f} %{clipped}',
                 fontsize=10,
+                y=1.0,
             )
         self.title.set_text(title)
         limits = tuple(axes.get_xlim() for axes, _ in self.panels)
