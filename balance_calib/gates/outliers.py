@@ -22,9 +22,9 @@ explains it (gates judge after the diagnosis; Diagnosis.residuals_named):
 
 What differs between the callers is what they pass, not the rule: a refit passes the diagnosis's
 structure (named, campaign); a table calibration judges the residuals of the model it adopts
-after the loop is closed on it (an adopted effect's points are judged with its terms), passes no
-structure, asks for `alike`, and for `tail_quantile`: its points mix load levels and zero brackets of
-unequal scatter, so its σ is at least the 90 % point of |residual| / 1.6449 too
+after the loop is closed on it (an adopted effect's points are judged with its terms), passes
+no structure, asks for `alike`, and for `tail_quantile`: its points mix load levels and zero
+brackets of unequal scatter, so its σ is at least the 90 % point of |residual| / 1.6449 too
 (outlier_statistic.robust_sigma). `alike` and `tail_quantile` stay the tables' alone because on
 bags they would change the robust σ every refit reports and excuse faults a refit refuses today.
 """
