@@ -9,9 +9,10 @@ from .errors import ToolError
 
 DEFAULT_TIMEOUT_S = 10.0
 SETTLE_S = 1.5  # a listing unchanged this long is the graph as discovery has it
-# and it is looked at for at least this long (a second participant can take 2 s to be discovered by
-# a new process on a busy machine)
-MIN_LISTING_S = 3.0
+# and it is looked at for at least this long: longer than Fast DDS's participant announcement
+# period (3 s) with room for the endpoints after it, so a node that missed the new process's
+# first announcements (a busy machine) is heard at its next periodic one before the list ends
+MIN_LISTING_S = 4.5
 EMPTY_WAIT_S = 5.0  # an empty one this long before it counts (a loaded machine is slow)
 SERVICE_DISCOVERY_S = 4.0  # a service on the graph is discovered well within this
 
