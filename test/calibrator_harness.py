@@ -11,6 +11,7 @@ from std_srvs.srv import Trigger
 
 from balance_calib.calibration_file import load_calibration
 from balance_calib.config import CONFIG_DIR
+from balance_calib.nodes._messages import set_wrench
 from balance_calib.nodes.balance_calibrator import BalanceCalibrator
 
 MEMO = load_calibration(CONFIG_DIR / 'lmc6522.yaml')
@@ -52,14 +53,7 @@ class RawSource:
             (self.sent % 1000) * 1000,
         )
         msg.header.frame_id = 'LMC6522'
-        (
-            msg.wrench.force.x,
-            msg.wrench.force.y,
-            msg.wrench.force.z,
-            msg.wrench.torque.x,
-            msg.wrench.torque.y,
-            msg.wrench.torque.z,
-        ) = (float(v) for v in outputs)
+        set_wrench(msg.wrench, outputs)
         self.publisher.publish(msg)
         self.sent += 1
 
@@ -109,14 +103,7 @@ class Stamped(RawSource):
         msg = WrenchStamped()
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 10**9)
         msg.header.frame_id = frame_id
-        (
-            msg.wrench.force.x,
-            msg.wrench.force.y,
-            msg.wrench.force.z,
-            msg.wrench.torque.x,
-            msg.wrench.torque.y,
-            msg.wrench.torque.z,
-        ) = (float(v) for v in outputs)
+        set_wrench(msg.wrench, outputs)
         self.publisher.publish(msg)
         self.sent += 1
 

@@ -9,6 +9,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from ros_harness import six as wrench_six
 
 from balance_calib.live.raw_codec import decode_wrenches
+from balance_calib.nodes._messages import set_wrench
 
 
 def serialized(values, stamps_ns, frame='LMC6522'):
@@ -17,14 +18,7 @@ def serialized(values, stamps_ns, frame='LMC6522'):
         msg = WrenchStamped()
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp), 10**9)
         msg.header.frame_id = frame
-        (
-            msg.wrench.force.x,
-            msg.wrench.force.y,
-            msg.wrench.force.z,
-            msg.wrench.torque.x,
-            msg.wrench.torque.y,
-            msg.wrench.torque.z,
-        ) = [float(v) for v in row]
+        set_wrench(msg.wrench, row)
         messages.append(serialize_message(msg))
     return messages
 

@@ -22,6 +22,7 @@ from balance_calib.model.inverse import InverseDidNotConverge
 from balance_calib.model.r091 import IterativeModel
 from balance_calib.model.terms import parse_terms
 from balance_calib.model.uncertainty import load_standard_uncertainty
+from balance_calib.nodes._messages import set_wrench
 from balance_calib.tables import synthetic as sy
 from balance_calib.tables.calibrate import calibrate_table
 from balance_calib.tunnel_axes import parse_installation
@@ -336,14 +337,7 @@ def test_table_fitted_iterative_calibration_drives_the_calibrator_over_dds(tmp_p
         for i, values in enumerate(samples):
             msg = WrenchStamped()
             msg.header.stamp.sec, msg.header.stamp.nanosec = 100, (i + 1) * 1000
-            (
-                msg.wrench.force.x,
-                msg.wrench.force.y,
-                msg.wrench.force.z,
-                msg.wrench.torque.x,
-                msg.wrench.torque.y,
-                msg.wrench.torque.z,
-            ) = (float(v) for v in values)
+            set_wrench(msg.wrench, values)
             publisher.publish(msg)
 
         def of_the_test(messages):

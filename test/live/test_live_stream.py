@@ -33,6 +33,7 @@ from balance_calib.live.stream import (
 from balance_calib.live.tare_store import load_tare, save_tare, tare_file_for, TareState
 from balance_calib.live.tare_window import check_steady
 from balance_calib.model.active_calibration import activate
+from balance_calib.nodes._messages import set_wrench
 from balance_calib.tunnel_axes import INVERTED, UPRIGHT
 
 
@@ -339,14 +340,7 @@ def test_fast_path_bytes_carry_exactly_the_pure_cores_wrench():
         msg = WrenchStamped()
         msg.header.stamp.sec, msg.header.stamp.nanosec = 1700000000 + k, 999_999_000 - k
         msg.header.frame_id = 'LMC6522' if k != 7 else 'B660H-other'  # one of another length
-        (
-            msg.wrench.force.x,
-            msg.wrench.force.y,
-            msg.wrench.force.z,
-            msg.wrench.torque.x,
-            msg.wrench.torque.y,
-            msg.wrench.torque.z,
-        ) = row.tolist()
+        set_wrench(msg.wrench, row.tolist())
         messages.append(serialize_message(msg))
     stamps, values, frames = decode_wrenches(messages)
     np.testing.assert_array_equal(values, outputs)

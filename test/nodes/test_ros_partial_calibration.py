@@ -14,6 +14,8 @@ from partial_cells import CAPACITY, fit_cell, raw_samples, SIGMA_LOAD, SLOTS
 import pytest
 from ros_harness import new_domain_id, NodeProcess, Probe, RELIABLE, six, wait_for
 
+from balance_calib.nodes._messages import set_wrench
+
 pytestmark = pytest.mark.ros
 ABSENT_SLOTS = [0, 1, 5]
 UPRIGHT_SIGNS = np.array([-1.0, 1.0, -1.0, 1.0, 1.0, 1.0])  # TM-663 §10.2.1, written out
@@ -23,14 +25,7 @@ def _publish(publisher, values, sec: int, nanosec: int = 0) -> None:
     msg = WrenchStamped()
     msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
     msg.header.frame_id = 'cell-3'
-    (
-        msg.wrench.force.x,
-        msg.wrench.force.y,
-        msg.wrench.force.z,
-        msg.wrench.torque.x,
-        msg.wrench.torque.y,
-        msg.wrench.torque.z,
-    ) = (float(v) for v in values)
+    set_wrench(msg.wrench, values)
     publisher.publish(msg)
 
 

@@ -14,6 +14,7 @@ from std_srvs.srv import Trigger
 
 from balance_calib.calibration_file import load_calibration, save_calibration
 from balance_calib.config import CONFIG_DIR
+from balance_calib.nodes._messages import set_wrench
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 SAMPLE_MV = np.array([0.3, -0.2, 0.5, 0.1, -0.4, 0.2])
@@ -69,14 +70,7 @@ class Stream:
             1000 + self.sent // 1000,
             (self.sent % 1000) * 1000,
         )
-        (
-            msg.wrench.force.x,
-            msg.wrench.force.y,
-            msg.wrench.force.z,
-            msg.wrench.torque.x,
-            msg.wrench.torque.y,
-            msg.wrench.torque.z,
-        ) = SAMPLE_MV.tolist()
+        set_wrench(msg.wrench, SAMPLE_MV.tolist())
         self.publisher.publish(msg)
         self.sent += 1
 

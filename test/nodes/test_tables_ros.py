@@ -9,6 +9,7 @@ from ros_harness import new_domain_id, NodeProcess, Probe, RELIABLE, wait_for
 
 from balance_calib.calibration_file import load_calibration
 from balance_calib.cli import main
+from balance_calib.nodes._messages import set_wrench
 from balance_calib.tables import synthetic as sy
 from balance_calib.tables.balfit_writer import write_table
 from balance_calib.tunnel_axes import parse_installation
@@ -69,14 +70,7 @@ def test_table_fitted_direct_calibration_drives_the_calibrator(tmp_path):
         for i, values in enumerate(samples):
             msg = WrenchStamped()
             msg.header.stamp.sec, msg.header.stamp.nanosec = 100, i * 1000
-            (
-                msg.wrench.force.x,
-                msg.wrench.force.y,
-                msg.wrench.force.z,
-                msg.wrench.torque.x,
-                msg.wrench.torque.y,
-                msg.wrench.torque.z,
-            ) = (float(v) for v in values)
+            set_wrench(msg.wrench, values)
             publisher.publish(msg)
         wait_for(lambda: len(wrenches) >= len(samples), 60.0, f'{len(samples)} wrenches')
         received = np.array(
